@@ -1,0 +1,195 @@
+"""Unstructured triangle mesh of a flat leaflet outline with Gmsh's Python API."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import gmsh
+import numpy as np
+
+from valve_dolfinx.exceptions import MeshError
+from valve_dolfinx.geometry.outline import LeafletShape
+
+__all__ = ["FlatLeafletMesh", "mesh_flat_leaflet", "commissure_node_count", "triangle_angles"]
+
+log = logging.getLogger(__name__)
+
+#: Points used to describe the lower attachment curve to Gmsh (an interpolating
+#: spline); mesh nodes on it are afterwards projected exactly onto the curve.
+_LOWER_EDGE_POINTS = 81
+
+
+@dataclass(frozen=True)
+class FlatLeafletMesh:
+    """A flat leaflet triangulation (mm).
+
+    Attributes
+    ----------
+    points
+        ``(n, 2)`` flat coordinates (x across, y up from the nadir).
+    triangles
+        ``(m, 3)`` node indices, counter-clockwise (positive flat area).
+    lower, left, right, free
+        Node indices of the boundary curves, ordered: lower edge left→right,
+        commissures bottom→top, free edge left→right.  Corners are shared.
+    shape
+        The outline that was meshed.
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    lower: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    free: np.ndarray
+    shape: LeafletShape
+
+    @property
+    def attachment(self) -> np.ndarray:
+        """Attachment nodes (left commissure top→bottom, lower edge, right commissure bottom→top)."""
+        return np.concatenate([self.left[::-1], self.lower[1:], self.right[1:]])
+
+    def boundary_edges(self) -> dict[str, np.ndarray]:
+        """Consecutive node pairs along each boundary curve, ``(k, 2)`` arrays."""
+        def pairs(chain: np.ndarray) -> np.ndarray:
+            return np.stack([chain[:-1], chain[1:]], axis=1)
+
+        return {
+            "lower": pairs(self.lower),
+            "left": pairs(self.left),
+            "right": pairs(self.right),
+            "free": pairs(self.free),
+        }
+
+
+def commissure_node_count(commissure_height: float, mesh_size: float) -> int:
+    """Nodes on a commissure segment (uniformly spaced, ends included)."""
+    return max(3, int(round(commissure_height / mesh_size)) + 1)
+
+
+def mesh_flat_leaflet(shape: LeafletShape, mesh_size: float, n_commissure: int | None = None
+                      ) -> FlatLeafletMesh:
+    """Mesh the flat outline ``shape`` with target edge length ``mesh_size`` (mm).
+
+    The commissures get ``n_commissure`` uniformly spaced nodes (by default from
+    the *native* commissure height), so that the commissures of neighbouring
+    leaflets -- and of a graft, whose commissure is mapped onto the native one by
+    normalised arc length -- carry nodes at identical heights and can share them.
+    """
+    shape.check_mesh_size(mesh_size)
+    if n_commissure is None:
+        n_commissure = commissure_node_count(shape.native().commissure_height, mesh_size)
+    initialised_here = not gmsh.isInitialized()
+    if initialised_here:
+        gmsh.initialize(interruptible=False)
+    try:
+        return _mesh_with_gmsh(shape, mesh_size, n_commissure)
+    finally:
+        if initialised_here:
+            gmsh.finalize()
+
+
+def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLeafletMesh:
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.option.setNumber("General.Verbosity", 1)
+    name = f"leaflet_{id(shape)}"
+    gmsh.model.add(name)
+    try:
+        geo = gmsh.model.geo
+        a, top = shape.half_width, shape.height
+        xs = np.linspace(-a, a, _LOWER_EDGE_POINTS)
+        ys = shape.lower_edge(xs)
+        lower_pts = [geo.addPoint(x, y, 0.0, h) for x, y in zip(xs, ys, strict=True)]
+        tl = geo.addPoint(-a, top, 0.0, h)
+        tr = geo.addPoint(a, top, 0.0, h)
+        lower = geo.addSpline(lower_pts)
+        right = geo.addLine(lower_pts[-1], tr)
+        free = geo.addLine(tr, tl)
+        left = geo.addLine(tl, lower_pts[0])
+        loop = geo.addCurveLoop([lower, right, free, left])
+        surf = geo.addPlaneSurface([loop])
+        geo.synchronize()
+        for curve in (left, right):
+            gmsh.model.mesh.setTransfiniteCurve(curve, n_commissure)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * h)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)  # Frontal-Delaunay: well-shaped triangles
+        gmsh.option.setNumber("Mesh.Smoothing", 5)
+        gmsh.model.mesh.generate(2)
+
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        index = {int(t): i for i, t in enumerate(tags)}
+        points = coords.reshape(-1, 3)[:, :2].copy()
+        etypes, _, enodes = gmsh.model.mesh.getElements(2, surf)
+        tri_pos = list(etypes).index(2)
+        triangles = np.array([index[int(t)] for t in enodes[tri_pos]], dtype=np.int64)
+        triangles = triangles.reshape(-1, 3)
+
+        def chain(curve: int, start_xy: tuple[float, float]) -> np.ndarray:
+            node_tags, _, _ = gmsh.model.mesh.getNodes(1, curve, includeBoundary=True)
+            ids = np.array([index[int(t)] for t in node_tags], dtype=np.int64)
+            ids = np.unique(ids)
+            # order the curve's nodes by distance along it from its start point
+            p = points[ids]
+            order = np.argsort(np.hypot(p[:, 0] - start_xy[0], p[:, 1] - start_xy[1])
+                               if curve != lower else p[:, 0])
+            return ids[order]
+
+        b = shape.commissure_bottom
+        lower_ids = chain(lower, (-a, b))
+        right_ids = chain(right, (a, b))
+        left_ids = chain(left, (-a, b))
+        free_ids = chain(free, (-a, top))
+    finally:
+        gmsh.model.remove()
+
+    # snap boundary nodes exactly onto the analytic outline
+    points[lower_ids, 1] = shape.lower_edge(points[lower_ids, 0])
+    points[left_ids, 0], points[right_ids, 0] = -a, a
+    heights = np.linspace(b, top, n_commissure)
+    if len(left_ids) != n_commissure or len(right_ids) != n_commissure:
+        raise MeshError(f"Gmsh placed {len(left_ids)}/{len(right_ids)} commissure nodes, "
+                        f"expected {n_commissure}")
+    points[left_ids, 1] = heights
+    points[right_ids, 1] = heights
+    points[free_ids, 1] = top
+
+    # drop nodes on no triangle (Gmsh also meshes the spline's control points)
+    used = np.unique(triangles)
+    renumber = np.full(len(points), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    points, triangles = points[used], renumber[triangles]
+    lower_ids, left_ids, right_ids, free_ids = (renumber[c] for c in (lower_ids, left_ids,
+                                                                      right_ids, free_ids))
+    triangles = _orient_ccw(points, triangles)
+    log.debug("flat leaflet W=%g%% H=%g%%: %d nodes, %d triangles", shape.width_pct,
+              shape.height_pct, len(points), len(triangles))
+    return FlatLeafletMesh(points, triangles, lower_ids, left_ids, right_ids, free_ids, shape)
+
+
+def _orient_ccw(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Reorder triangles to counter-clockwise (positive signed area)."""
+    p = points[triangles]
+    area2 = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+             - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    if np.any(np.abs(area2) < 1e-14):
+        raise MeshError("Gmsh produced a degenerate (zero-area) triangle")
+    out = triangles.copy()
+    neg = area2 < 0
+    out[neg, 1], out[neg, 2] = triangles[neg, 2], triangles[neg, 1]
+    return out
+
+
+def triangle_angles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Interior angles (degrees) of each triangle, ``(m, 3)``; works in 2-D and 3-D."""
+    p = points[triangles]
+    angles = np.empty(triangles.shape)
+    for i in range(3):
+        u = p[:, (i + 1) % 3] - p[:, i]
+        v = p[:, (i + 2) % 3] - p[:, i]
+        cos = np.einsum("ij,ij->i", u, v) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        angles[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angles
+

@@ -1,0 +1,151 @@
+"""Reading and writing meshes, fields and results (atomically where it matters)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from valve_dolfinx.exceptions import MeshError
+
+__all__ = [
+    "atomic_write",
+    "write_json",
+    "read_json",
+    "save_valve_mesh",
+    "load_valve_mesh",
+    "export_valve_vtu",
+]
+
+log = logging.getLogger(__name__)
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it into place.
+
+    A crash mid-write never leaves a truncated ``path`` behind; readers see the
+    old file or the new one.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot write {type(obj).__name__} to JSON")
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """Write ``data`` as indented JSON, atomically (NaN written as null)."""
+    text = json.dumps(_nan_to_none(data), indent=2, default=_json_default, allow_nan=False)
+    return atomic_write(path, lambda tmp: tmp.write_text(text + "\n"))
+
+
+def _nan_to_none(data: Any) -> Any:
+    if isinstance(data, dict):
+        return {k: _nan_to_none(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [_nan_to_none(v) for v in data]
+    if isinstance(data, float | np.floating) and not np.isfinite(data):
+        return None
+    return data
+
+
+def read_json(path: str | Path) -> Any:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path} is not valid JSON ({err}); delete it to recompute") from err
+
+
+# --- valve meshes -------------------------------------------------------------
+_LEAFLET_ARRAYS = ("nodes", "flat", "triangles", "free_edge", "attachment")
+
+
+def save_valve_mesh(valve, path: str | Path) -> Path:
+    """Write a :class:`~valve_dolfinx.geometry.valve.ValveMesh` to ``.npz`` (reloadable)."""
+    path = Path(path).with_suffix(".npz")
+    arrays: dict[str, np.ndarray] = {
+        "points": valve.points, "cells": valve.cells, "cell_tags": valve.cell_tags,
+        "flat": valve.flat, "fibres": valve.fibres, "edges": valve.edges,
+        "edge_tags": valve.edge_tags,
+    }
+    meta = {"parameters": valve.parameters.to_dict(), "leaflets": []}
+    for i, patch in enumerate(valve.leaflets):
+        meta["leaflets"].append({"name": patch.name, "tag": patch.tag, "is_graft": patch.is_graft,
+                                 "shape": {k: getattr(patch.shape, k) for k in (
+                                     "root_diameter", "gamma_deg", "commissure_height",
+                                     "width_pct", "height_pct")}})
+        for key in _LEAFLET_ARRAYS:
+            arrays[f"leaflet{i}_{key}"] = getattr(patch, key)
+    arrays["meta"] = np.array(json.dumps(meta))
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    return atomic_write(path, write)
+
+
+def load_valve_mesh(path: str | Path):
+    """Read a valve mesh written by :func:`save_valve_mesh`, and validate it."""
+    from valve_dolfinx.geometry.outline import LeafletShape
+    from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh, ValveParameters
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such valve mesh; write the default meshes with "
+                                "`valve-dolfinx mesh --out meshes`")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        meta = json.loads(str(arrays.pop("meta")))
+        leaflets = []
+        for i, info in enumerate(meta["leaflets"]):
+            kw = {key: arrays.pop(f"leaflet{i}_{key}") for key in _LEAFLET_ARRAYS}
+            leaflets.append(LeafletPatch(name=info["name"], tag=info["tag"],
+                                         shape=LeafletShape(**info["shape"]),
+                                         is_graft=info["is_graft"], **kw))
+        valve = ValveMesh(**arrays, leaflets=tuple(leaflets),
+                          parameters=ValveParameters(**meta["parameters"]))
+    except (KeyError, ValueError, TypeError, OSError) as err:
+        raise MeshError(f"{path} is not a valve mesh written by valve_dolfinx ({err}); "
+                        "regenerate it with `valve-dolfinx mesh`") from err
+    return valve.validate()
+
+
+def export_valve_vtu(valve, path: str | Path, point_data: dict | None = None,
+                     cell_data: dict | None = None) -> Path:
+    """Write the valve surface with tags and fibres as a VTK ``.vtu`` file through meshio."""
+    import meshio
+
+    cd = {"leaflet": valve.cell_tags.astype(np.int32), "fibre": valve.fibres_3d()}
+    cd.update(cell_data or {})
+    mesh = meshio.Mesh(valve.points, [("triangle", valve.cells)],
+                       point_data=point_data or {},
+                       cell_data={k: [np.asarray(v)] for k, v in cd.items()})
+    path = Path(path).with_suffix(".vtu")
+    return atomic_write(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
