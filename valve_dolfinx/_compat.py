@@ -20,6 +20,7 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 import dolfinx  # noqa: E402
+import dolfinx.fem.petsc  # noqa: E402,F401  (PETSc assembly API)
 
 __all__ = ["MPI", "PETSc", "dolfinx", "package_versions", "MIN_DOLFINX"]
 

@@ -17,6 +17,7 @@ import basix.ufl
 import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx
+from valve_dolfinx.geometry.domain import MembraneDomain
 from valve_dolfinx.geometry.valve import (
     ATTACHMENT,
     FREE_EDGE,
@@ -33,7 +34,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass
-class ValveDomain:
+class ValveDomain(MembraneDomain):
     """The distributed valve: DOLFINx mesh, tags and per-cell reference data.
 
     Attributes
@@ -56,25 +57,9 @@ class ValveDomain:
         DG0 ``(2,)`` unit fibre direction in flat reference coordinates.
     """
 
-    mesh: dolfinx.mesh.Mesh
-    cell_tags: dolfinx.mesh.MeshTags
-    facet_tags: dolfinx.mesh.MeshTags
-    valve: ValveMesh
-    cell_index: np.ndarray
-    node_index: np.ndarray
-    reference: dolfinx.fem.Function
-    fibre: dolfinx.fem.Function
-
-    @property
-    def comm(self) -> MPI.Comm:
-        return self.mesh.comm
-
-    def num_cells_global(self) -> int:
-        imap = self.mesh.topology.index_map(self.mesh.topology.dim)
-        return imap.size_global
-
-    def num_nodes_global(self) -> int:
-        return self.mesh.geometry.index_map().size_global
+    valve: ValveMesh | None = None
+    cell_index: np.ndarray | None = None
+    node_index: np.ndarray | None = None
 
     def fibre_3d(self) -> dolfinx.fem.Function:
         """Unit fibre vectors in 3-D (DG0), J0·a normalised: for ParaView and checks."""
@@ -146,8 +131,8 @@ def create_valve_domain(valve: ValveMesh | ValveParameters | None = None,
     J0 = reference_jacobians(valve.points, valve.cells, valve.flat)[cell_index]
     reference = cell_function(mesh, J0, "reference_jacobian")
     fibre = cell_function(mesh, valve.fibres[cell_index], "fibre_flat")
-    domain = ValveDomain(mesh, cell_tags, facet_tags, valve, cell_index, node_index,
-                         reference, fibre)
+    domain = ValveDomain(mesh, cell_tags, facet_tags, reference, fibre, valve, cell_index,
+                         node_index)
     if comm.rank == 0:
         log.info("distributed valve: %d cells, %d nodes on %d rank(s)", valve.num_cells,
                  valve.num_nodes, comm.size)

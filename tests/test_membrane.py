@@ -1,0 +1,215 @@
+"""Membrane mechanics against exact solutions on curved manifold meshes (SPEC §8).
+
+Exact solutions used (membrane, no bending, thickness t, Fung PK2 stress S):
+
+* closed sphere, equibiaxial stretch λ: Cauchy tension T = t·S(E) with
+  E = (λ² − 1)/2, and T = p·r/2 with r = λR  →  one scalar equation for λ(p);
+* closed-end tube of radius R far from its ends: hoop tension T_θ = t·λθ·S_θ/λz = p·r,
+  axial tension T_z = t·λz·S_z/λθ = p·r/2 (r = λθR)  →  two equations for (λθ, λz).
+
+The closed-form stress is written out here, independently of the package.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq, fsolve
+
+from valve_dolfinx._compat import MPI, dolfinx
+from valve_dolfinx.boundary_conditions import point_supports
+from valve_dolfinx.geometry.verification import (
+    CAP_TAG,
+    TUBE_TAG,
+    capsule_domain,
+    flat_sheet_domain,
+    sphere_domain,
+)
+from valve_dolfinx.materials import NATIVE_LEAFLET, FungMaterial
+from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.solvers.quasistatic import ContinuationParameters, QuasiStaticSolver
+
+P80 = 10.666  # kPa
+ISO = FungMaterial.isotropic(c=9.7, a=20.0, b=0.0, thickness=0.5)
+
+
+def pk2(m, E11, E22):
+    Q = m.A1 * E11**2 + m.A2 * E22**2 + 2 * m.A3 * E11 * E22
+    g = m.c * math.exp(Q)
+    return g * (m.A1 * E11 + m.A3 * E22), g * (m.A2 * E22 + m.A3 * E11)
+
+
+def exact_sphere_radius(p, R, m):
+    def f(lam):
+        E = 0.5 * (lam**2 - 1)
+        return m.thickness * pk2(m, E, E)[0] - p * lam * R / 2
+
+    return R * brentq(f, 1.0, 3.0, xtol=1e-15)
+
+
+def exact_tube_stretches(p, R, m, fibre):
+    def f(v):
+        lt, lz = v
+        Et, Ez = 0.5 * (lt**2 - 1), 0.5 * (lz**2 - 1)
+        if fibre == "circumferential":
+            St, Sz = pk2(m, Et, Ez)
+        else:
+            Sz, St = pk2(m, Ez, Et)
+        return [m.thickness * lt * St / lz - p * lt * R, m.thickness * lz * Sz / lt - p * lt * R / 2]
+
+    for guess in ([1.1, 1.3], [1.4, 1.1], [1.2, 1.2]):
+        sol, _, ier, _ = fsolve(f, guess, xtol=1e-13, full_output=True)
+        if np.max(np.abs(f(sol))) < 1e-9 and np.all((sol > 1.0) & (sol < 2.0)):
+            return sol
+    raise AssertionError("exact tube solution not found")
+
+
+def current_points(model):
+    x = model.domain.mesh.geometry.x
+    return x + model.u.x.array.reshape(-1, 3)[: len(x)]
+
+
+def gathered(comm, a):
+    return np.concatenate(comm.allgather(a))
+
+
+def sphere_supports(model, R):
+    return point_supports(model.V, [((0, 0, -R), (0, 1, 2)), ((0, 0, R), (0, 1)),
+                                    ((R, 0, 0), (1,))])
+
+
+def solve_sphere(mesh_size, R=10.0, comm=MPI.COMM_WORLD, degree=1, record=None):
+    domain = sphere_domain(R, mesh_size, comm=comm)
+    model = MembraneModel(domain, {1: ISO}, quadrature_degree=degree)
+    solver = QuasiStaticSolver(model, sphere_supports(model, R), P80)
+
+    def radius():
+        n = domain.mesh.geometry.index_map().size_local
+        X = gathered(comm, current_points(model)[:n])
+        return float(np.linalg.norm(X - X.mean(axis=0), axis=1).mean())
+
+    curve = []
+    report = solver.solve(on_step=lambda lam, p: curve.append((p, radius())))
+    assert report.converged
+    return radius(), curve, report, domain
+
+
+def test_patch_homogeneous_stretch():
+    """A flat sheet with homogeneous boundary stretch: exact homogeneous solution in every cell."""
+    domain = flat_sheet_domain(4.0, 3.0, 8, 6, fibre_angle_deg=30.0, comm=MPI.COMM_SELF)
+    model = MembraneModel(domain, {1: NATIVE_LEAFLET})
+    U = np.array([[1.12, 0.03], [0.03, 1.25]])  # symmetric stretch, taut
+    F3 = np.eye(3)
+    F3[:2, :2] = U
+
+    def homogeneous(X):
+        return (F3 - np.eye(3)) @ X
+
+    g = dolfinx.fem.Function(model.V)
+    g.interpolate(homogeneous)
+    mesh = domain.mesh
+    boundary = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda X: np.full(X.shape[1], True))
+    dofs = dolfinx.fem.locate_dofs_topological(model.V, 1, boundary)
+    bc = dolfinx.fem.dirichletbc(g, dofs)
+    # start away from the solution: interior nodes displaced out of plane and in plane
+    # (not too far: the native law's exp(Q) reaches 1e170 at strains of order 2)
+    model.u.interpolate(lambda X: homogeneous(X) + 0.05 * np.sin(X[0]) * np.sin(X[1])
+                        * np.array([[1.0], [-0.5], [2.0]]))
+    report = QuasiStaticSolver(model, [bc], 0.0).solve()
+    assert report.converged
+    exact = g.x.array.reshape(-1, 3)
+    assert np.max(np.abs(model.u.x.array.reshape(-1, 3) - exact)) < 1e-10
+    # stress in every cell against the closed form in the material axes
+    phi = math.radians(30.0)
+    R = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+    Em = R.T @ (0.5 * (U.T @ U - np.eye(2))) @ R
+    m = NATIVE_LEAFLET
+    Q = (m.A1 * Em[0, 0] ** 2 + m.A2 * Em[1, 1] ** 2 + 2 * m.A3 * Em[0, 0] * Em[1, 1]
+         + m.A4 * Em[0, 1] ** 2 + 2 * m.A5 * Em[0, 0] * Em[0, 1] + 2 * m.A6 * Em[1, 1] * Em[0, 1])
+    g_ = m.c * math.exp(Q)
+    S = np.array([[g_ * (m.A1 * Em[0, 0] + m.A3 * Em[1, 1] + m.A5 * Em[0, 1]),
+                   0.5 * g_ * (m.A4 * Em[0, 1] + m.A5 * Em[0, 0] + m.A6 * Em[1, 1])],
+                  [0.0, g_ * (m.A2 * Em[1, 1] + m.A3 * Em[0, 0] + m.A6 * Em[0, 1])]])
+    S[1, 0] = S[0, 1]
+    stress = model.cell_fields()["stress"].x.array.reshape(-1, 2, 2)
+    assert np.allclose(stress, S, rtol=1e-9, atol=1e-9 * np.abs(S).max())
+
+
+def test_sphere_pressure_radius_curve_and_convergence():
+    R = 10.0
+    errors = {}
+    for h in (2.0, 1.4, 1.0):
+        r, curve, report, domain = solve_sphere(h)
+        errors[h] = abs(r / exact_sphere_radius(P80, R, ISO) - 1)
+        if h == 1.0:  # the default verification mesh: the whole curve within 0.5 %
+            assert len(curve) >= 4
+            for p, rad in curve:
+                assert rad == pytest.approx(exact_sphere_radius(p, R, ISO), rel=5e-3)
+    hs = sorted(errors, reverse=True)
+    assert errors[hs[0]] > errors[hs[1]] > errors[hs[2]]
+    rate = math.log(errors[hs[0]] / errors[hs[2]]) / math.log(hs[0] / hs[2])
+    assert rate > 1.5  # faceting of the sphere by flat triangles: O(h²) expected
+    assert errors[1.0] < 5e-3
+
+
+def test_quadrature_degree_does_not_change_result():
+    r1, *_ = solve_sphere(2.0, degree=1)
+    r2, *_ = solve_sphere(2.0, degree=2)
+    assert r2 == pytest.approx(r1, rel=1e-10)
+
+
+@pytest.mark.parametrize("fibre", ["circumferential", "axial"])
+def test_closed_end_tube_hoop_and_axial(fibre):
+    R, L = 5.0, 30.0
+    domain = capsule_domain(R, L, 1.0, fibre=fibre)
+    model = MembraneModel(domain, {TUBE_TAG: NATIVE_LEAFLET, CAP_TAG: NATIVE_LEAFLET})
+    bcs = point_supports(model.V, [((0, 0, -L / 2 - R), (0, 1, 2)), ((0, 0, L / 2 + R), (0, 1)),
+                                   ((R, 0, 0), (1,))])
+    assert QuasiStaticSolver(model, bcs, P80).solve().converged
+    comm = domain.comm
+    n = domain.mesh.geometry.index_map().size_local
+    x = gathered(comm, domain.mesh.geometry.x[:n])
+    X = gathered(comm, current_points(model)[:n])
+    mid = np.abs(x[:, 2]) < L / 6
+    axis_xy = X[:, :2].mean(axis=0)
+    hoop = np.linalg.norm(X[mid, :2] - axis_xy, axis=1).mean() / R
+    rings = [np.abs(x[:, 2] - z) < 0.05 for z in (L / 4, -L / 4)]
+    axial = (X[rings[0], 2].mean() - X[rings[1], 2].mean()) / (L / 2)
+    lt, lz = exact_tube_stretches(P80, R, NATIVE_LEAFLET, fibre)
+    assert hoop == pytest.approx(lt, rel=5e-3)
+    assert axial == pytest.approx(lz, rel=5e-3)
+    # the anisotropy is real: the stiff fibre direction stretches far less
+    if fibre == "circumferential":
+        assert lt < lz
+    else:
+        assert lz < lt
+
+
+def test_slack_membrane_converges_without_compression():
+    """A sheet whose reference is larger than its clamped placement (slack), then pressurised."""
+    domain = flat_sheet_domain(4.0, 4.0, 12, 12, comm=MPI.COMM_SELF)
+    domain.reference.x.array[:] *= 0.9  # placement 10 % smaller than the stress-free sheet
+    model = MembraneModel(domain, {1: ISO})
+    mesh = domain.mesh
+    edges = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda X: np.full(X.shape[1], True))
+    bc = dolfinx.fem.dirichletbc(dolfinx.fem.Function(model.V),
+                                 dolfinx.fem.locate_dofs_topological(model.V, 1, edges))
+    solver = QuasiStaticSolver(model, [bc], 2.0,
+                               continuation=ContinuationParameters(viscosity=1e-3))
+    report = solver.solve()
+    assert report.converged and report.residual_norm < 1e-7
+    # it bulged (taut dome) and no cell carries compression
+    assert current_points(model)[:, 2].max() > 0.5
+    stress = model.cell_fields()["stress"].x.array.reshape(-1, 2, 2)
+    principal = np.linalg.eigvalsh(stress)
+    assert principal.min() > -1e-8 * principal.max()
+    assert np.sum(principal[:, 0] < 1e-6 * principal.max()) > 0  # some cells are wrinkled
+
+
+@pytest.mark.mpi
+def test_sphere_parallel_matches_serial():
+    r_par, *_ = solve_sphere(2.0, comm=MPI.COMM_WORLD)
+    r_ser, *_ = solve_sphere(2.0, comm=MPI.COMM_SELF)
+    assert r_par == pytest.approx(r_ser, rel=1e-8)
