@@ -125,10 +125,25 @@ class MembraneModel:
         return (self.pressure_side * self.pressure * ufl.dot(n_da, v) * self.area_factor()
                 * self.dx)
 
-    def residual(self, v=None):
+    def internal_work(self, w, u=None):
+        """Internal virtual work δΠ = Σ ∫ t·S : δE dA_ref for a virtual displacement w.
+
+        ``S = ∂W/∂E`` (material axes) is taken by UFL from the relaxed energy and
+        ``δE = Rᵀ sym(Fᵀ ∇w J0) R``; identical to the Gateaux derivative of
+        :meth:`strain_energy`, but written so that ``u`` and ``w`` may be any UFL
+        expressions (e.g. components of a mixed displacement–velocity state).
+        """
+        F = self.deformation_gradient(u)
+        dF = ufl.grad(w) * self.domain.reference
+        dE = to_material_axes(0.5 * (F.T * dF + dF.T * F), self.domain.fibre)
+        dA = self.area_factor()
+        return sum(material.thickness * ufl.inner(self.stress(material, u), dE) * dA
+                   * self.dx(tag) for tag, material in self.materials.items())
+
+    def residual(self, v=None, u=None):
         """R(u; v) = δΠ − δW_p."""
         v = ufl.TestFunction(self.V) if v is None else v
-        return ufl.derivative(self.strain_energy(), self.u, v) - self.pressure_work(v)
+        return self.internal_work(v, u) - self.pressure_work(v, u)
 
     def jacobian(self, residual=None):
         residual = self.residual() if residual is None else residual

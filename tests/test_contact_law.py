@@ -1,0 +1,149 @@
+"""The SPEC §5 contact force law and its parameters.
+
+Reference values come from the SPEC formula written out below with ``math``,
+not from the code under test:
+
+    f = 0                 d >= h
+    f = F·exp(-k·d/F)     0 <= d < h
+    f = F - k·d           d < 0
+
+with k = 10 mN/mm and h = 0.1 mm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from valve_dolfinx.contact import ContactParameters, contact_force, driving_force
+from valve_dolfinx.exceptions import ParameterError
+
+K, H = 10.0, 0.1
+
+
+def spec_force(d: float, F: float) -> float:
+    if d >= H:
+        return 0.0
+    if d >= 0.0:
+        return F * math.exp(-K * d / F)
+    return F - K * d
+
+
+def test_defaults_are_the_spec_values():
+    p = ContactParameters()
+    assert (p.stiffness, p.cutoff) == (10.0, 0.1)
+    assert p.search_distance == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("F", [0.05, 0.4, 1.0, 3.0])
+def test_force_matches_spec_at_sampled_distances(F):
+    d = np.linspace(-0.3, 0.15, 181)
+    f, _ = contact_force(d, np.full_like(d, F), K, H)
+    expected = [spec_force(di, F) for di in d]
+    np.testing.assert_allclose(f, expected, rtol=1e-14, atol=0.0)
+
+
+def test_some_hand_values():
+    # F = 1 mN: d = 0.05 → exp(-0.5) = 0.6065306597; d = -0.02 → 1.2 mN
+    f, _ = contact_force(np.array([0.05, -0.02, 0.1, 0.2]), np.ones(4), K, H)
+    np.testing.assert_allclose(f, [0.6065306597126334, 1.2, 0.0, 0.0], rtol=1e-13)
+
+
+@pytest.mark.parametrize("F", [0.1, 1.0, 5.0])
+def test_both_branches_give_F_at_contact(F):
+    f, dfdd = contact_force(np.array([0.0, -1e-300, 1e-300]), np.full(3, F), K, H)
+    np.testing.assert_allclose(f, F, rtol=1e-15)
+    np.testing.assert_allclose(dfdd, -K, rtol=1e-15)
+
+
+@pytest.mark.parametrize("F", [0.2, 1.0, 4.0])
+def test_slope_is_minus_k_on_both_sides_of_zero(F):
+    eps = 1e-7
+    for centre in (-2 * eps, 2 * eps):  # one-sided stencils that stay in one branch
+        d = np.array([centre - eps, centre + eps])
+        f, _ = contact_force(d, np.full(2, F), K, H)
+        assert (f[1] - f[0]) / (2 * eps) == pytest.approx(-K, rel=1e-5)
+
+
+@pytest.mark.parametrize("F", [0.2, 1.0])
+def test_derivative_matches_central_differences(F):
+    d = np.array([-0.15, -0.01, 0.01, 0.03, 0.07, 0.095])
+    _, dfdd = contact_force(d, np.full_like(d, F), K, H)
+    eps = 1e-6
+    fp, _ = contact_force(d + eps, np.full_like(d, F), K, H)
+    fm, _ = contact_force(d - eps, np.full_like(d, F), K, H)
+    np.testing.assert_allclose(dfdd, (fp - fm) / (2 * eps), rtol=1e-7)
+
+
+def test_zero_at_and_beyond_cutoff():
+    d = np.array([H, H + 1e-12, 0.2, 5.0])
+    f, dfdd = contact_force(d, np.full(4, 2.0), K, H)
+    assert np.all(f == 0.0) and np.all(dfdd == 0.0)
+
+
+def test_documented_jump_at_cutoff():
+    F = 1.0
+    below = np.nextafter(H, 0.0)
+    f, _ = contact_force(np.array([below, H]), np.full(2, F), K, H)
+    assert f[0] == pytest.approx(F * math.exp(-K * H / F), rel=1e-12)  # 0.3679 mN
+    assert f[1] == 0.0
+
+
+def test_tiny_driving_force_leaves_a_pure_penalty():
+    F = ContactParameters().min_driving_force
+    f, _ = contact_force(np.array([0.05, -0.03]), np.full(2, F), K, H)
+    assert f[0] == 0.0
+    assert f[1] == pytest.approx(F + K * 0.03, rel=1e-12)
+
+
+def test_driving_force_modes():
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    f_ext = np.array([[0.3, 0.0, -0.4], [0.0, 0.0, 2.0]])   # into / away from the surface
+    normal = driving_force(f_ext, n, ContactParameters())
+    np.testing.assert_allclose(normal, [0.4, 1e-9])
+    magnitude = driving_force(f_ext, n, ContactParameters(driving_force="magnitude"))
+    np.testing.assert_allclose(magnitude, [0.5, 2.0])
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("stiffness", 0.0),
+        ("stiffness", -1.0),
+        ("cutoff", 0.0),
+        ("cutoff", float("nan")),
+        ("penetration_depth", -0.1),
+        ("min_driving_force", 0.0),
+        ("driving_force", "absolute"),
+    ],
+)
+def test_bad_parameters_raise_naming_the_parameter(field, value):
+    with pytest.raises(ParameterError, match=field):
+        ContactParameters(**{field: value})
+
+
+def test_taper_removes_the_jump_and_keeps_the_contact_point():
+    """With taper τ the force is the SPEC law up to (1-τ)h, then fades C¹ to zero at h."""
+    F, tau = 3.0, 0.5
+    d = np.array([-0.02, 0.0, 0.03, 0.05])  # up to (1 - τ)h = 0.05: the SPEC law exactly
+    f, _ = contact_force(d, np.full_like(d, F), K, H, taper=tau)
+    assert f == pytest.approx([spec_force(x, F) for x in d], rel=1e-14)
+    # inside the fade: f = s(ξ)·F·exp(-kd/F), s = 1 - 3ξ² + 2ξ³, ξ = (d - h/2)/(h/2)
+    d = np.array([0.06, 0.075, 0.09])
+    xi = (d - 0.05) / 0.05
+    expected = (1 - 3 * xi**2 + 2 * xi**3) * F * np.exp(-K * d / F)
+    f, dfdd = contact_force(d, np.full(3, F), K, H, taper=tau)
+    assert f == pytest.approx(expected, rel=1e-12)
+    # continuous at h (no jump) and the derivative matches finite differences
+    f_h, _ = contact_force(np.array([H - 1e-12, H]), np.full(2, F), K, H, taper=tau)
+    assert abs(f_h[0]) < 1e-9 and f_h[1] == 0.0
+    eps = 1e-7
+    fp, _ = contact_force(d + eps, np.full(3, F), K, H, taper=tau)
+    fm, _ = contact_force(d - eps, np.full(3, F), K, H, taper=tau)
+    assert dfdd == pytest.approx((fp - fm) / (2 * eps), rel=1e-6)
+    with pytest.raises(ParameterError, match="taper"):
+        ContactParameters(taper=1.5)
+    with pytest.raises(ParameterError, match="pairing"):
+        ContactParameters(pairing="three_pass")

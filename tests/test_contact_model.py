@@ -1,0 +1,528 @@
+"""Node-to-surface and node-to-plane penalty contact (SPEC §5).
+
+Expected numbers are worked out by hand from the SPEC law (k = 10 mN/mm,
+h = 0.1 mm) or come from a brute-force all-pairs reference written here with
+plain loops, never from the code under test.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from valve_dolfinx.contact import (
+    ContactParameters,
+    ContactResult,
+    PlaneContact,
+    SurfaceContact,
+    plane_projection,
+    vertex_adjacency,
+)
+from valve_dolfinx.exceptions import MeshError, ParameterError
+
+K, H = 10.0, 0.1
+SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+SQUARE_TRIANGLES = np.array([[0, 1, 2], [0, 2, 3]])      # normals +z
+
+#: The law exactly as SPEC §5 states it (no taper), every node tested against every body
+#: at full weight: the semantics these unit tests check.  The taper and the pairing
+#: options are tested at the end of this file and in test_contact_law.py.
+LITERAL = ContactParameters(taper=0.0, pairing="two_pass", blend_distance=1e-6)
+
+
+def spec_force(d: float, F: float, taper: float = 0.0) -> float:
+    if d >= H:
+        return 0.0
+    if d < 0.0:
+        return F - K * d
+    f = F * math.exp(-K * d / F)
+    start = (1.0 - taper) * H
+    if taper > 0.0 and d > start:  # smoothstep fade over the outer part of [0, h)
+        xi = (d - start) / (taper * H)
+        f *= 1.0 - 3.0 * xi**2 + 2.0 * xi**3
+    return f
+
+
+def node_over_square(z: float, push: float = -0.8, xy=(0.3, 0.2)):
+    """A free node (id 4) above the unit square; its external force is ``push`` along z."""
+    x = np.vstack([SQUARE, [xy[0], xy[1], z]])
+    f_ext = np.zeros_like(x)
+    f_ext[4, 2] = push
+    return x, f_ext
+
+
+def dense_jacobian(result: ContactResult, num_nodes: int) -> np.ndarray:
+    J = np.zeros((num_nodes, 3, num_nodes, 3))
+    for r, c, block in zip(result.jac_rows, result.jac_cols, result.jac_blocks, strict=True):
+        J[r, :, c, :] += block
+    return J.reshape(3 * num_nodes, 3 * num_nodes)
+
+
+def grid_sheet(n: int, m: int, spacing: float):
+    u, v = np.arange(n + 1) * spacing, np.arange(m + 1) * spacing
+    X, Y = np.meshgrid(u, v, indexing="ij")
+    x = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    q = (np.arange(n)[:, None] * (m + 1) + np.arange(m)[None, :]).ravel()
+    quads = np.stack([q, q + m + 1, q + m + 2, q + 1], axis=1)
+    return x, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+
+
+def stacked_sheets(cells: int = 10, spacing: float = 0.3, gap: float = 0.06, seed: int = 0):
+    """Three jittered wavy sheets (bodies 0, 1, 2) ``gap`` apart, pushed together."""
+    rng = np.random.default_rng(seed)
+    base, tri = grid_sheet(cells, cells, spacing)
+    length = cells * spacing
+    interior = np.all((base[:, :2] > 0) & (base[:, :2] < length), axis=1)
+    xs, tris, body, fext = [], [], [], []
+    for k in range(3):
+        x = base.copy()
+        x[:, :2] += 0.2 * spacing * rng.uniform(-1, 1, (len(x), 2)) * interior[:, None]
+        x[:, 2] = 0.3 * np.sin(2.0 * x[:, 0]) * np.cos(1.5 * x[:, 1]) + (k - 1) * gap
+        xs.append(x)
+        tris.append(tri + k * len(base))
+        body.append(np.full(len(tri), k))
+        f = np.zeros_like(x)
+        f[:, 2] = (1.0 - k) * 0.5 if k != 1 else -0.3
+        fext.append(f)
+    return np.concatenate(xs), np.concatenate(tris), np.concatenate(body), np.concatenate(fext)
+
+
+# -- (a) a single node above a flat triangle pair ----------------------------------------
+
+
+@pytest.mark.parametrize("z", [0.05, 0.0, 0.099, -0.05])
+def test_single_node_force_and_reactions(z):
+    x, f_ext = node_over_square(z)
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    contact.update_history(node_over_square(0.05)[0])      # the node came from above
+    res = contact.evaluate(x, f_ext)
+    f = spec_force(z, 0.8)
+    assert res.n_active == 1
+    assert res.pairs.tolist() == [[4, 0]]                   # (0.3, 0.2) lies in triangle 0
+    np.testing.assert_allclose(res.forces[4], [0.0, 0.0, f], rtol=1e-13, atol=1e-15)
+    # projection (0.3, 0.2) = 0.7·(0,0) + 0.1·(1,0) + 0.2·(1,1)
+    np.testing.assert_allclose(res.forces[:3, 2], [-0.7 * f, -0.1 * f, -0.2 * f], rtol=1e-12)
+    assert np.all(res.forces[:4, :2] == 0.0) and res.forces[3, 2] == 0.0
+    np.testing.assert_allclose(res.forces.sum(axis=0), 0.0, atol=1e-14)            # Newton III
+    np.testing.assert_allclose(np.cross(x, res.forces).sum(axis=0), 0.0, atol=1e-14)  # moments
+    assert res.total_force == pytest.approx(f, rel=1e-13)
+    assert res.max_penetration == pytest.approx(max(-z, 0.0), abs=1e-15)
+
+
+def test_node_beyond_cutoff_or_off_the_triangles_is_free():
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    for x, f_ext in (node_over_square(0.1), node_over_square(0.05, xy=(1.2, 0.5))):
+        res = contact.evaluate(x, f_ext)
+        assert res.n_active == 0 and not res.forces.any() and res.jac_blocks.shape == (0, 3, 3)
+        assert res.max_penetration == 0.0 and res.total_force == 0.0
+
+
+def test_magnitude_driving_force_uses_the_full_external_force():
+    x, f_ext = node_over_square(0.05)
+    f_ext[4] = [0.3, 0.0, -0.4]                              # |f_ext| = 0.5, normal part 0.4
+    normal = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
+    magnitude = SurfaceContact(SQUARE_TRIANGLES, 5, ContactParameters(driving_force="magnitude", taper=0.0, pairing="two_pass",
+                               blend_distance=1e-6))
+    assert normal.forces[4, 2] == pytest.approx(spec_force(0.05, 0.4), rel=1e-13)
+    assert magnitude.evaluate(x, f_ext).forces[4, 2] == pytest.approx(spec_force(0.05, 0.5),
+                                                                      rel=1e-13)
+
+
+def test_node_above_shared_edge_contacts_its_body_once():
+    x, f_ext = node_over_square(0.04, xy=(0.5, 0.5))        # on the diagonal 0–2
+    res = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
+    assert res.n_active == 1
+    assert res.forces[4, 2] == pytest.approx(spec_force(0.04, 0.8), rel=1e-12)
+    np.testing.assert_allclose(res.forces.sum(axis=0), 0.0, atol=1e-14)
+
+
+def test_node_between_two_bodies_touches_both():
+    # square of body 7 at z = 0 (normal +z), of body 3 at z = 0.1 (normal -z), node at z = 0.04
+    top = SQUARE + [0.0, 0.0, 0.1]
+    x = np.vstack([SQUARE, top, [[0.3, 0.2, 0.04]]])
+    triangles = np.vstack([SQUARE_TRIANGLES, SQUARE_TRIANGLES[:, ::-1] + 4])
+    f_ext = np.zeros_like(x)
+    f_ext[8] = [0.0, 0.0, -0.5]
+    params = ContactParameters(driving_force="magnitude", taper=0.0, pairing="two_pass",
+                               blend_distance=1e-6)   # F = 0.5 mN against both
+    contact = SurfaceContact(triangles, 9, params, triangle_body=np.array([7, 7, 3, 3]))
+    contact.update_history(x)
+    res = contact.evaluate(x, f_ext)
+    assert res.n_active == 2
+    assert sorted(res.pairs[:, 1].tolist()) == [0, 2]       # triangles over (0.3, 0.2)
+    up, down = spec_force(0.04, 0.5), spec_force(0.06, 0.5)
+    assert res.forces[8, 2] == pytest.approx(up - down, rel=1e-12)
+    assert res.forces[:4, 2].sum() == pytest.approx(-up, rel=1e-12)
+    assert res.forces[4:8, 2].sum() == pytest.approx(down, rel=1e-12)
+
+
+# -- (b) disjoint node sets sum to the whole -----------------------------------------------
+
+
+def test_disjoint_node_sets_sum_to_the_all_nodes_result():
+    x, triangles, body, f_ext = stacked_sheets()
+    contact = SurfaceContact(triangles, len(x), LITERAL, triangle_body=body)
+    contact.update_history(x)
+    whole = contact.evaluate(x, f_ext)
+    assert whole.n_active > 100
+    rng = np.random.default_rng(7)
+    mine = rng.random(len(x)) < 0.5
+    parts = [contact.evaluate(x, f_ext, np.flatnonzero(mine)),
+             contact.evaluate(x, f_ext, np.flatnonzero(~mine))]
+    summed = ContactResult.combine(parts)
+    scale = np.abs(whole.forces).max()
+    np.testing.assert_allclose(summed.forces, whole.forces, rtol=0, atol=1e-12 * scale)
+    assert summed.n_active == whole.n_active
+    assert summed.total_force == pytest.approx(whole.total_force, rel=1e-12)
+    assert summed.max_penetration == whole.max_penetration
+    assert sorted(map(tuple, summed.pairs.tolist())) == sorted(map(tuple, whole.pairs.tolist()))
+
+    def assembled(res):
+        rows = (3 * res.jac_rows[:, None, None] + np.arange(3)[None, :, None]).repeat(3, 2)
+        cols = (3 * res.jac_cols[:, None, None] + np.arange(3)[None, None, :]).repeat(3, 1)
+        n = 3 * len(x)
+        return sp.coo_matrix((res.jac_blocks.ravel(), (rows.ravel(), cols.ravel())),
+                             shape=(n, n)).tocsr()
+
+    diff = assembled(summed) - assembled(whole)
+    assert abs(diff).max() <= 1e-12 * abs(assembled(whole)).max()
+
+
+# -- (c) Jacobian blocks against finite differences (n, λ, F frozen) -----------------------
+
+
+@pytest.mark.parametrize("z", [-0.05, 0.03, 0.07])
+def test_jacobian_matches_finite_differences(z):
+    x, f_ext = node_over_square(z)
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    contact.update_history(node_over_square(0.05)[0])
+    J = dense_jacobian(contact.evaluate(x, f_ext), 5)
+    np.testing.assert_allclose(J, J.T, atol=1e-14)          # B_p B_q symmetric
+    eps = 1e-7
+    n = np.array([0.0, 0.0, 1.0])
+    # moving the node along n leaves n, λ and F unchanged
+    step = np.zeros((5, 3))
+    step[4] = eps * n
+    fd = (contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces)
+    np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-6, atol=1e-12)
+    # so does translating the square along n (d changes by -eps)
+    step = np.zeros((5, 3))
+    step[:4] = eps * n
+    fd = (contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces)
+    np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-6, atol=1e-12)
+    # and the hand value of the node's own block: (df/dd) n⊗n
+    dfdd = -K if z < 0 else -K * math.exp(-K * z / 0.8)
+    assert J[14, 14] == pytest.approx(dfdd, rel=1e-12)
+
+
+# -- (d) own and neighbouring triangles are excluded ---------------------------------------
+
+
+def test_flat_sheet_alone_has_no_contacts():
+    rng = np.random.default_rng(8)
+    x, triangles = grid_sheet(12, 9, 0.25)
+    interior = np.all((x[:, :2] > 0) & (x[:, :2] < [3.0, 2.25]), axis=1)
+    x[:, :2] += 0.1 * rng.uniform(-1, 1, (len(x), 2)) * interior[:, None]
+    f_ext = np.zeros_like(x)
+    f_ext[:, 2] = rng.choice([-1.0, 1.0], len(x))
+    res = SurfaceContact(triangles, len(x), LITERAL).evaluate(x, f_ext)
+    assert res.n_active == 0
+
+
+def test_curved_sheet_alone_has_no_contacts():
+    # a cylinder patch of radius 0.6 mm meshed at 0.2 mm: neighbouring triangles bend away
+    x, triangles = grid_sheet(12, 8, 0.2)
+    angle = x[:, 0] / 0.6
+    x = np.stack([0.6 * np.sin(angle), x[:, 1], 0.6 * (1 - np.cos(angle))], axis=1)
+    f_ext = np.tile([0.0, 0.0, -1.0], (len(x), 1))
+    assert SurfaceContact(triangles, len(x), LITERAL).evaluate(x, f_ext).n_active == 0
+
+
+def test_commissure_nodes_shared_by_two_bodies_are_excluded_from_both():
+    # two sheets (bodies 0 and 1) sharing the edge x = 0 and opening as a narrow V
+    a, ta = grid_sheet(6, 4, 0.25)
+    b = a.copy()
+    a[:, 2] = 0.06 * a[:, 0]                                 # tilted up
+    b[:, 2] = -0.06 * b[:, 0]                                # tilted down, shares x = 0
+    shared = np.flatnonzero(a[:, 0] == 0.0)
+    ids_b = np.arange(len(b)) + len(a)
+    ids_b[shared] = shared                                   # reuse the commissure nodes
+    keep_b = np.setdiff1d(np.arange(len(b)), shared)
+    x = np.vstack([a, b[keep_b]])
+    remap = np.empty(len(b), dtype=int)
+    remap[shared] = shared
+    remap[keep_b] = len(a) + np.arange(len(keep_b))
+    triangles = np.vstack([ta, remap[ta[:, ::-1]]])
+    body = np.repeat([0, 1], len(ta))
+    f_ext = np.zeros_like(x)
+    f_ext[: len(a), 2] = -1.0
+    f_ext[len(a):, 2] = 1.0
+    contact = SurfaceContact(triangles, len(x), LITERAL, triangle_body=body)
+    res = contact.evaluate(x, f_ext)
+    assert not np.isin(res.pairs[:, 0], shared).any()
+    # gap 0.12·x·cos θ < h for x < 0.835.  The row x = 0.25 projects onto the other
+    # sheet's triangles at the commissure, which hold its neighbours (excluded), but it is
+    # 0.03 mm from the edge x = 0.25 of the next triangle, whose closest point it meets
+    active_x = set(x[res.pairs[:, 0], 0].tolist())
+    assert active_x == {0.25, 0.5, 0.75}
+    np.testing.assert_allclose(res.forces.sum(axis=0), 0.0, atol=1e-13)
+
+
+def test_vertex_adjacency_table():
+    table = vertex_adjacency(SQUARE_TRIANGLES, 5)
+    assert table[0].tolist() == [0, 1, 2, 3]
+    assert table[1].tolist() == [1, 0, 2, -1]
+    assert table[4].tolist() == [4, -1, -1, -1]
+
+
+# -- (e) self-contact of a folded sheet ----------------------------------------------------
+
+
+def folded_sheet(gap: float = 0.05, spacing: float = 0.2, n: int = 10, m: int = 5):
+    """One body folded at x = L: lower half z = 0 (normal +z), upper half z = gap (normal -z)."""
+    x, triangles = grid_sheet(2 * n + 1, m, spacing)
+    column = np.arange(len(x)) // (m + 1)
+    length = n * spacing
+    lower = column <= n
+    x[lower, 0] = column[lower] * spacing
+    x[~lower, 0] = length - (column[~lower] - n - 1) * spacing
+    x[~lower, 2] = gap
+    return x, triangles, lower
+
+
+def test_folded_sheet_is_pushed_apart():
+    x, triangles, lower = folded_sheet()
+    f_ext = np.zeros_like(x)
+    f_ext[:, 2] = np.where(lower, 0.4, -0.4)                 # pressure folds it shut
+    contact = SurfaceContact(triangles, len(x), LITERAL)
+    res = contact.evaluate(x, f_ext)
+    assert res.n_active > 50
+    assert res.max_penetration == 0.0
+    assert res.forces[~lower, 2].sum() > 0 and res.forces[lower, 2].sum() < 0
+    np.testing.assert_allclose(res.forces.sum(axis=0), 0.0, atol=1e-12)
+    # away from the fold, every upper node is pushed up by at least its own contact
+    far = ~lower & (x[:, 0] < 1.5)
+    assert np.all(res.forces[far, 2] >= spec_force(0.05, 0.4) - 1e-12)
+
+
+def test_folded_sheet_penetrating_itself_is_pushed_back():
+    x_before, triangles, lower = folded_sheet(gap=0.05)
+    x, _, _ = folded_sheet(gap=-0.03)                        # the upper half went through
+    f_ext = np.zeros_like(x)
+    f_ext[:, 2] = np.where(lower, 0.4, -0.4)
+    contact = SurfaceContact(triangles, len(x), LITERAL)
+    contact.update_history(x_before)
+    res = contact.evaluate(x, f_ext)
+    assert res.max_penetration == pytest.approx(0.03, rel=1e-12)
+    far = ~lower & (x[:, 0] < 1.5)
+    assert np.all(res.forces[far, 2] >= spec_force(-0.03, 0.4) - 1e-12)   # 0.7 mN up
+
+
+# -- (f) the side a node comes from is taken from the recorded state ------------------------
+
+
+def test_sidedness_from_history_pushes_a_crossed_node_back():
+    before, _ = node_over_square(0.05)
+    x, f_ext = node_over_square(-0.1, push=0.0)             # crossed by 0.1 < 0.2, no load
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    contact.update_history(before)
+    res = contact.evaluate(x, f_ext)
+    floor = LITERAL.min_driving_force
+    assert res.forces[4, 2] == pytest.approx(floor + K * 0.1, rel=1e-12)   # back up, 1 mN
+    assert res.max_penetration == pytest.approx(0.1)
+    # without the history the node is taken to be on the side it is now: d = +0.1 >= h
+    contact.clear_history()
+    assert contact.evaluate(x, f_ext).n_active == 0
+
+
+def test_sidedness_without_history_follows_the_pressure():
+    x, f_ext = node_over_square(-0.05, push=-0.8)           # pushed down: came from above
+    res = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
+    assert res.forces[4, 2] == pytest.approx(0.8 + K * 0.05, rel=1e-12)
+    x, f_ext = node_over_square(-0.05, push=0.8)            # pushed up: came from below
+    res = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
+    assert res.forces[4, 2] == pytest.approx(-spec_force(0.05, 0.8), rel=1e-12)
+
+
+def test_node_further_behind_than_penetration_depth_is_ignored():
+    x, f_ext = node_over_square(-0.25)
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    contact.update_history(node_over_square(0.05)[0])
+    assert contact.evaluate(x, f_ext).n_active == 0
+
+
+# -- a brute-force reference on a multi-body configuration ---------------------------------
+
+
+def closest_on_segment(p, a, b):
+    t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    return a + t * (b - a), t
+
+
+def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
+    """All pairs, plain loops over the survivors: the contact rules written out directly.
+
+    Face contact where the node projects inside the triangle (plane distance);
+    otherwise contact with the closest point on the triangle's boundary (edge or
+    vertex, found here segment by segment) within the cut-off, for nodes on their
+    own side of the plane.  The candidates of one (node, body) are blended with the
+    softmin weights exp(-(d - min d)/ε), ε = params.blend_distance.
+    """
+    N, M = len(x), len(triangles)
+    adjacent = np.eye(N, dtype=bool)
+    for t in triangles:
+        for i in range(3):
+            adjacent[t[i], t[(i + 1) % 3]] = adjacent[t[(i + 1) % 3], t[i]] = True
+    found: dict[tuple[int, int], list] = {}
+    for node in range(N):
+        for tri in range(M):
+            tv = triangles[tri]
+            if adjacent[node, tv].any():
+                continue
+            a, b, c = x[tv]
+            n = np.cross(b - a, c - a)
+            n /= np.linalg.norm(n)
+            d0 = np.dot(x[node] - a, n)
+            if abs(d0) >= params.search_distance:
+                continue
+            pv = x_prev[tv]
+            n_prev = np.cross(pv[1] - pv[0], pv[2] - pv[0])
+            s = np.sign(np.dot(x_prev[node] - pv[0], n_prev / np.linalg.norm(n_prev)))
+            q = x[node] - d0 * n
+            # barycentric coordinates of the projection, by areas
+            area = np.dot(np.cross(b - a, c - a), n)
+            w = np.array([np.dot(np.cross(c - b, q - b), n), np.dot(np.cross(a - c, q - c), n),
+                          np.dot(np.cross(b - a, q - a), n)]) / area
+            presence = 1.0
+            if np.all(w >= -1e-10):
+                d, normal = s * d0, s * n
+            else:
+                # edge/vertex rows fade in over ε as the node leaves the triangle's plane
+                xi = min(max(s * d0 / params.blend_distance, 0.0), 1.0)
+                presence = xi * xi * (3 - 2 * xi)
+                if presence == 0.0:
+                    continue
+                cands = []
+                for i, j in ((0, 1), (1, 2), (2, 0)):
+                    point, t = closest_on_segment(x[node], x[tv[i]], x[tv[j]])
+                    ww = np.zeros(3)
+                    ww[i], ww[j] = 1 - t, t
+                    cands.append((np.linalg.norm(x[node] - point), point, ww))
+                gap, point, w = min(cands, key=lambda c: c[0])
+                if gap >= params.cutoff:
+                    continue
+                d, normal = gap, (x[node] - point) / gap
+            if not -params.penetration_depth < d < params.cutoff:
+                continue
+            if params.taper > 0:  # every row fades out over the last ε before the cut-off
+                xi = min(max((params.cutoff - d) / params.blend_distance, 0.0), 1.0)
+                presence *= xi * xi * (3 - 2 * xi)
+            found.setdefault((node, int(body[tri])), []).append((d, tri, normal, w, presence))
+    forces = np.zeros_like(x)
+    for (node, _), cands in found.items():
+        dmin = min(c[0] for c in cands)
+        blend = np.array([c[4] * math.exp(-(c[0] - dmin) / params.blend_distance)
+                          for c in cands])
+        blend /= blend.sum()
+        for b, (d, tri, normal, w, presence) in zip(blend, cands, strict=True):
+            F = max(max(-np.dot(f_ext[node], normal), 0.0), params.min_driving_force)
+            f = b * presence * spec_force(d, F, params.taper)
+            forces[node] += f * normal
+            for j in range(3):
+                forces[triangles[tri, j]] -= w[j] * f * normal
+    return forces, len(found)
+
+
+@pytest.mark.parametrize("taper", [0.0, 0.5])
+def test_matches_brute_force_reference_on_three_sheets(taper):
+    x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=3)
+    x_prev = x.copy()
+    x = x + np.random.default_rng(4).normal(scale=0.02, size=x.shape)
+    params = ContactParameters(taper=taper, pairing="two_pass")  # default blending ε
+    contact = SurfaceContact(triangles, len(x), params, triangle_body=body)
+    contact.update_history(x_prev)
+    res = contact.evaluate(x, f_ext)
+    expected, n_pairs = brute_force_forces(x, f_ext, triangles, body, x_prev, params)
+    assert res.n_active > 30
+    assert res.n_active <= n_pairs
+    np.testing.assert_allclose(res.forces, expected, rtol=0, atol=1e-12)
+
+
+# -- (g) rigid planes ----------------------------------------------------------------------
+
+
+def test_plane_contact_law_and_jacobian():
+    x = np.array([[0.0, 0.0, 0.05], [1.0, 0.0, -0.3], [2.0, 0.0, 0.05], [3.0, 0.0, 0.5]])
+    f_ext = np.array([[0.0, 0.0, -0.6], [0.0, 0.0, -0.6], [0.0, 0.0, 0.6], [0.0, 0.0, -0.6]])
+    plane = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 2.0]])   # normalised to +z
+    res = plane.evaluate(x, f_ext)
+    f0 = 0.6 * math.exp(-K * 0.05 / 0.6)
+    assert res.forces[0, 2] == pytest.approx(f0, rel=1e-13)
+    assert res.forces[1, 2] == pytest.approx(0.6 + K * 0.3, rel=1e-13)    # deep: still pushed
+    assert res.forces[2, 2] == 0.0 and res.forces[3, 2] == 0.0        # pulled away / far
+    assert res.n_active == 2 and res.pairs.tolist() == [[0, -1], [1, -1]]
+    assert res.max_penetration == pytest.approx(0.3)
+    J = dense_jacobian(res, 4)
+    assert J[2, 2] == pytest.approx(-K * math.exp(-K * 0.05 / 0.6), rel=1e-13)
+    assert J[5, 5] == pytest.approx(-K)
+    assert np.count_nonzero(J) == 2
+
+
+def test_plane_contact_node_subsets_and_two_planes():
+    x = np.array([[0.05, 0.5, 0.05]])                          # in a corner of two walls
+    f_ext = np.array([[-1.0, 0.0, -1.0]])
+    planes = PlaneContact([[0, 0, 0], [0, 0, 0]], [[0, 0, 1], [1, 0, 0]])
+    res = planes.evaluate(x, f_ext)
+    np.testing.assert_allclose(res.forces[0], [spec_force(0.05, 1.0), 0, spec_force(0.05, 1.0)],
+                               rtol=1e-13)
+    assert planes.evaluate(x, f_ext, np.array([], dtype=int)).n_active == 0
+
+
+# -- input checks --------------------------------------------------------------------------
+
+
+def test_bad_inputs_raise_named_errors():
+    with pytest.raises(MeshError, match="triangle node ids"):
+        SurfaceContact(np.array([[0, 1, 7]]), 5)
+    with pytest.raises(MeshError, match="triangle_body"):
+        SurfaceContact(SQUARE_TRIANGLES, 5, triangle_body=np.zeros(3))
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL)
+    with pytest.raises(MeshError, match=r"\(5, 3\)"):
+        contact.evaluate(np.zeros((4, 3)), np.zeros((5, 3)))
+    with pytest.raises(MeshError, match="contact nodes"):
+        contact.evaluate(np.zeros((5, 3)), np.zeros((5, 3)), np.array([5]))
+    with pytest.raises(ParameterError, match="normals"):
+        PlaneContact([[0, 0, 0]], [[0, 0, 0]])
+
+
+@pytest.mark.parametrize("pairing,expected_factor", [("one_pass", 1.0), ("two_pass", 2.0)])
+def test_pairing_of_two_pressed_sheets(pairing, expected_factor):
+    """Two sheets touching (d = 0), each pushed onto the other by its pressure force F.
+
+    One-pass: only the lower body's nodes are tested, the upper sheet gets their
+    reactions: it is pushed back by exactly ΣF (its own pressure load) -- contact at
+    d = 0 is an equilibrium.  Two-pass counts the pair twice (2ΣF).
+    """
+    xa, ta = grid_sheet(6, 6, 0.25)
+    xb, tb = grid_sheet(8, 8, 0.25)
+    xb = xb - [0.5, 0.5, 0.0]  # B covers A's nodes with a margin, coincident plane z = 0
+    x = np.vstack([xa, xb])
+    triangles = np.vstack([ta, tb + len(xa)])
+    body = np.r_[np.ones(len(ta), int), np.full(len(tb), 2)]
+    F = 0.3
+    f_ext = np.zeros_like(x)
+    f_ext[: len(xa), 2] = -F  # A is pushed down onto B ...
+    f_ext[len(xa):, 2] = +F   # ... and B up onto A (A's nodes come from above B: n = +z)
+    contact = SurfaceContact(triangles, len(x), ContactParameters(pairing=pairing),
+                             triangle_body=body)
+    contact.update_history(x + np.r_[np.zeros((len(xa), 3)) + [0, 0, 0.01],
+                                     np.zeros((len(xb), 3))])  # A was above B
+    res = contact.evaluate(x, f_ext)
+    on_b = res.forces[len(xa):, 2].sum()
+    on_a = res.forces[: len(xa), 2].sum()
+    # A's 49 nodes sit exactly on B (and, in two-pass, B's nodes under A sit on A)
+    assert on_a == pytest.approx(expected_factor * F * len(xa), rel=1e-12)
+    assert on_a + on_b == pytest.approx(0.0, abs=1e-9)  # action = reaction

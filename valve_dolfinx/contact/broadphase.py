@@ -1,0 +1,290 @@
+"""Broad phase of the contact search: nodes inside padded triangle bounding boxes.
+
+The padded axis-aligned bounding boxes (AABBs) of the triangles are matched
+against the nodes with a uniform grid built from NumPy sorts and prefix sums:
+
+* the two axes along which the boxes are widest are cut into square columns
+  of edge ``cell``; the third, the *sweep axis*, into thinner levels;
+* each node gets the key of its cell, ``(column, level)`` in lexicographic
+  order, and the nodes are sorted by it, so that the nodes of a column are
+  contiguous and ordered along the sweep axis; a dense table gives the first
+  node of every cell;
+* a box covers a few columns, and in each of them the nodes between its two
+  faces across the sweep axis form one contiguous run of the sorted nodes,
+  read from the table in O(1) (sweep and prune within a column);
+* the runs are expanded into pairs and filtered with the exact box test.
+
+The work is ``O(S log S)`` for the sort of the ``S`` queried nodes, linear in
+the number of grid cells (bounded by a multiple of the nodes and boxes), of
+box–column runs and of pairs; there is no Python loop over nodes or
+triangles, only over blocks of :data:`BLOCK_SIZE` boxes, which keeps the
+temporaries cache-sized.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from valve_dolfinx.contact.geometry import triangle_normals
+
+__all__ = ["candidate_pairs", "padded_bounds", "CellGrid", "CellIndex", "BLOCK_SIZE"]
+
+log = logging.getLogger(__name__)
+
+#: Column edge as a multiple of the mean box width across the column axes.
+#: Smaller columns mean fewer false candidates but more runs; the optimum is
+#: flat between 0.75 and 1.5 on the meshes of benchmarks/contact.py.
+_CELL_FACTOR = 1.0
+#: The column edge is doubled until a box covers at most this many columns on
+#: average, so a few large triangles cannot blow up the number of runs.
+_MAX_COLUMNS_PER_BOX = 25.0
+#: Cell depth along the sweep axis as a multiple of the mean box depth (the
+#: runs overshoot the box by less than one cell at each end).
+_STEP_FACTOR = 0.25
+#: Largest grid, in cells per indexed node or box (a dense start table is kept).
+_CELLS_PER_ITEM = 16
+#: Boxes processed at once: bounds the temporaries at a few MB (cache-sized).
+BLOCK_SIZE = 4096
+
+
+def padded_bounds(xt: np.ndarray, triangles: np.ndarray, pad: float,
+                  normals: np.ndarray | None = None, slack: float = 1e-9
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners ``(3, M)`` of padded triangle bounding boxes (mm).
+
+    Without ``normals``: the triangles' AABBs inflated by ``pad`` on every
+    side.  With the unit ``normals`` ``(3, M)``: the AABBs of the triangles'
+    *contact prisms* :math:`\\{q + s\\,n : q \\in T, |s| \\le pad\\}`, i.e. inflated
+    by :math:`pad\\,|n_i|` along axis ``i``, plus ``slack`` times the box size
+    (for a projection test that accepts barycentric coordinates down to
+    ``-slack/4``) and a rounding margin.  A prism box is much smaller than the
+    padded AABB when the mesh is finer than ``pad`` and still contains every
+    node whose projection falls in the triangle within ``pad``.
+
+    ``xt`` holds the node coordinates by axis, ``(3, N)``; the result is laid
+    out the same way (one contiguous row per axis), which makes the gathers
+    of the box test several times faster than on ``(M, 3)`` arrays.
+    """
+    lo = np.empty((3, len(triangles)))
+    hi = np.empty((3, len(triangles)))
+    for axis in range(3):
+        a, b, c = (xt[axis][triangles[:, j]] for j in range(3))
+        np.minimum(np.minimum(a, b, out=lo[axis]), c, out=lo[axis])
+        np.maximum(np.maximum(a, b, out=hi[axis]), c, out=hi[axis])
+    if normals is None:
+        return lo - pad, hi + pad
+    size = (hi - lo).max(axis=0) + pad
+    rounding = 1e-13 * (1.0 + float(np.abs(xt).max(initial=0.0)))
+    margin = pad * np.abs(normals) + (slack * size + rounding)
+    return lo - margin, hi + margin
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    """A grid of ``cell × cell × step`` cells: square columns along the sweep axis ``axes[2]``.
+
+    Cell ``(i, j, l)`` covers ``[i, i+1)·cell × [j, j+1)·cell × [l, l+1)·step``
+    from ``origin`` along ``axes``; its key is ``(i·shape[1] + j)·shape[2] + l``.
+    Keys are monotone in each coordinate, so the nodes inside a box have, in
+    each column the box covers, keys between those of the box's corners —
+    one contiguous run of the nodes sorted by key.  Arrays of points and
+    boxes are ``(3, K)``.
+    """
+
+    origin: np.ndarray
+    cell: float
+    step: float
+    shape: tuple[int, int, int]
+    axes: tuple[int, int, int]
+
+    @classmethod
+    def covering(cls, lo: np.ndarray, hi: np.ndarray, max_cells: int) -> CellGrid:
+        """Grid over the boxes ``[lo, hi]``, sweeping along their thinnest axis.
+
+        Columns are about ``_CELL_FACTOR`` of the mean box width, levels
+        ``_STEP_FACTOR`` of the mean box depth, both coarsened (doubled) until
+        a box covers at most ``_MAX_COLUMNS_PER_BOX`` columns on average and
+        the grid has at most ``max_cells`` cells.
+        """
+        origin = lo.min(axis=1)
+        span = hi.max(axis=1) - origin
+        extent = hi - lo
+        mean_extent = extent.mean(axis=1)
+        sweep = int(np.argmin(mean_extent))
+        a, b = (ax for ax in range(3) if ax != sweep)
+        tiny = 1e-9 * max(float(span.max()), 1.0)
+        cell = max(_CELL_FACTOR * 0.5 * float(mean_extent[a] + mean_extent[b]), tiny)
+        while cell <= max(span[a], span[b]):
+            columns = (np.floor(extent[a] / cell) + 2.0) * (np.floor(extent[b] / cell) + 2.0)
+            if columns.mean() <= _MAX_COLUMNS_PER_BOX:
+                break
+            cell *= 2.0
+        step = max(_STEP_FACTOR * float(mean_extent[sweep]), tiny)
+
+        def shape_for(cell: float, step: float) -> tuple[int, int, int]:
+            # same rounding as _index (np.floor of a quotient, not //), so that
+            # the upper corner of the widest box falls in the last cell
+            return (int(np.floor(span[a] / cell)) + 1, int(np.floor(span[b] / cell)) + 1,
+                    int(np.floor(span[sweep] / step)) + 1)
+
+        while np.prod(shape_for(cell, step), dtype=float) > max_cells:
+            if step < cell:
+                step *= 2.0
+            else:
+                cell *= 2.0
+        return cls(origin=origin, cell=cell, step=step, shape=shape_for(cell, step),
+                   axes=(a, b, sweep))
+
+    @property
+    def num_cells(self) -> int:
+        return self.shape[0] * self.shape[1] * self.shape[2]
+
+    def _index(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a, b, c = self.axes
+        o = self.origin
+        return (np.floor((p[a] - o[a]) / self.cell).astype(np.int64),
+                np.floor((p[b] - o[b]) / self.cell).astype(np.int64),
+                np.floor((p[c] - o[c]) / self.step).astype(np.int64))
+
+    def point_keys(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Keys of points ``(3, K)`` and a mask of those inside the grid (others match no box)."""
+        i, j, level = self._index(p)
+        inside = (i >= 0) & (i < self.shape[0]) & (j >= 0) & (j < self.shape[1]) \
+            & (level >= 0) & (level < self.shape[2])
+        return (i * self.shape[1] + j) * self.shape[2] + level, inside
+
+    def box_runs(self, lo: np.ndarray, hi: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For every (box, covered column): the box id and the first and last key to match."""
+        i0, j0, level_lo = self._index(lo)
+        i1, j1, level_hi = self._index(hi)
+        nj = j1 - j0 + 1
+        box, rank = _segment_offsets((i1 - i0 + 1) * nj)
+        nj_box = nj[box]
+        column = (i0[box] + rank // nj_box) * self.shape[1] + j0[box] + rank % nj_box
+        base = column * self.shape[2]
+        return box, base + level_lo[box], base + level_hi[box]
+
+
+def _segment_offsets(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For segments of the given lengths: owner segment and rank within it of each item."""
+    owner = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+    rank = np.arange(len(owner), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+    return owner, rank
+
+
+class CellIndex:
+    """The query nodes sorted by their :class:`CellGrid` keys, with a start table per cell.
+
+    Parameters
+    ----------
+    xt
+        ``(3, N)`` node coordinates by axis (mm).
+    lo, hi
+        ``(3, M)`` corners of the boxes that will be queried (they set the grid).
+    nodes
+        Ids of the nodes to index, distinct.
+    """
+
+    def __init__(self, xt: np.ndarray, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> None:
+        self.xt = xt
+        self.grid = None
+        self.sorted_nodes = np.empty(0, dtype=np.int64)
+        if lo.shape[1] == 0 or len(nodes) == 0:
+            return
+        max_cells = _CELLS_PER_ITEM * (len(nodes) + lo.shape[1]) + (1 << 16)
+        self.grid = CellGrid.covering(lo, hi, max_cells)
+        keys, on_grid = self.grid.point_keys(xt[:, nodes])
+        keys, nodes = keys[on_grid], nodes[on_grid]
+        order = np.argsort(keys, kind="stable")
+        self.sorted_nodes = nodes[order]
+        #: ``first[k]``: position in ``sorted_nodes`` of the first node of cell ``k`` or later.
+        self.first = np.zeros(self.grid.num_cells + 1, dtype=np.int64)
+        np.cumsum(np.bincount(keys, minlength=self.grid.num_cells), out=self.first[1:])
+
+    def box_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs ``(node, box)`` of indexed nodes inside the closed boxes ``[lo, hi]``, ``(3, K)``.
+
+        Box ids are local to ``lo``/``hi``; pairs come grouped by box.
+        """
+        empty = np.empty(0, dtype=np.int64)
+        if self.grid is None or len(self.sorted_nodes) == 0 or lo.shape[1] == 0:
+            return empty, empty.copy()
+        box, key_lo, key_hi = self.grid.box_runs(lo, hi)
+        start = self.first[key_lo]
+        count = self.first[key_hi + 1] - start
+        offsets = np.cumsum(count) - count
+        position = np.arange(int(offsets[-1] + count[-1]), dtype=np.int64) \
+            + np.repeat(start - offsets, count)
+        node = self.sorted_nodes[position]
+        box = np.repeat(box, count)
+        inside = np.ones(len(node), dtype=bool)
+        for axis in self.grid.axes:
+            coordinate = self.xt[axis][node]
+            inside &= coordinate >= lo[axis][box]
+            inside &= coordinate <= hi[axis][box]
+        keep = np.flatnonzero(inside)
+        return node[keep], box[keep]
+
+    def blocks(self, lo: np.ndarray, hi: np.ndarray, block_size: int = BLOCK_SIZE
+               ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """:meth:`box_pairs` for consecutive blocks of boxes; box ids are global.
+
+        Blocking bounds the temporaries at ``O(block_size)`` whatever the mesh
+        size, which keeps them in cache and avoids page faults on large meshes.
+        """
+        for first in range(0, lo.shape[1], block_size):
+            block = slice(first, first + block_size)
+            node, box = self.box_pairs(lo[:, block], hi[:, block])
+            yield node, box + first
+
+
+def candidate_pairs(x: np.ndarray, triangles: np.ndarray, nodes: np.ndarray | None, pad: float,
+                    *, prism: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Every ``(node, triangle)`` pair whose node lies in the triangle's padded AABB.
+
+    A node at :math:`x_p` is paired with triangle ``t`` iff
+    :math:`\\min_j x_{t_j} - pad \\le x_p \\le \\max_j x_{t_j} + pad` in all three
+    coordinates (closed boxes; the vertices of ``t`` are paired with ``t``).
+
+    Parameters
+    ----------
+    x
+        ``(N, 3)`` node positions (mm).
+    triangles
+        ``(M, 3)`` node ids of the triangles.
+    nodes
+        Ids of the nodes to query (default: all), distinct.
+    pad
+        Inflation of the boxes (mm), ``>= 0``.
+    prism
+        Use the tighter boxes of the triangles' contact prisms instead (see
+        :func:`padded_bounds`; the normal is :math:`(x_1 - x_0)\\times(x_2 - x_0)`).
+
+    Returns
+    -------
+    node_ids, tri_ids
+        Two ``(P,)`` integer arrays; each pair appears once, grouped by
+        triangle (ascending), the nodes of a triangle in no particular order.
+        The pairs of a node do not depend on which other nodes are queried.
+    """
+    x = np.asarray(x, dtype=float)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    nodes = np.arange(len(x)) if nodes is None else np.asarray(nodes, dtype=np.int64).ravel()
+    xt = np.ascontiguousarray(x.T)
+    normals = None
+    if prism:
+        normals, _ = triangle_normals(*(x[triangles[:, j]] for j in range(3)))
+        normals = np.ascontiguousarray(normals.T)
+    lo, hi = padded_bounds(xt, triangles, pad, normals)
+    index = CellIndex(xt, lo, hi, nodes)
+    node, tri = zip(*index.blocks(lo, hi), strict=True) if len(triangles) else ((), ())
+    empty = [np.empty(0, dtype=np.int64)]
+    node_ids, tri_ids = np.concatenate([*node, *empty]), np.concatenate([*tri, *empty])
+    log.debug("broad phase: %d triangles, %d nodes queried, %d pairs",
+              len(triangles), len(nodes), len(node_ids))
+    return node_ids, tri_ids
