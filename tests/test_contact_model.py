@@ -18,9 +18,9 @@ from valve_dolfinx.contact import (
     ContactResult,
     PlaneContact,
     SurfaceContact,
-    plane_projection,
     vertex_adjacency,
 )
+from valve_dolfinx.contact.model import FACE_BAND
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 K, H = 10.0, 0.1
@@ -46,7 +46,7 @@ def spec_force(d: float, F: float, taper: float = 0.0) -> float:
     return f
 
 
-def node_over_square(z: float, push: float = -0.8, xy=(0.3, 0.2)):
+def node_over_square(z: float, push: float = -0.8, xy=(0.4, 0.1)):
     """A free node (id 4) above the unit square; its external force is ``push`` along z."""
     x = np.vstack([SQUARE, [xy[0], xy[1], z]])
     f_ext = np.zeros_like(x)
@@ -101,10 +101,11 @@ def test_single_node_force_and_reactions(z):
     res = contact.evaluate(x, f_ext)
     f = spec_force(z, 0.8)
     assert res.n_active == 1
-    assert res.pairs.tolist() == [[4, 0]]                   # (0.3, 0.2) lies in triangle 0
+    # (0.4, 0.1) lies in triangle 0, and 0.3 (barycentric) beyond triangle 1's band
+    assert res.pairs.tolist() == [[4, 0]]
     np.testing.assert_allclose(res.forces[4], [0.0, 0.0, f], rtol=1e-13, atol=1e-15)
-    # projection (0.3, 0.2) = 0.7·(0,0) + 0.1·(1,0) + 0.2·(1,1)
-    np.testing.assert_allclose(res.forces[:3, 2], [-0.7 * f, -0.1 * f, -0.2 * f], rtol=1e-12)
+    # projection (0.4, 0.1) = 0.6·(0,0) + 0.3·(1,0) + 0.1·(1,1)
+    np.testing.assert_allclose(res.forces[:3, 2], [-0.6 * f, -0.3 * f, -0.1 * f], rtol=1e-12)
     assert np.all(res.forces[:4, :2] == 0.0) and res.forces[3, 2] == 0.0
     np.testing.assert_allclose(res.forces.sum(axis=0), 0.0, atol=1e-14)            # Newton III
     np.testing.assert_allclose(np.cross(x, res.forces).sum(axis=0), 0.0, atol=1e-14)  # moments
@@ -124,8 +125,8 @@ def test_magnitude_driving_force_uses_the_full_external_force():
     x, f_ext = node_over_square(0.05)
     f_ext[4] = [0.3, 0.0, -0.4]                              # |f_ext| = 0.5, normal part 0.4
     normal = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
-    magnitude = SurfaceContact(SQUARE_TRIANGLES, 5, ContactParameters(driving_force="magnitude", taper=0.0, pairing="two_pass",
-                               blend_distance=1e-6))
+    magnitude = SurfaceContact(SQUARE_TRIANGLES, 5, ContactParameters(
+        driving_force="magnitude", taper=0.0, pairing="two_pass", blend_distance=1e-6))
     assert normal.forces[4, 2] == pytest.approx(spec_force(0.05, 0.4), rel=1e-13)
     assert magnitude.evaluate(x, f_ext).forces[4, 2] == pytest.approx(spec_force(0.05, 0.5),
                                                                       rel=1e-13)
@@ -142,7 +143,7 @@ def test_node_above_shared_edge_contacts_its_body_once():
 def test_node_between_two_bodies_touches_both():
     # square of body 7 at z = 0 (normal +z), of body 3 at z = 0.1 (normal -z), node at z = 0.04
     top = SQUARE + [0.0, 0.0, 0.1]
-    x = np.vstack([SQUARE, top, [[0.3, 0.2, 0.04]]])
+    x = np.vstack([SQUARE, top, [[0.4, 0.1, 0.04]]])
     triangles = np.vstack([SQUARE_TRIANGLES, SQUARE_TRIANGLES[:, ::-1] + 4])
     f_ext = np.zeros_like(x)
     f_ext[8] = [0.0, 0.0, -0.5]
@@ -152,7 +153,7 @@ def test_node_between_two_bodies_touches_both():
     contact.update_history(x)
     res = contact.evaluate(x, f_ext)
     assert res.n_active == 2
-    assert sorted(res.pairs[:, 1].tolist()) == [0, 2]       # triangles over (0.3, 0.2)
+    assert sorted(res.pairs[:, 1].tolist()) == [0, 2]       # triangles over (0.4, 0.1)
     up, down = spec_force(0.04, 0.5), spec_force(0.06, 0.5)
     assert res.forces[8, 2] == pytest.approx(up - down, rel=1e-12)
     assert res.forces[:4, 2].sum() == pytest.approx(-up, rel=1e-12)
@@ -362,16 +363,24 @@ def closest_on_segment(p, a, b):
     return a + t * (b - a), t
 
 
+def smoothstep(x: float, width: float) -> float:
+    xi = min(max(x / width, 0.0), 1.0)
+    return xi * xi * (3 - 2 * xi)
+
+
 def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
     """All pairs, plain loops over the survivors: the contact rules written out directly.
 
-    Face contact where the node projects inside the triangle (plane distance);
-    otherwise contact with the closest point on the triangle's boundary (edge or
-    vertex, found here segment by segment) within the cut-off, for nodes on their
-    own side of the plane.  The candidates of one (node, body) are blended with the
-    softmin weights exp(-(d - min d)/ε), ε = params.blend_distance.
+    Face rows where the node projects inside the triangle or within FACE_BAND
+    (barycentric) outside it, with presence ``smoothstep(λ_min + band)``;
+    edge/vertex rows (closest point on the boundary, found segment by segment)
+    where it projects outside, within the cut-off, with presence
+    ``smoothstep(s·d0/ε)`` (only nodes on their own side).  The rows of one
+    (node, body) are blended with weights ``p e^{-d/ε}`` (normalised) and the
+    group's force is scaled by ``G = 1 - Π(1 - p)``.
     """
     N, M = len(x), len(triangles)
+    eps = params.blend_distance
     adjacent = np.eye(N, dtype=bool)
     for t in triangles:
         for i in range(3):
@@ -394,42 +403,37 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
             q = x[node] - d0 * n
             # barycentric coordinates of the projection, by areas
             area = np.dot(np.cross(b - a, c - a), n)
-            w = np.array([np.dot(np.cross(c - b, q - b), n), np.dot(np.cross(a - c, q - c), n),
-                          np.dot(np.cross(b - a, q - a), n)]) / area
-            presence = 1.0
-            if np.all(w >= -1e-10):
-                d, normal = s * d0, s * n
-            else:
-                # edge/vertex rows fade in over ε as the node leaves the triangle's plane
-                xi = min(max(s * d0 / params.blend_distance, 0.0), 1.0)
-                presence = xi * xi * (3 - 2 * xi)
-                if presence == 0.0:
-                    continue
+            lam = np.array([np.dot(np.cross(c - b, q - b), n), np.dot(np.cross(a - c, q - c), n),
+                            np.dot(np.cross(b - a, q - a), n)]) / area
+            rows = []
+            if lam.min() > -FACE_BAND:
+                rows.append((s * d0, s * n, lam, smoothstep(lam.min() + FACE_BAND, FACE_BAND)))
+            if lam.min() < 0.0 and s * d0 > 0.0:
                 cands = []
                 for i, j in ((0, 1), (1, 2), (2, 0)):
                     point, t = closest_on_segment(x[node], x[tv[i]], x[tv[j]])
                     ww = np.zeros(3)
                     ww[i], ww[j] = 1 - t, t
                     cands.append((np.linalg.norm(x[node] - point), point, ww))
-                gap, point, w = min(cands, key=lambda c: c[0])
-                if gap >= params.cutoff:
+                gap, point, ww = min(cands, key=lambda c: c[0])
+                if gap < params.cutoff:
+                    rows.append((gap, (x[node] - point) / gap, ww, smoothstep(s * d0, eps)))
+            for d, normal, w, presence in rows:
+                if not -params.penetration_depth < d < params.cutoff or presence == 0.0:
                     continue
-                d, normal = gap, (x[node] - point) / gap
-            if not -params.penetration_depth < d < params.cutoff:
-                continue
-            if params.taper > 0:  # every row fades out over the last ε before the cut-off
-                xi = min(max((params.cutoff - d) / params.blend_distance, 0.0), 1.0)
-                presence *= xi * xi * (3 - 2 * xi)
-            found.setdefault((node, int(body[tri])), []).append((d, tri, normal, w, presence))
+                if params.taper > 0:  # every row fades out over the last ε before the cut-off
+                    presence *= smoothstep(params.cutoff - d, eps)
+                found.setdefault((node, int(body[tri])), []).append(
+                    (d, tri, normal, w, presence))
     forces = np.zeros_like(x)
     for (node, _), cands in found.items():
         dmin = min(c[0] for c in cands)
-        blend = np.array([c[4] * math.exp(-(c[0] - dmin) / params.blend_distance)
-                          for c in cands])
+        blend = np.array([c[4] * math.exp(-(c[0] - dmin) / eps) for c in cands])
         blend /= blend.sum()
-        for b, (d, tri, normal, w, presence) in zip(blend, cands, strict=True):
+        group = 1.0 - np.prod([1.0 - c[4] for c in cands])
+        for b, (d, tri, normal, w, _) in zip(blend, cands, strict=True):
             F = max(max(-np.dot(f_ext[node], normal), 0.0), params.min_driving_force)
-            f = b * presence * spec_force(d, F, params.taper)
+            f = b * group * spec_force(d, F, params.taper)
             forces[node] += f * normal
             for j in range(3):
                 forces[triangles[tri, j]] -= w[j] * f * normal
@@ -526,3 +530,31 @@ def test_pairing_of_two_pressed_sheets(pairing, expected_factor):
     # A's 49 nodes sit exactly on B (and, in two-pass, B's nodes under A sit on A)
     assert on_a == pytest.approx(expected_factor * F * len(xa), rel=1e-12)
     assert on_a + on_b == pytest.approx(0.0, abs=1e-9)  # action = reaction
+
+
+@pytest.mark.parametrize("thickness", [0.0, 0.05])
+def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
+    """Blended face/edge/vertex contacts at angles, fading rows, turning driving forces.
+
+    The Jacobian includes the turning of the contact direction, the sliding of
+    the contact point, the blending weights, the presence fades and the driving
+    force turning with the normal: it must match central differences of the
+    forces (with the external forces frozen, as the solver freezes them).
+    """
+    x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=5)
+    rng = np.random.default_rng(6)
+    f_ext = f_ext + rng.normal(scale=0.2, size=f_ext.shape)
+    x_prev = x.copy()
+    x = x + rng.normal(scale=0.02, size=x.shape)
+    params = ContactParameters(taper=0.5, blend_distance=0.02, thickness=thickness)
+    contact = SurfaceContact(triangles, len(x), params, triangle_body=body)
+    contact.update_history(x_prev)
+    res = contact.evaluate(x, f_ext)
+    assert res.n_active > 30
+    J = dense_jacobian(res, len(x))
+    for eps in (1e-6, 1e-7):
+        step = rng.normal(size=x.shape) * eps
+        fd = (contact.evaluate(x + step, f_ext).forces
+              - contact.evaluate(x - step, f_ext).forces) / 2
+        np.testing.assert_allclose(J @ step.ravel(), fd.ravel(), rtol=0,
+                                   atol=1e-5 * np.abs(fd).max())

@@ -57,7 +57,8 @@ def exact_tube_stretches(p, R, m, fibre):
             St, Sz = pk2(m, Et, Ez)
         else:
             Sz, St = pk2(m, Ez, Et)
-        return [m.thickness * lt * St / lz - p * lt * R, m.thickness * lz * Sz / lt - p * lt * R / 2]
+        return [m.thickness * lt * St / lz - p * lt * R,
+                m.thickness * lz * Sz / lt - p * lt * R / 2]
 
     for guess in ([1.1, 1.3], [1.4, 1.1], [1.2, 1.2]):
         sol, _, ier, _ = fsolve(f, guess, xtol=1e-13, full_output=True)

@@ -26,7 +26,8 @@ import numpy as np
 from valve_dolfinx.exceptions import ParameterError, check_range
 
 __all__ = [
-    "ContactParameters", "DRIVING_FORCE_MODES", "PAIRINGS", "contact_force", "driving_force",
+    "ContactParameters", "DRIVING_FORCE_MODES", "PAIRINGS", "contact_force",
+    "contact_force_slope_in_F", "driving_force",
 ]
 
 log = logging.getLogger(__name__)
@@ -195,6 +196,26 @@ def contact_force(d: np.ndarray, F: np.ndarray, k: float, h: float, taper: float
         dfdd[fade] = s * dfdd[fade] + ds * f[fade]
         f[fade] = s * f[fade]
     return f, dfdd
+
+
+def contact_force_slope_in_F(d: np.ndarray, F: np.ndarray, k: float, h: float,
+                             taper: float = 0.0) -> np.ndarray:
+    """``∂f/∂F`` of :func:`contact_force`: ``e^{-kd/F}(1 + kd/F)`` in front, 1 behind, 0 beyond h.
+
+    The taper's smoothstep multiplies it like it multiplies ``f``.
+    """
+    d, F = np.broadcast_arrays(np.asarray(d, dtype=float), np.asarray(F, dtype=float))
+    out = np.zeros(d.shape)
+    out[d < 0.0] = 1.0
+    near = (d >= 0.0) & (d < h)
+    ratio = k * d[near] / F[near]
+    out[near] = np.exp(-ratio) * (1.0 + ratio)
+    if taper > 0.0:
+        start = (1.0 - taper) * h
+        fade = near & (d > start)
+        xi = (d[fade] - start) / (taper * h)
+        out[fade] *= 1.0 - xi * xi * (3.0 - 2.0 * xi)
+    return out
 
 
 def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParameters

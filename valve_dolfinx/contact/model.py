@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -39,7 +39,13 @@ from valve_dolfinx.contact.geometry import (
     closest_point_on_triangles,
     triangle_normals,
 )
-from valve_dolfinx.contact.law import ContactParameters, contact_force, driving_force
+from valve_dolfinx.contact.law import (
+    ContactParameters,
+    contact_force,
+    contact_force_slope_in_F,
+    driving_force,
+)
+from valve_dolfinx.contact.linearisation import direction_derivatives, geometric_stiffness
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 __all__ = [
@@ -60,6 +66,10 @@ log = logging.getLogger(__name__)
 INSIDE_TOLERANCE = 1e-10
 #: The SPEC §5 parameters (frozen, so safe as a default argument).
 DEFAULT_PARAMETERS = ContactParameters()
+#: Face rows extend this far outside their triangle, in barycentric coordinates, and fade
+#: out across the band: a node pressed through a sheet near its boundary then loses its
+#: contact force smoothly instead of at once (a jump that makes Newton's method cycle).
+FACE_BAND = 0.1
 #: Slack of the contact-prism boxes of the broad phase: a point accepted with
 #: barycentric coordinates >= -INSIDE_TOLERANCE lies within 2·√3·INSIDE_TOLERANCE
 #: times the box size of the triangle, so 10·INSIDE_TOLERANCE keeps it in the box.
@@ -211,6 +221,44 @@ def triangle_halo(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
     return halo
 
 
+def reference_neighbours(triangles: np.ndarray, reference: np.ndarray, body: np.ndarray,
+                         radius: float) -> list[np.ndarray]:
+    """For each triangle, the nodes of its own body within ``radius`` of it in the reference state.
+
+    ``reference`` holds each triangle's vertex coordinates in the stress-free
+    state, ``(M, 3, D)`` (the flat leaflet, D = 2; a node shared by two bodies may
+    have different coordinates in each).  A node counts if its reference
+    distance to the triangle's centroid is below ``radius`` plus the
+    triangle's centroid-to-vertex radius (a cheap superset of "within
+    ``radius`` of the triangle").
+    """
+    from scipy.spatial import cKDTree
+
+    out: list[np.ndarray] = [np.empty(0, dtype=np.int64)] * len(triangles)
+    centroid = reference.mean(axis=1)
+    size = np.linalg.norm(reference - centroid[:, None], axis=2).max(axis=1)
+    for b in np.unique(body):
+        cells = np.flatnonzero(body == b)
+        nodes = triangles[cells].ravel()
+        coords = reference[cells].reshape(-1, reference.shape[2])
+        nodes, first = np.unique(nodes, return_index=True)
+        tree = cKDTree(coords[first])
+        hits = tree.query_ball_point(centroid[cells], radius + size[cells])
+        for cell, found in zip(cells, hits, strict=True):
+            out[cell] = nodes[np.asarray(found, dtype=np.int64)]
+    return out
+
+
+def _merge_exclusions(halo: np.ndarray, extra: list[np.ndarray]) -> np.ndarray:
+    """Padded table of the union, per row, of ``halo`` (padded with -1) and ``extra``."""
+    rows = [np.union1d(h[h >= 0], e) for h, e in zip(halo, extra, strict=True)]
+    width = max((len(r) for r in rows), default=0)
+    table = np.full((len(rows), width), -1, dtype=np.int64)
+    for i, r in enumerate(rows):
+        table[i, :len(r)] = r
+    return table
+
+
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
@@ -237,71 +285,125 @@ def _check_nodes(nodes: np.ndarray | None, num_nodes: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Contacts:
-    """Active contacts, one row each: the node, the supporting nodes and their weights.
+    """Contact rows: a node, the nodes taking the reaction, and everything the Jacobian needs.
 
-    Rows of one ``group`` (the triangles of one body a node meets) are blended
-    with weights ``blend`` (softmin of ``d`` with scale ``blend_scale``); their
-    forces are ``blend·f`` and the Jacobian includes the derivative of the
-    weights (see :meth:`result`).
+    Row ``i`` pushes its node with ``s_i = w_i p_i f_i`` along ``n_i`` and its
+    support nodes with ``-λ_j s_i n_i``: ``f`` is the law's force (pairing
+    weight included), ``p`` the row's presence (its smooth fade-in/out) and
+    ``w`` the softmin blending weight of the rows of one (node, body) group,
+    ``w_i ∝ p_i exp(-d_i/ε)``.
     """
 
     node: np.ndarray        # (A,) contacting node
     support: np.ndarray     # (A, s) nodes taking the reaction (triangle vertices; none for planes)
-    weights: np.ndarray     # (A, s) reaction weights (barycentric coordinates)
-    normal: np.ndarray      # (A, 3) unit normal pointing to the node's side
+    weights: np.ndarray     # (A, s) reaction weights λ (barycentric coordinates)
+    normal: np.ndarray      # (A, 3) unit force direction on the node
     d: np.ndarray           # (A,) signed distance (mm)
-    f: np.ndarray           # (A,) force magnitude (mN), before blending
+    f: np.ndarray           # (A,) law force (mN), before presence and blending
     dfdd: np.ndarray        # (A,) derivative of f w.r.t. d (mN/mm)
     partner: np.ndarray     # (A,) triangle id, or -1 - plane index
     group: np.ndarray | None = None  # (A,) contact id: blended rows of one contact share it
-    blend: np.ndarray | None = None  # (A,) blending weights (sum to 1 per group)
+    blend: np.ndarray | None = None  # (A,) blending weights w (sum to 1 per group)
     blend_scale: float = 1.0         # ε of the softmin (mm)
+    presence: np.ndarray | None = None         # (A,) p in (0, 1]
+    grad_log_presence: np.ndarray | None = None  # (A, 1+s, 3) ∂log p/∂x over [node, support]
+    grad_f: np.ndarray | None = None  # (A, 1+s, 3) ∂f/∂x beyond f'·∇d (the driving force turning)
+    #: extra Jacobian blocks (rows, cols, blocks): turning direction, sliding point
+    geometric: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def _group_presence(self) -> tuple[np.ndarray, np.ndarray]:
+        """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``).
+
+        ``G = 1 - Π_j (1 - p_j)`` over the rows of a group: 1 as soon as one row
+        is fully present (a node over the shared edge of two coplanar faces gets
+        the full force), ``p`` for a lone row (a node sliding off a free edge
+        loses its force smoothly).
+        """
+        p = np.ones(len(self.node)) if self.presence is None else self.presence
+        if self.group is None:
+            return p, np.ones(len(p))
+        _, inverse = np.unique(self.group, return_inverse=True)
+        exact_one = p >= 1.0
+        log_slack = np.where(exact_one, 0.0, np.log(np.maximum(1.0 - p, 1e-300)))
+        total = np.bincount(inverse, log_slack)[inverse]       # Σ log(1-p) over p < 1
+        ones = np.bincount(inverse, exact_one.astype(float))[inverse]
+        G = np.where(ones > 0, 1.0, 1.0 - np.exp(total))
+        c = np.where(ones == 0, np.exp(total - log_slack),
+                     np.where((ones == 1) & exact_one, np.exp(total), 0.0))
+        return G, c
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        """``s = w G f`` (mN) of every row."""
+        w = np.ones(len(self.node)) if self.blend is None else self.blend
+        G, _ = self._group_presence()
+        return w * G * self.f
 
     def result(self, num_nodes: int) -> ContactResult:
-        """Nodal forces and Jacobian blocks with ``B = [1, -λ...]`` over ``[node, support...]``.
+        """Nodal forces and their Jacobian blocks.
 
-        ``forces[p] = B_p w f n``.  With ``d_k = B_k·x n_k`` (``n``, ``λ`` frozen)
-        and the softmin weights ``∂w_i/∂d_k = -w_i(δ_ik - w_k)/ε``, the Jacobian
-        blocks are
+        Row ``i`` pushes with ``s_i = w_i G f_i``: ``f`` the law's force,
+        ``w_i = p_i e^{-d_i/ε}/Σ_k p_k e^{-d_k/ε}`` the blending weight of the
+        rows of its (node, body) group and ``G`` the group's presence
+        (:meth:`_group_presence`).  With ``B = [1, -λ...]`` over
+        ``ids = [node, support...]``, ``∇d = B⊗n`` (exact: the distance to a
+        triangle's plane moves with its vertices as ``-λ_j n``),
+        ``∇L = ∇log p - ∇d/ε`` and ``∇f = f'∇d + (∂f/∂F)∇F``:
 
-        * same row: ``B_p B_q (w f' - f w (1 - w)/ε) n⊗n``,
-        * rows i ≠ k of one group: ``B_{i,p} B_{k,q} f_i w_i w_k/ε · n_i⊗n_k``.
+        * over the row's own nodes: ``G f w(1-w) ∇L + w f c_i ∇p_i + w G ∇f``,
+        * over the nodes of another row ``k`` of the group:
+          ``-G f_i w_i w_k ∇L_k + w_i f_i c_k ∇p_k``,
+
+        and the force on ``ids[r]`` is ``B_r s n``: its blocks are
+        ``B_r n ⊗ ∂s/∂x_m``, plus the turning of ``n`` and the sliding of ``λ``
+        (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).
         """
-        w = np.ones(len(self.node)) if self.blend is None else self.blend
-        eps = self.blend_scale
-        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, 1+s)
-        B = np.concatenate([np.ones((len(self.node), 1)), -self.weights], axis=1)
-        fn = (w * self.f)[:, None] * self.normal
-        contributions = B[:, :, None] * fn[:, None, :]                            # (A, 1+s, 3)
-        flat_ids = ids.ravel()
-        forces = np.stack([np.bincount(flat_ids, contributions[:, :, i].ravel(),
+        count = len(self.node)
+        w = np.ones(count) if self.blend is None else self.blend
+        p = np.ones(count) if self.presence is None else self.presence
+        G, c = self._group_presence()
+        f = self.f
+        magnitude = w * G * f
+        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
+        B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
+        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
+        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
                                        minlength=num_nodes) for i in range(3)], axis=1)
-        slope = w * self.dfdd
+        grad_d = B[:, :, None] * self.normal[:, None, :]                           # (A, m, 3)
+        grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
+            else self.grad_log_presence
+        grad_p = p[:, None, None] * grad_logp
+        grad_L = grad_logp - grad_d / self.blend_scale
+        grad_f = self.dfdd[:, None, None] * grad_d
+        if self.grad_f is not None:
+            grad_f = grad_f + self.grad_f
+        own = (w * G)[:, None, None] * grad_f + (w * f * c)[:, None, None] * grad_p
         if self.blend is not None:
-            slope = slope - self.f * w * (1.0 - w) / eps
-        nn = slope[:, None, None] * self.normal[:, :, None] * self.normal[:, None, :]
-        BB = B[:, :, None] * B[:, None, :]                                        # (A, 1+s, 1+s)
-        blocks = (BB[:, :, :, None, None] * nn[:, None, None, :, :]).reshape(-1, 3, 3)
+            own += (G * f * w * (1.0 - w))[:, None, None] * grad_L
         m = ids.shape[1]
+        Bn = B[:, :, None] * self.normal[:, None, :]                               # (A, m, 3)
+        blocks = (Bn[:, :, None, :, None] * own[:, None, :, None, :]).reshape(-1, 3, 3)
         rows = np.repeat(ids, m, axis=1).ravel()
         cols = np.tile(ids, (1, m)).ravel()
+        parts = [(rows, cols, blocks)]
         if self.blend is not None and self.group is not None:
             i, k = _pairs_within_groups(self.group)
             if len(i):
-                c = self.f[i] * w[i] * w[k] / eps
-                nik = c[:, None, None] * self.normal[i][:, :, None] * self.normal[k][:, None, :]
-                Bik = B[i][:, :, None] * B[k][:, None, :]
-                extra = Bik[:, :, :, None, None] * nik[:, None, None]
-                blocks = np.concatenate([blocks, extra.reshape(-1, 3, 3)])
-                rows = np.concatenate([rows, np.repeat(ids[i], m, axis=1).ravel()])
-                cols = np.concatenate([cols, np.tile(ids[k], (1, m)).ravel()])
-        active = w * self.f > 0.0
+                cross = (-(G[i] * f[i] * w[i] * w[k])[:, None, None] * grad_L[k]
+                         + (w[i] * f[i] * c[k])[:, None, None] * grad_p[k])          # (P, m, 3)
+                extra = Bn[i][:, :, None, :, None] * cross[:, None, :, None, :]
+                parts.append((np.repeat(ids[i], m, axis=1).ravel(),
+                              np.tile(ids[k], (1, m)).ravel(), extra.reshape(-1, 3, 3)))
+        if self.geometric is not None:
+            parts.append(self.geometric)
+        rows, cols, blocks = (np.concatenate(v) for v in zip(*parts, strict=True))
+        active = magnitude > 0.0
         groups = self.group[active] if self.group is not None else None
         return ContactResult(
             forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
             n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
             max_penetration=float(np.max(-self.d[active], initial=0.0)),
-            total_force=float((w * self.f).sum()),
+            total_force=float(magnitude.sum()),
             pairs=np.stack([self.node[active], self.partner[active]], axis=1),
         )
 
@@ -329,9 +431,10 @@ def _ramp(x: np.ndarray, width: float) -> np.ndarray:
     return xi * xi * (3.0 - 2.0 * xi)
 
 
-def _fade(d: np.ndarray, end: float, width: float) -> np.ndarray:
-    """1 for ``d <= end - width``, smoothly to 0 at ``d >= end``."""
-    return _ramp(end - np.asarray(d, dtype=float), width)
+def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
+    """``d log(ramp(x))/dx`` where the ramp is positive (0 where it is 1)."""
+    xi = np.clip(np.asarray(x, dtype=float) / width, 1e-300, 1.0)
+    return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
 
 
 def _law(params: ContactParameters, f_ext: np.ndarray, normal: np.ndarray, d: np.ndarray
@@ -389,12 +492,38 @@ class SurfaceContact:
         (which point to the aortic side).  A fixed side cannot flip when a
         node passes a fold, a crease or a free edge, so a node that has
         crossed a neighbour leaflet is always pushed back out of it.
+    reference, self_exclusion_radius
+        ``(M, 3, D)`` vertex coordinates of every triangle in the stress-free
+        state, and a radius (mm): a node never contacts the triangles of its
+        own body that lie within that radius of it in the reference state.
+        A sheet folded back on itself with a fold radius ρ meets itself at
+        distance 2ρ across material that is πρ long, so nodes closer than
+        about 1.5× the contact reach in the reference state cannot be in
+        genuine self-contact; near a crease (a leaflet's V-shaped tip at the
+        valve centre) they are within reach across the crease, and treating
+        them as contacts makes the two sides of the crease fight.
+    between_bodies_depth
+        Penetration window (mm) of contacts between bodies when their side is
+        fixed (``between_bodies_side``); default ``params.penetration_depth``.
+        With the side known there is no far side of a sheet to confuse with a
+        penetration, so the window can be deep: the SPEC §5 penalty is soft
+        (10 mN/mm) and a leaflet's free edge, pulled by its own tension, can
+        press a few tenths of a millimetre into its neighbour before the
+        reaction balances it.
+    geometric_stiffness
+        Include the Jacobian of the turning contact direction and the sliding
+        contact point (:mod:`~valve_dolfinx.contact.linearisation`); without
+        it the Jacobian is exact only for flat, normally loaded contact.
     """
 
     def __init__(self, triangles: np.ndarray, num_nodes: int,
                  params: ContactParameters = DEFAULT_PARAMETERS, *,
                  triangle_body: np.ndarray | None = None,
-                 between_bodies_side: float | None = None) -> None:
+                 between_bodies_side: float | None = None,
+                 reference: np.ndarray | None = None,
+                 self_exclusion_radius: float = 0.0,
+                 geometric_stiffness: bool = True,
+                 between_bodies_depth: float | None = None) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
             raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
@@ -412,6 +541,12 @@ class SurfaceContact:
         self.num_nodes = int(num_nodes)
         self.params = params
         self.between_bodies_side = between_bodies_side
+        self.geometric_stiffness = bool(geometric_stiffness)
+        self.between_bodies_depth = params.penetration_depth if between_bodies_depth is None \
+            else float(between_bodies_depth)
+        #: padding of the search: the deepest penetration window plus the contact thickness
+        self.search_distance = max(params.search_distance,
+                                   params.thickness + self.between_bodies_depth)
         self.body_labels, self.triangle_body = np.unique(body, return_inverse=True)
         #: body of each node: the lowest body among its triangles (commissure nodes are shared)
         self.node_body = np.full(self.num_nodes, np.iinfo(np.int64).max, dtype=np.int64)
@@ -419,6 +554,14 @@ class SurfaceContact:
             np.minimum.at(self.node_body, triangles[:, k], self.triangle_body)
         #: ``(M, U)`` nodes that never contact triangle ``t`` (see :func:`triangle_halo`).
         self.excluded_nodes = triangle_halo(triangles, self.num_nodes)
+        if reference is not None and self_exclusion_radius > 0.0:
+            reference = np.asarray(reference, dtype=float)
+            if reference.shape[:2] != (len(triangles), 3):
+                raise MeshError(f"reference has shape {reference.shape}; expected "
+                                f"({len(triangles)}, 3, D), the vertices of every triangle")
+            extra = reference_neighbours(triangles, reference, self.triangle_body,
+                                         self_exclusion_radius)
+            self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the "broad" and "narrow" steps of the last evaluation.
         self.timings: dict[str, float] = {}
@@ -466,7 +609,7 @@ class SurfaceContact:
         """Candidates → sides → window ``-penetration_depth < d < h`` → nearest per body → law."""
         p = self.params
         clock = _Clock()
-        node, tri, d0, gap, lam, offset, n_tri = self._candidates(x, nodes, clock)
+        node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
         s = self._side(node, tri, d0, f_ext, n_tri)
         if self.between_bodies_side is not None:
             other = self.node_body[node] != self.triangle_body[tri]
@@ -482,30 +625,74 @@ class SurfaceContact:
         # no row enters or leaves the blend with a finite weight (a jump in the residual):
         # edge/vertex rows fade out as the node reaches the triangle's plane (behind it
         # the neighbouring face takes over), every row as d reaches the cut-off
-        presence = np.where(edge, _ramp(s * d0, p.blend_distance), 1.0)
+        eps = p.blend_distance
+        side_distance = s * d0
+        face_lam_min = plane_lam.min(axis=1)
+        presence = np.where(edge, _ramp(side_distance, eps),
+                            _ramp(face_lam_min + FACE_BAND, FACE_BAND))
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
-            presence *= _fade(d, p.cutoff, p.blend_distance)
+            presence *= _ramp(p.cutoff - d, eps)
         else:
             presence *= d < p.cutoff
-        keep = (d > -p.penetration_depth) & (presence > 0.0)
+        depth = np.full(len(d), p.penetration_depth)
+        if self.between_bodies_side is not None:
+            depth[self.node_body[node] != self.triangle_body[tri]] = self.between_bodies_depth
+        keep = (d > -depth) & (presence > 0.0)
         weight = self._pair_weight(node, tri)
         keep &= weight > 0.0
-        node, tri, d, lam, weight = node[keep], tri[keep], d[keep], lam[keep], weight[keep]
-        presence = presence[keep]
+        node, tri, d, lam, weight, presence, normal, edge, side_distance = (
+            v[keep] for v in (node, tri, d, lam, weight, presence, normal, edge, side_distance))
+        plane_lam, s, n_tri, face_lam_min = plane_lam[keep], s[keep], n_tri[keep], \
+            face_lam_min[keep]
         blend = self._blend_weights(node, tri, d, presence)
-        normal = normal[keep]
         f, dfdd = _law(p, f_ext[node], normal, d)
-        # dpresence/dx is dropped from the Jacobian: it is non-zero only in the thin
-        # bands where a row fades, where the force is small
-        f, dfdd = weight * presence * f, weight * presence * dfdd
+        f, dfdd = weight * f, weight * dfdd
         # rows with no force stay: their distance still moves the blending weights
         a = (f > 0.0) | (dfdd != 0.0) | (blend < 1.0)
+        node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight = (
+            v[a] for v in (node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight))
+        # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
+        # the vertices through the barycentric coordinates of the plane projection
+        B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
+        grad_d = B[:, :, None] * normal[:, None, :]
+        grad_logp = np.zeros_like(grad_d)
+        if p.taper > 0.0:
+            grad_logp -= (_log_ramp_slope(p.cutoff - d, eps))[:, None, None] * grad_d
+        on_edge = np.flatnonzero(edge)
+        if len(on_edge):
+            plane_B = np.concatenate([np.ones((len(on_edge), 1)), -plane_lam[a][on_edge]], axis=1)
+            sided = (s[a][on_edge, None] * n_tri[a][on_edge])
+            grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
+                                   * plane_B[:, :, None] * sided[:, None, :])
+        group = node * len(self.body_labels) + self.triangle_body[tri]
+        support = self.triangles[tri]
+        dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
+        banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
+        if len(banded):  # face rows fading out beyond their triangle's boundary
+            j = np.argmin(lam[banded], axis=1)
+            grad_logp[banded] += (_log_ramp_slope(face_lam_min[a][banded] + FACE_BAND,
+                                                  FACE_BAND)[:, None, None]
+                                  * dlam[banded, j])
+        geometric = grad_f = None
+        if self.geometric_stiffness:
+            geometric = None  # set below, once the group presence is known
+            if p.driving_force == "normal":
+                # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
+                F = -np.einsum("ij,ij->i", f_ext[node], normal)
+                slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
+                                                 p.stiffness, p.cutoff, p.taper)
+                slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
+                grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
         clock.add("narrow")
         self.timings = clock.laps
-        group = node * len(self.body_labels) + self.triangle_body[tri]
-        return _Contacts(node=node[a], support=self.triangles[tri[a]], weights=lam[a],
-                         normal=normal[a], d=d[a], f=f[a], dfdd=dfdd[a], partner=tri[a],
-                         group=group[a], blend=blend[a], blend_scale=p.blend_distance)
+        contacts = _Contacts(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
+                             dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
+                             presence=presence, grad_log_presence=grad_logp, grad_f=grad_f)
+        if self.geometric_stiffness:
+            geometric = geometric_stiffness(node, support, lam, normal, contacts.magnitude,
+                                            dn, dlam)
+            contacts = replace(contacts, geometric=geometric)
+        return contacts
 
     def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: _Clock
                     ) -> tuple[np.ndarray, ...]:
@@ -516,7 +703,7 @@ class SurfaceContact:
         """
         xt = np.ascontiguousarray(x.T)
         frames = _TriangleFrames.at(xt, self.triangles)
-        lo, hi = padded_bounds(xt, self.triangles, self.params.search_distance, frames.normal,
+        lo, hi = padded_bounds(xt, self.triangles, self.search_distance, frames.normal,
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
@@ -526,16 +713,16 @@ class SurfaceContact:
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
         found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 2
-                 + (np.empty((0, 3)),) * 2]
+                 + (np.empty((0, 3)),) * 3]
         for first in range(0, len(self.triangles), BLOCK_SIZE):
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
             found.append(self._narrow(xt, frames, node, tri + first))
             clock.add("narrow")
-        node, tri, d0, gap, lam, offset = (np.concatenate(parts)
+        node, tri, d0, gap, lam, offset, plane_lam = (np.concatenate(parts)
                                            for parts in zip(*found, strict=True))
-        return node, tri, d0, gap, lam, offset, frames.normal[:, tri].T
+        return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
                 tri: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -560,7 +747,7 @@ class SurfaceContact:
         r = [xt[i][node] - o[i][tri] for i in range(3)]
         n = frames.normal
         d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
-        near = np.flatnonzero(np.abs(d0) < self.params.search_distance)
+        near = np.flatnonzero(np.abs(d0) < self.search_distance)
         node, tri, d0 = node[near], tri[near], d0[near]
         r = [ri[near] for ri in r]
         lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
@@ -573,25 +760,30 @@ class SurfaceContact:
         beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
                             -lam2 * alt[2][tri])
         h = self.params.reach
-        reach = np.flatnonzero((beyond <= 1e-9) | ((beyond < h) & (np.abs(d0) < h)))
+        lam_min = np.minimum(np.minimum(lam0, lam1), lam2)
+        reach = np.flatnonzero((lam_min > -FACE_BAND) | ((beyond < h) & (np.abs(d0) < h)))
         node, tri, d0, lam0, lam1, lam2 = (v[reach] for v in (node, tri, d0, lam0, lam1, lam2))
         keep = ~self._in_neighbourhood(node, tri)
         node, tri, d0, lam0, lam1, lam2 = (v[keep] for v in (node, tri, d0, lam0, lam1, lam2))
         lam = np.stack([lam0, lam1, lam2], axis=1)
-        inside = np.all(lam >= -INSIDE_TOLERANCE, axis=1)
-        gap = np.full(len(node), np.nan)
-        offset = d0[:, None] * n[:, tri].T
-        out = np.flatnonzero(~inside)
-        if len(out):
-            t = self.triangles[tri[out]]
-            xo = xt.T
-            q, bary = closest_point_on_triangles(xo[node[out]], xo[t[:, 0]], xo[t[:, 1]],
-                                                 xo[t[:, 2]])
-            v = xo[node[out]] - q
-            gap[out] = np.linalg.norm(v, axis=1)
-            lam[out], offset[out] = bary, v
-        keep = inside | (gap < self.params.reach)  # nan (face contacts) compares False
-        return node[keep], tri[keep], d0[keep], gap[keep], lam[keep], offset[keep]
+        # face rows: the projection inside the triangle or in a thin band around it (where
+        # they fade out, see _find_contacts); edge/vertex rows: the projection outside
+        face = np.flatnonzero(lam.min(axis=1) > -FACE_BAND)
+        out = np.flatnonzero(lam.min(axis=1) < -INSIDE_TOLERANCE)
+        xo = xt.T
+        t = self.triangles[tri[out]]
+        q, bary = closest_point_on_triangles(xo[node[out]], xo[t[:, 0]], xo[t[:, 1]],
+                                             xo[t[:, 2]])
+        v = xo[node[out]] - q
+        gap = np.linalg.norm(v, axis=1)
+        near_edge = gap < self.params.reach
+        out, bary, v, gap = out[near_edge], bary[near_edge], v[near_edge], gap[near_edge]
+        rows = np.concatenate([face, out])
+        return (node[rows], tri[rows], d0[rows],
+                np.concatenate([np.full(len(face), np.nan), gap]),
+                np.concatenate([lam[face], bary]),
+                np.concatenate([d0[face, None] * n[:, tri[face]].T, v]),
+                lam[rows])
 
     def _in_neighbourhood(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """True where the node is a vertex of the triangle or an edge-neighbour of one."""

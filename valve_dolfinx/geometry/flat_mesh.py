@@ -47,7 +47,7 @@ class FlatLeafletMesh:
 
     @property
     def attachment(self) -> np.ndarray:
-        """Attachment nodes (left commissure top→bottom, lower edge, right commissure bottom→top)."""
+        """Attachment nodes: left commissure top→bottom, lower edge, right commissure bottom→top."""
         return np.concatenate([self.left[::-1], self.lower[1:], self.right[1:]])
 
     def boundary_edges(self) -> dict[str, np.ndarray]:
