@@ -372,7 +372,7 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
     """All pairs, plain loops over the survivors: the contact rules written out directly.
 
     Face rows where the node projects inside the triangle or within FACE_BAND
-    (barycentric) outside it, with presence ``smoothstep(λ_min + band)``;
+    (barycentric) outside it, with presence ``Π_j smoothstep(λ_j + band)``;
     edge/vertex rows (closest point on the boundary, found segment by segment)
     where it projects outside, within the cut-off, with presence
     ``smoothstep(s·d0/ε)`` (only nodes on their own side).  The rows of one
@@ -407,7 +407,8 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
                             np.dot(np.cross(b - a, q - a), n)]) / area
             rows = []
             if lam.min() > -FACE_BAND:
-                rows.append((s * d0, s * n, lam, smoothstep(lam.min() + FACE_BAND, FACE_BAND)))
+                fade = np.prod([smoothstep(v + FACE_BAND, FACE_BAND) for v in lam])
+                rows.append((s * d0, s * n, lam, fade))
             if lam.min() < 0.0 and s * d0 > 0.0:
                 cands = []
                 for i, j in ((0, 1), (1, 2), (2, 0)):

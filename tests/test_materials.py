@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pytest
-import ufl
 
 from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.exceptions import ParameterError

@@ -628,8 +628,9 @@ class SurfaceContact:
         eps = p.blend_distance
         side_distance = s * d0
         face_lam_min = plane_lam.min(axis=1)
-        presence = np.where(edge, _ramp(side_distance, eps),
-                            _ramp(face_lam_min + FACE_BAND, FACE_BAND))
+        # face rows: Π_j ramp(λ_j + band), smooth also near the vertices (a min would kink)
+        band_fade = np.prod(_ramp(plane_lam + FACE_BAND, FACE_BAND), axis=1)
+        presence = np.where(edge, _ramp(side_distance, eps), band_fade)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
             presence *= _ramp(p.cutoff - d, eps)
         else:
@@ -669,10 +670,8 @@ class SurfaceContact:
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
         banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
         if len(banded):  # face rows fading out beyond their triangle's boundary
-            j = np.argmin(lam[banded], axis=1)
-            grad_logp[banded] += (_log_ramp_slope(face_lam_min[a][banded] + FACE_BAND,
-                                                  FACE_BAND)[:, None, None]
-                                  * dlam[banded, j])
+            slopes = _log_ramp_slope(lam[banded] + FACE_BAND, FACE_BAND)            # (K, 3)
+            grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
         geometric = grad_f = None
         if self.geometric_stiffness:
             geometric = None  # set below, once the group presence is known

@@ -138,6 +138,13 @@ class QuasiStaticSolver:
         self.snes.setFunction(self.system.residual, self.system.b)
         self.snes.setJacobian(self.system.jacobian, self.system.A)
 
+    def _accept(self) -> None:
+        """Tell the hooks a load step was accepted (contact sides and driving forces)."""
+        for hook in self.system.hooks:
+            accept = getattr(hook, "accept_state", None)
+            if accept is not None:
+                accept(self.model.u)
+
     def _newton(self) -> tuple[bool, int]:
         for bc in self.bcs:
             bc.set(self.model.u.x.array)
@@ -170,6 +177,7 @@ class QuasiStaticSolver:
                 lam = trial
                 report.load_steps += 1
                 self.u_prev.x.array[:] = u.x.array
+                self._accept()
                 report.history.append({"load_factor": lam, "pressure": trial * self.target_pressure,
                                        "newton_iterations": its})
                 if on_step is not None:
@@ -217,6 +225,7 @@ class QuasiStaticSolver:
             report.newton_iterations += its
             if ok:
                 self.u_prev.x.array[:] = u.x.array
+                self._accept()
                 if eta == 0.0:
                     return
                 eta *= 0.1

@@ -1,0 +1,127 @@
+"""Contact as a residual/Jacobian hook of the finite element solve (SPEC §5).
+
+At every residual evaluation the hook gathers the nodal positions of the
+whole surface (:class:`~valve_dolfinx.solvers.nodal.NodalCoupling`),
+evaluates the contact models for the nodes this rank owns, and adds
+``−f_contact`` to the residual (contact forces are external forces) and
+``−∂f_contact/∂x`` to the Jacobian.  The Jacobian evaluation at the same
+positions reuses the forces and blocks of the residual evaluation.
+
+Driving force.  The law's force scale is the nodal pressure force
+``f_ext`` (SPEC §5).  It is taken at the last *accepted* state (time or load
+step), scaled by the current pressure: within a step it is a constant, so the
+contact Jacobian needs no derivative of the pressure forces (which turn and
+change size with the surface) and Newton's method converges quadratically
+instead of linearly.  At a steady state the accepted and the current states
+coincide, so the equilibrium is the one of the law with the current forces.
+
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+
+from valve_dolfinx._compat import MPI, PETSc, dolfinx
+from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
+
+__all__ = ["ContactHook"]
+
+log = logging.getLogger(__name__)
+
+
+class ContactHook:
+    """Adds the forces of contact models (surface–surface, rigid planes) to a solve.
+
+    Parameters
+    ----------
+    coupling
+        Node ↔ PETSc index map of the assembled system.
+    models
+        Objects with ``evaluate(x, f_ext, nodes) -> ContactResult`` and
+        optionally ``update_history(x)``.
+    pressure_triangles
+        ``(M, 3)`` node ids of the loaded surface, oriented like the pressure
+        form (normal ``(x1−x0)×(x2−x0)``).
+    pressure
+        The pressure constant of the model (kPa), read at each evaluation.
+    pressure_side
+        Sign of the pressure force relative to the triangle normal.
+    """
+
+    def __init__(self, coupling: NodalCoupling, models: Sequence, pressure_triangles: np.ndarray,
+                 pressure: dolfinx.fem.Constant, pressure_side: float, *,
+                 lag_driving_force: bool = True, driving_force_relaxation: float = 0.5,
+                 fixed_nodes: np.ndarray | None = None):
+        self.coupling = coupling
+        self.driving_force_relaxation = float(driving_force_relaxation)
+        # nodes held by Dirichlet conditions (the attachment) are never contacting nodes;
+        # their triangles still are contact surfaces
+        fixed = np.empty(0, dtype=np.int64) if fixed_nodes is None else np.asarray(fixed_nodes)
+        self.contact_nodes = np.setdiff1d(coupling.owned_nodes, fixed)
+        self.lag_driving_force = bool(lag_driving_force)
+        self.models = list(models)
+        self.triangles = np.asarray(pressure_triangles, dtype=np.int64)
+        self.pressure = pressure
+        self.side = float(pressure_side)
+        self._key: np.ndarray | None = None
+        self._results: list = []
+        self.last_positions: np.ndarray | None = None
+        self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
+
+    def _evaluate(self, state: dolfinx.fem.Function) -> list:
+        x = self.coupling.positions(state)
+        p = float(self.pressure.value)
+        if self._key is not None and self._pressure_key == p and np.array_equal(x, self._key):
+            return self._results
+        if self._unit_forces is None or not self.lag_driving_force:
+            self._unit_forces = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
+        f_ext = p * self._unit_forces
+        nodes = self.contact_nodes
+        self._results = [m.evaluate(x, f_ext, nodes) for m in self.models]
+        self._key, self._pressure_key = x, p
+        self.last_positions = x
+        return self._results
+
+    def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
+        for result in self._evaluate(state):
+            self.coupling.add_forces(b, result.forces, scale=-1.0)
+
+    def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
+        for result in self._evaluate(state):
+            self.coupling.add_blocks(A, result.jac_rows, result.jac_cols, result.jac_blocks,
+                                     scale=-1.0)
+
+    def accept_state(self, state: dolfinx.fem.Function) -> None:
+        """Record an accepted (time/load) step: sides and driving forces come from it."""
+        x = self.coupling.positions(state)
+        current = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
+        if self._unit_forces is None or not self.lag_driving_force:
+            self._unit_forces = current
+        else:  # under-relaxed update: damps the step-to-step flip-flop of a lagged load
+            beta = self.driving_force_relaxation
+            self._unit_forces = (1.0 - beta) * self._unit_forces + beta * current
+        self._key = None
+        for m in self.models:
+            update = getattr(m, "update_history", None)
+            if update is not None:
+                update(x)
+
+    def contact_forces(self, state: dolfinx.fem.Function) -> np.ndarray:
+        """(N, 3) total contact force on every node (summed over ranks), e.g. for output."""
+        local = sum(r.forces for r in self._evaluate(state))
+        if isinstance(local, int):
+            return np.zeros((self.coupling.num_nodes, 3))
+        return self.coupling.comm.allreduce(local, op=MPI.SUM)
+
+    def diagnostics(self) -> dict:
+        """Active contacts, maximum penetration (mm) and total contact force (mN), all ranks."""
+        comm = self.coupling.comm
+        n = sum(r.n_active for r in self._results)
+        pen = max((r.max_penetration for r in self._results), default=0.0)
+        force = sum(r.total_force for r in self._results)
+        return {"contacts": comm.allreduce(n, op=MPI.SUM),
+                "max_penetration_mm": comm.allreduce(pen, op=MPI.MAX),
+                "contact_force_mN": comm.allreduce(force, op=MPI.SUM)}
