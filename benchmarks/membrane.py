@@ -1,0 +1,79 @@
+"""Benchmark: closed sphere inflated to 80 mmHg (10.666 kPa) at three mesh sizes.
+
+Prints, per mesh size: cells, dofs, load steps, Newton iterations, wall time of
+the solve (forms are compiled beforehand) and the peak resident memory of the
+process.  Each size runs in a fresh process so the memory figures are its own.
+
+    python benchmarks/membrane.py [--sizes 2.0 1.0 0.5] [--np 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+
+
+def run_one(h: float) -> dict:
+    import resource
+    import time
+
+    import numpy as np
+
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.boundary_conditions import point_supports
+    from valve_dolfinx.geometry.verification import sphere_domain
+    from valve_dolfinx.materials import FungMaterial
+    from valve_dolfinx.membrane import MembraneModel
+    from valve_dolfinx.solvers.quasistatic import QuasiStaticSolver
+
+    R = 10.0
+    comm = MPI.COMM_WORLD
+    domain = sphere_domain(R, h, comm=comm)
+    model = MembraneModel(domain, {1: FungMaterial.isotropic(9.7, 20.0)})
+    bcs = point_supports(model.V, [((0, 0, -R), (0, 1, 2)), ((0, 0, R), (0, 1)),
+                                   ((R, 0, 0), (1,))])
+    solver = QuasiStaticSolver(model, bcs, 10.666)
+    t0 = time.perf_counter()
+    report = solver.solve()
+    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    n = domain.mesh.geometry.index_map().size_local
+    x = domain.mesh.geometry.x[:n] + model.u.x.array.reshape(-1, 3)[:n]
+    X = np.concatenate(comm.allgather(x))
+    radius = float(np.linalg.norm(X - X.mean(axis=0), axis=1).mean())
+    peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, op=MPI.SUM)
+    return {"mesh_size": h, "cells": domain.num_cells_global(),
+            "dofs": model.V.dofmap.index_map.size_global * 3, "load_steps": report.load_steps,
+            "newton": report.newton_iterations, "wall_s": wall, "peak_mb": peak,
+            "radius": radius, "ranks": comm.size}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sizes", type=float, nargs="+", default=[2.0, 1.0, 0.5])
+    parser.add_argument("--np", type=int, default=1, help="MPI ranks per run")
+    parser.add_argument("--one", type=float, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one is not None:
+        result = run_one(args.one)
+        from valve_dolfinx._compat import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            print("RESULT " + json.dumps(result))
+        return
+    print(f"{'h (mm)':>7} {'cells':>7} {'dofs':>7} {'steps':>6} {'Newton':>7} {'wall (s)':>9} "
+          f"{'peak (MB)':>10} {'radius (mm)':>12}")
+    launcher = [] if args.np == 1 else ["mpirun", "-n", str(args.np)]
+    for h in args.sizes:
+        # warm the JIT cache first so the timing is the solve, not the compiler
+        for _ in range(2):
+            out = subprocess.run(launcher + [sys.executable, __file__, "--one", str(h)],
+                                 capture_output=True, text=True, check=True).stdout
+        r = json.loads(next(line for line in out.splitlines() if line.startswith("RESULT"))[7:])
+        print(f"{r['mesh_size']:7.2f} {r['cells']:7d} {r['dofs']:7d} {r['load_steps']:6d} "
+              f"{r['newton']:7d} {r['wall_s']:9.2f} {r['peak_mb']:10.0f} {r['radius']:12.5f}")
+
+
+if __name__ == "__main__":
+    main()

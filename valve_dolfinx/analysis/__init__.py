@@ -1,0 +1,38 @@
+"""Analysis of the loaded valve: coaptation region, heights, area and competence (SPEC §6)."""
+
+from __future__ import annotations
+
+from valve_dolfinx.analysis.coaptation import (
+    DEFAULT_PIXEL_MM,
+    DEFAULT_THRESHOLD_MM,
+    CoaptationResult,
+    LeafletCoaptation,
+    analyse_coaptation,
+    coaptation_height_profile,
+    distance_to_surface,
+    fraction_below,
+    leaflet_pair_gaps,
+    region_area,
+    regurgitant_orifice_area,
+)
+from valve_dolfinx.analysis.orifice import orifice_leak_map, rasterise_footprint
+from valve_dolfinx.analysis.plots import leaflet_outline, plot_coaptation_map, plot_orifice_map
+
+__all__ = [
+    "DEFAULT_PIXEL_MM",
+    "DEFAULT_THRESHOLD_MM",
+    "CoaptationResult",
+    "LeafletCoaptation",
+    "analyse_coaptation",
+    "coaptation_height_profile",
+    "distance_to_surface",
+    "fraction_below",
+    "leaflet_outline",
+    "leaflet_pair_gaps",
+    "orifice_leak_map",
+    "plot_coaptation_map",
+    "plot_orifice_map",
+    "rasterise_footprint",
+    "region_area",
+    "regurgitant_orifice_area",
+]

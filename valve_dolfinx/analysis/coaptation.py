@@ -1,0 +1,450 @@
+"""Coaptation of the loaded valve: region, height, area and competence (SPEC §6).
+
+Definitions (the reasoning is in ``docs/coaptation.md``):
+
+* **Gap** of a node of leaflet ``L``: the exact Euclidean distance, in the
+  loaded configuration, from the node to the nearest triangle of any *other*
+  leaflet.  Inside a triangle the gap is the linear (P1) interpolant of its
+  nodal values.
+* **Coaptation region** of ``L``: ``{gap <= threshold}`` (threshold 0.5 mm,
+  about the leaflet thickness).  Nodes shared at a commissure have gap 0 and
+  belong to the region: the leaflets meet there.
+* **Coaptation height profile** ``h(x)``: on the *flat reference* leaflet, the
+  length of the part of the line perpendicular to the free edge (the vertical
+  line at abscissa ``x``) that lies in the region.  Computed exactly for the
+  P1 gap by clipping the line against every triangle.  ``min_height`` is the
+  minimum of ``h`` over the free-edge span; ``central_height`` is ``h`` at the
+  midline.
+* **Coaptation area**: the region's area on the loaded triangles (and, for
+  reference, on the flat triangles), exact for the P1 level set.
+* **Regurgitant orifice area**: see :mod:`valve_dolfinx.analysis.orifice`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from valve_dolfinx.analysis.orifice import orifice_leak_map
+from valve_dolfinx.contact.geometry import closest_point_on_triangles
+from valve_dolfinx.exceptions import MeshError, ParameterError, check_range
+from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh
+
+__all__ = [
+    "DEFAULT_THRESHOLD_MM",
+    "DEFAULT_PIXEL_MM",
+    "PROFILE_SAMPLES",
+    "LeafletCoaptation",
+    "CoaptationResult",
+    "analyse_coaptation",
+    "regurgitant_orifice_area",
+    "distance_to_surface",
+    "leaflet_pair_gaps",
+    "fraction_below",
+    "region_area",
+    "coaptation_height_profile",
+]
+
+log = logging.getLogger(__name__)
+
+#: Coaptation threshold (mm): about the leaflet thickness (SPEC §6).
+DEFAULT_THRESHOLD_MM = 0.5
+#: Pixel edge of the cross-section raster for the regurgitant orifice (mm).
+DEFAULT_PIXEL_MM = 0.05
+#: Abscissae of the coaptation height profile along the flat free edge.
+PROFILE_SAMPLES = 201
+#: Nearest centroids examined first by the point–surface distance search.
+_FIRST_NEIGHBOURS = 16
+#: Point–triangle pairs evaluated at once (bounds the memory of the exact test).
+_PAIR_CHUNK = 400_000
+
+
+# --- results -------------------------------------------------------------------------------
+@dataclass
+class LeafletCoaptation:
+    """Coaptation of one leaflet (lengths in mm, areas in mm²).
+
+    ``x_mm``/``height_mm`` are the height profile ``h(x)`` on the flat leaflet;
+    ``node_gap_mm`` holds, per local node, the loaded distance to the nearest
+    other leaflet's surface.
+    """
+
+    name: str
+    is_graft: bool
+    min_height_mm: float
+    central_height_mm: float
+    area_mm2: float
+    reference_area_mm2: float
+    x_mm: np.ndarray = field(repr=False)
+    height_mm: np.ndarray = field(repr=False)
+    node_gap_mm: np.ndarray = field(repr=False)
+
+    @property
+    def min_height_x_mm(self) -> float:
+        """Flat abscissa where ``h(x)`` is smallest (first occurrence)."""
+        return float(self.x_mm[int(np.argmin(self.height_mm))])
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "is_graft": bool(self.is_graft),
+            "min_height_mm": _json_float(self.min_height_mm),
+            "min_height_x_mm": _json_float(self.min_height_x_mm),
+            "central_height_mm": _json_float(self.central_height_mm),
+            "area_mm2": _json_float(self.area_mm2),
+            "reference_area_mm2": _json_float(self.reference_area_mm2),
+        }
+
+
+@dataclass
+class CoaptationResult:
+    """Coaptation of the whole valve (SPEC §6).
+
+    ``min_native_height_mm`` -- the minimum over native (non-graft) leaflets of
+    their minimum coaptation height -- is the study's figure of merit.
+    """
+
+    leaflets: dict[str, LeafletCoaptation]
+    threshold_mm: float
+    regurgitant_orifice_area_mm2: float
+    competent: bool
+    min_native_height_mm: float
+    central_native_height_mm: float
+    coaptation_area_mm2: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready scalars (no arrays); NaN becomes ``None``."""
+        return {
+            "threshold_mm": _json_float(self.threshold_mm),
+            "regurgitant_orifice_area_mm2": _json_float(self.regurgitant_orifice_area_mm2),
+            "competent": bool(self.competent),
+            "min_native_height_mm": _json_float(self.min_native_height_mm),
+            "central_native_height_mm": _json_float(self.central_native_height_mm),
+            "coaptation_area_mm2": _json_float(self.coaptation_area_mm2),
+            "leaflets": {name: lc.to_dict() for name, lc in self.leaflets.items()},
+        }
+
+    def result_fields(self) -> dict:
+        """The coaptation fields of a case result under their SPEC §7 names."""
+        return {
+            "min_coaptation_height_mm": _json_float(self.min_native_height_mm),
+            "central_coaptation_height_mm": _json_float(self.central_native_height_mm),
+            "coaptation_area_mm2": _json_float(self.coaptation_area_mm2),
+            "regurgitant_orifice_area_mm2": _json_float(self.regurgitant_orifice_area_mm2),
+            "competent": bool(self.competent),
+        }
+
+
+def _json_float(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+# --- input checks ----------------------------------------------------------------------------
+def _check_inputs(positions: np.ndarray, valve: ValveMesh, threshold_mm: float,
+                  pixel_mm: float) -> np.ndarray:
+    """Validated ``(N, 3)`` float copy of ``positions``; raises naming the bad argument."""
+    check_range("threshold_mm", threshold_mm, 0.0, None, low_open=True, unit="mm",
+                hint="the coaptation threshold is about the leaflet thickness, 0.5 mm")
+    check_range("pixel_mm", pixel_mm, 0.0, 0.5 * threshold_mm, low_open=True, unit="mm",
+                hint="the raster must resolve gaps of half the coaptation threshold; "
+                "0.05 mm is the default")
+    try:
+        x = np.asarray(positions, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError("positions must be an (N, 3) array of loaded node positions "
+                             "(mm)") from None
+    n = len(valve.points)
+    if x.shape != (n, 3):
+        raise ParameterError(f"positions has shape {x.shape}; expected ({n}, 3), one row per "
+                             "valve node in the order of ValveMesh.points")
+    bad = ~np.isfinite(x)
+    if bad.any():
+        raise ParameterError(f"positions contain {int(bad.any(axis=1).sum())} nodes with NaN "
+                             "or infinite coordinates; pass the converged loaded positions")
+    if len(valve.leaflets) < 2:
+        raise MeshError(f"valve has {len(valve.leaflets)} leaflet(s); coaptation needs at least "
+                        "two (mirror a single leaflet across its symmetry planes first)")
+    for patch in valve.leaflets:
+        ok = (patch.nodes.min() >= 0 and patch.nodes.max() < n
+              and patch.triangles.min() >= 0 and patch.triangles.max() < len(patch.nodes)
+              and patch.flat.shape == (len(patch.nodes), 2) and len(patch.free_edge) >= 2)
+        if not ok:
+            raise MeshError(f"valve leaflet {patch.name!r} is inconsistent: its nodes, "
+                            "triangles, flat coordinates or free edge do not match the valve")
+    return x
+
+
+# --- distances -------------------------------------------------------------------------------
+def _pair_distances(points: np.ndarray, tri: np.ndarray, pi: np.ndarray,
+                    ti: np.ndarray) -> np.ndarray:
+    """Exact distances from ``points[pi]`` to triangles ``tri[ti]``, in bounded chunks."""
+    out = np.empty(len(pi))
+    for s in range(0, len(pi), _PAIR_CHUNK):
+        sl = slice(s, s + _PAIR_CHUNK)
+        p, t = points[pi[sl]], tri[ti[sl]]
+        q, _ = closest_point_on_triangles(p, t[:, 0], t[:, 1], t[:, 2])
+        out[sl] = np.linalg.norm(p - q, axis=1)
+    return out
+
+
+def distance_to_surface(points: np.ndarray, vertices: np.ndarray,
+                        triangles: np.ndarray) -> np.ndarray:
+    """Exact distance from each point ``(n, 3)`` to a triangulated surface.
+
+    A k-d tree on the triangle centroids gives candidates: with ``ρ`` the
+    largest centroid-to-vertex distance, a triangle whose centroid is farther
+    than ``u + ρ`` from the point cannot be closer than ``u``, where ``u`` is
+    the exact distance to the nearest-centroid triangles.  The nearest
+    centroids are fetched in doubling batches until the next one lies beyond
+    that bound; the exact point–triangle distance (Ericson's closest-point
+    test) is then evaluated on all candidates at once.
+    """
+    tri = np.asarray(vertices, float)[np.asarray(triangles)]
+    m = len(tri)
+    points = np.asarray(points, float)
+    if m == 0:
+        return np.full(len(points), np.inf)
+    centroids = tri.mean(axis=1)
+    reach = float(np.linalg.norm(tri - centroids[:, None], axis=2).max())
+    tree = cKDTree(centroids)
+
+    k = min(_FIRST_NEIGHBOURS, m)
+    dc, idx = (a.reshape(len(points), k) for a in tree.query(points, k=k))
+    rows = np.repeat(np.arange(len(points)), k)
+    best = _pair_distances(points, tri, rows, idx.ravel()).reshape(-1, k).min(axis=1)
+    active = np.flatnonzero(dc[:, -1] <= best + reach) if k < m else np.empty(0, int)
+    while active.size:
+        k_old, k = k, min(2 * k, m)
+        dc, idx = (a.reshape(len(active), k) for a in tree.query(points[active], k=k))
+        dc, idx = dc[:, k_old:], idx[:, k_old:]
+        cand = dc <= (best[active] + reach)[:, None]
+        r, c = np.nonzero(cand)
+        d = _pair_distances(points, tri, active[r], idx[r, c])
+        np.minimum.at(best, active[r], d)
+        still = dc[:, -1] <= best[active] + reach
+        active = active[still] if k < m else np.empty(0, int)
+    return best
+
+
+def leaflet_pair_gaps(positions: np.ndarray, valve: ValveMesh
+                      ) -> dict[tuple[int, int], np.ndarray]:
+    """Nodal distances between leaflets in the loaded configuration.
+
+    Returns ``{(i, j): d}`` for every ordered pair of distinct leaflets, ``d``
+    holding for each local node of leaflet ``i`` its distance to the surface of
+    leaflet ``j``.
+    """
+    x = np.asarray(positions, float)
+    gaps = {}
+    for i, pa in enumerate(valve.leaflets):
+        for j, pb in enumerate(valve.leaflets):
+            if i != j:
+                gaps[i, j] = distance_to_surface(x[pa.nodes], x[pb.nodes], pb.triangles)
+    return gaps
+
+
+# --- region, area, height ----------------------------------------------------------------------
+def fraction_below(values: np.ndarray, threshold: float) -> np.ndarray:
+    """Fraction of each triangle's area where the P1 field is ``<= threshold``.
+
+    ``values`` are the ``(m, 3)`` nodal values.  The sub-level set of a linear
+    function on a triangle is a triangle (one vertex below) or the complement
+    of one (two below), cut at the edge points where the field crosses the
+    threshold.  The fraction is affine-invariant, so it serves the loaded and
+    the flat triangle alike.
+    """
+    f = np.sort(np.asarray(values, float) - threshold, axis=1)
+    a, b, c = f[:, 0], f[:, 1], f[:, 2]
+    frac = np.where(c <= 0.0, 1.0, 0.0)
+    one = (a <= 0.0) & (b > 0.0)
+    frac[one] = a[one] ** 2 / ((b[one] - a[one]) * (c[one] - a[one]))
+    two = (b <= 0.0) & (c > 0.0)
+    frac[two] = 1.0 - c[two] ** 2 / ((c[two] - a[two]) * (c[two] - b[two]))
+    return frac
+
+
+def _triangle_areas(p: np.ndarray) -> np.ndarray:
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    if p.shape[-1] == 2:
+        return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+
+def region_area(vertices: np.ndarray, triangles: np.ndarray, gap: np.ndarray,
+                threshold: float) -> float:
+    """Area of ``{gap <= threshold}`` on the triangulation (2-D or 3-D vertices), exact for P1."""
+    frac = fraction_below(gap[triangles], threshold)
+    return float(np.sum(_triangle_areas(vertices[triangles]) * frac))
+
+
+def _columns_of_triangles(xs: np.ndarray, tx: np.ndarray, x_right: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (sample, triangle) with ``xmin <= x < xmax`` (``<=`` on the rightmost boundary).
+
+    The half-open rule counts a line that runs along a vertical mesh edge once,
+    not once per neighbouring triangle.
+    """
+    lo, hi = tx.min(axis=1), tx.max(axis=1)
+    i0 = np.searchsorted(xs, lo, side="left")
+    i1 = np.where(hi >= x_right, np.searchsorted(xs, hi, side="right"),
+                  np.searchsorted(xs, hi, side="left"))
+    count = np.maximum(i1 - i0, 0)
+    tri = np.repeat(np.arange(len(tx)), count)
+    start = np.repeat(np.cumsum(count) - count, count)
+    sample = np.repeat(i0, count) + np.arange(count.sum()) - start
+    return sample, tri
+
+
+def coaptation_height_profile(flat: np.ndarray, triangles: np.ndarray, gap: np.ndarray,
+                              threshold: float, x: np.ndarray) -> np.ndarray:
+    """Length of ``{gap <= threshold}`` on the vertical line at each flat abscissa ``x``.
+
+    Exact for the P1 gap on the flat triangulation: a vertical line cuts a
+    triangle in a segment whose end points lie on two edges; the gap is linear
+    along the segment, so the part below the threshold is a sub-segment whose
+    length follows from the two end values.  Summed over triangles.
+    """
+    xs = np.asarray(x, float)
+    order = np.argsort(xs)
+    xs_sorted = xs[order]
+    txy = flat[triangles]  # (m, 3, 2)
+    tg = gap[triangles]
+    sample, tri = _columns_of_triangles(xs_sorted, txy[:, :, 0], float(flat[:, 0].max()))
+    xq = xs_sorted[sample]
+    ys = np.full((len(sample), 3), np.nan)
+    gs = np.full((len(sample), 3), np.nan)
+    for e in range(3):  # the three edges
+        pa, pb = txy[tri, e], txy[tri, (e + 1) % 3]
+        ga, gb = tg[tri, e], tg[tri, (e + 1) % 3]
+        dx = pb[:, 0] - pa[:, 0]
+        crosses = (dx != 0.0) & (xq >= np.minimum(pa[:, 0], pb[:, 0])) & (
+            xq <= np.maximum(pa[:, 0], pb[:, 0]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip((xq - pa[:, 0]) / dx, 0.0, 1.0)
+        ys[crosses, e] = (pa[:, 1] + t * (pb[:, 1] - pa[:, 1]))[crosses]
+        gs[crosses, e] = (ga + t * (gb - ga))[crosses]
+    has = np.isfinite(ys).sum(axis=1) >= 2
+    ys, gs, sample = ys[has], gs[has], sample[has]
+    rows = np.arange(len(ys))
+    e_lo = np.argmin(np.where(np.isnan(ys), np.inf, ys), axis=1)
+    e_hi = np.argmax(np.where(np.isnan(ys), -np.inf, ys), axis=1)
+    length = ys[rows, e_hi] - ys[rows, e_lo]
+    g_min = np.minimum(gs[rows, e_lo], gs[rows, e_hi])
+    g_max = np.maximum(gs[rows, e_lo], gs[rows, e_hi])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(g_max > g_min, np.clip((threshold - g_min) / (g_max - g_min), 0, 1),
+                        (g_min <= threshold).astype(float))
+    h_sorted = np.bincount(sample, weights=length * frac, minlength=len(xs))
+    h = np.empty_like(h_sorted)
+    h[order] = h_sorted
+    return h
+
+
+def _leaflet_coaptation(patch: LeafletPatch, loaded: np.ndarray, gap: np.ndarray,
+                        threshold: float, samples: int) -> LeafletCoaptation:
+    fx = patch.flat[patch.free_edge, 0]
+    x_left, x_right = float(fx.min()), float(fx.max())
+    x = np.linspace(x_left, x_right, samples)
+    h = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold, x)
+    midline = 0.5 * (x_left + x_right)  # x = 0 for the symmetric leaflet outlines
+    central = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold,
+                                        np.array([midline]))[0]
+    return LeafletCoaptation(
+        name=patch.name,
+        is_graft=bool(patch.is_graft),
+        min_height_mm=float(h.min()),
+        central_height_mm=float(central),
+        area_mm2=region_area(loaded, patch.triangles, gap, threshold),
+        reference_area_mm2=region_area(patch.flat, patch.triangles, gap, threshold),
+        x_mm=x,
+        height_mm=h,
+        node_gap_mm=gap,
+    )
+
+
+# --- public entry points -----------------------------------------------------------------------
+def regurgitant_orifice_area(positions: np.ndarray, valve: ValveMesh,
+                             threshold_mm: float = DEFAULT_THRESHOLD_MM,
+                             pixel_mm: float = DEFAULT_PIXEL_MM, *,
+                             pair_gaps: dict[tuple[int, int], np.ndarray] | None = None
+                             ) -> tuple[float, dict]:
+    """Regurgitant orifice area (mm²) of the loaded valve and its raster diagnostics.
+
+    See :func:`valve_dolfinx.analysis.orifice.orifice_leak_map` for the
+    definition.  ``pair_gaps`` (from :func:`leaflet_pair_gaps`) may be passed
+    to avoid recomputing the leaflet–leaflet distances.
+    """
+    x = _check_inputs(positions, valve, threshold_mm, pixel_mm)
+    if pair_gaps is None:
+        pair_gaps = leaflet_pair_gaps(x, valve)
+    return orifice_leak_map(x, valve, pair_gaps, float(threshold_mm), float(pixel_mm))
+
+
+def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
+                       threshold_mm: float = DEFAULT_THRESHOLD_MM,
+                       pixel_mm: float = DEFAULT_PIXEL_MM, *,
+                       profile_samples: int = PROFILE_SAMPLES,
+                       orifice: bool = True) -> CoaptationResult:
+    """Coaptation region, heights, area and competence of a loaded valve (SPEC §6).
+
+    Parameters
+    ----------
+    positions
+        ``(N, 3)`` loaded node positions (mm), indexed like ``valve.points``.
+    valve
+        The valve mesh (leaflet patches with flat reference coordinates).
+    threshold_mm
+        Distance below which a leaflet's surface counts as coapted with another
+        leaflet (about the leaflet thickness).
+    pixel_mm
+        Pixel edge of the cross-section raster used for the regurgitant
+        orifice area; at most ``threshold_mm / 2``.
+    profile_samples
+        Number of abscissae of the height profile along the flat free edge.
+    orifice
+        Compute the regurgitant orifice area (the default).  ``False`` skips it
+        -- for constructed surfaces that have no orifice around the z axis --
+        and reports it as NaN (``competent`` is then ``False``).
+
+    Returns
+    -------
+    CoaptationResult
+        Per-leaflet heights and areas; the figure of merit
+        ``min_native_height_mm``; the regurgitant orifice area and competence.
+    """
+    x = _check_inputs(positions, valve, threshold_mm, pixel_mm)
+    if int(profile_samples) < 3:
+        raise ParameterError(f"profile_samples = {profile_samples!r}; use at least 3 "
+                             "(201 by default)")
+    threshold = float(threshold_mm)
+    pair_gaps = leaflet_pair_gaps(x, valve)
+    leaflets = {}
+    for i, patch in enumerate(valve.leaflets):
+        gap = np.min([g for (a, _), g in pair_gaps.items() if a == i], axis=0)
+        leaflets[patch.name] = _leaflet_coaptation(patch, x[patch.nodes], gap, threshold,
+                                                   int(profile_samples))
+    ro_area = (orifice_leak_map(x, valve, pair_gaps, threshold, float(pixel_mm))[0]
+               if orifice else math.nan)
+    native = [lc for lc in leaflets.values() if not lc.is_graft]
+    if not native:
+        log.warning("no native leaflet: the native coaptation heights are undefined (NaN)")
+    result = CoaptationResult(
+        leaflets=leaflets,
+        threshold_mm=threshold,
+        regurgitant_orifice_area_mm2=ro_area,
+        competent=ro_area == 0.0,
+        min_native_height_mm=min((lc.min_height_mm for lc in native), default=math.nan),
+        central_native_height_mm=min((lc.central_height_mm for lc in native),
+                                     default=math.nan),
+        coaptation_area_mm2=float(sum(lc.area_mm2 for lc in leaflets.values())),
+    )
+    log.info("coaptation: min native height %.3f mm, central %.3f mm, area %.2f mm², "
+             "regurgitant orifice %.3f mm² (%s)", result.min_native_height_mm,
+             result.central_native_height_mm, result.coaptation_area_mm2, ro_area,
+             "competent" if result.competent else "incompetent")
+    return result

@@ -1,0 +1,485 @@
+"""Damped dynamics to the loaded equilibrium: PETSc TS, BDF2, adaptive steps (SPEC §4).
+
+The membrane is driven to its static equilibrium under the diastolic pressure
+by integrating
+
+    ρ·ü + c·u̇ + R(u) = 0,   R = internal − pressure − contact forces,
+
+written as a first-order system in the state U = (u, v) (a P1 field with 6
+components per node):
+
+    u̇ − v = 0,
+    ρ·v̇ + c·v + R(u) = 0,
+
+with lumped (vertex-quadrature) mass and damping, implicit second-order BDF
+(``TSBDF``, order 2) and adaptive step control on the local truncation error of
+the displacement only (absolute target ``error_tolerance_mm``, 0.01 mm as in
+the reference method; velocities are not error-controlled).  The pressure is
+ramped smoothly over ``ramp_time``.  The run stops when the displacement
+increment of the watched nodes (the middle of each leaflet's free edge) over
+one accepted step falls below ``stop_increment_mm`` (1e-5 mm) once the full
+load is on.
+
+Mass and damping are numerical devices: a steady state of the system has
+v = 0 and R(u) = 0 whatever ρ and c are, so the equilibrium does not depend on
+them (tested).  They are scaled per tissue to its stiffness,
+``c = (k_tissue/k_ref)^β · k_ref·τ/L²`` and ``ρ = c·(mass_ratio·τ)``, with
+``k = t·c_Fung·λmax(M)`` (:attr:`FungMaterial.stiffness_scale`), so that the
+pericardial graft -- hundreds of times stiffer in-plane than the native
+leaflet -- is not integrated with the native leaflet's time scale (SPEC §4).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import ufl
+
+from valve_dolfinx._compat import PETSc, dolfinx
+from valve_dolfinx.exceptions import check_range
+from valve_dolfinx.geometry.distributed import node_to_dof
+from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
+
+__all__ = ["DynamicsParameters", "DynamicsReport", "DampedDynamicsSolver", "STATE_LAYOUT"]
+
+log = logging.getLogger(__name__)
+fem = dolfinx.fem
+fem_petsc = dolfinx.fem.petsc
+
+#: forces act on the momentum rows (components 3-5), depend on the displacement (0-2)
+STATE_LAYOUT = NodalLayout(block_size=6, row_offset=3, col_offset=0)
+
+
+@dataclass
+class DynamicsParameters:
+    """Numerical mass, damping and step control (units: s, mm).
+
+    Attributes
+    ----------
+    relaxation_time
+        τ (s): damping per unit stiffness, ``c = k·τ/L²``.
+    mass_ratio
+        Mass time scale over τ: ``ρ = c·mass_ratio·τ`` (small: over-damped).
+    length_scale
+        L (mm) in the stiffness-per-area estimate k/L².
+    stiffness_exponent
+        β in ``c ∝ (k_tissue/k_ref)^β`` (1: damping proportional to stiffness).
+    ramp_time
+        Pressure ramp duration (s), smooth-step shaped.
+    dt_initial, dt_min, dt_max
+        Time steps (s); ``dt_min`` is the floor below which the run is
+        declared stalled.
+    t_max
+        Simulated time limit (s).
+    error_tolerance_mm
+        Local truncation error target of the displacement (mm).
+    stop_increment_mm
+        Convergence: displacement increment of the watched nodes per step (mm).
+    equilibrium_tolerance
+        Convergence also needs the static residual (internal − pressure −
+        contact forces at rest), max-norm over the free nodes, below this (mN):
+        small increments alone can also mean a stalled, tiny time step.
+    max_increment_mm
+        Largest nodal displacement per step (mm): the next step is shortened
+        so that no node moves further, which keeps nodes from tunnelling
+        through a surface between two contact evaluations (the contact search
+        only sees penetrations shallower than ``penetration_depth``).
+    wall_time_limit_s
+        Wall-clock limit of the run (s).
+    max_steps
+        Limit on accepted + rejected steps.
+    newton_max_it
+        Newton iterations per step before the step is retried smaller.
+    petsc_options
+        Extra PETSc options for the TS/SNES/KSP (without prefix), e.g.
+        ``{"snes_linesearch_type": "l2"}``.
+    """
+
+    relaxation_time: float = 1.0
+    mass_ratio: float = 0.05
+    length_scale: float = 10.0
+    stiffness_exponent: float = 1.0
+    ramp_time: float = 1.0
+    dt_initial: float = 1e-3
+    dt_min: float = 1e-8
+    dt_max: float = 50.0
+    t_max: float = 1e5
+    error_tolerance_mm: float = 0.01
+    stop_increment_mm: float = 1e-5
+    max_increment_mm: float = 0.1
+    equilibrium_tolerance: float = 0.05
+    wall_time_limit_s: float = 3600.0
+    max_steps: int = 20000
+    newton_max_it: int = 20
+    petsc_options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_range("relaxation_time", self.relaxation_time, 0.0, 1e6, low_open=True, unit="s")
+        check_range("mass_ratio", self.mass_ratio, 0.0, 1e3, unit="")
+        check_range("length_scale", self.length_scale, 0.0, 1e3, low_open=True, unit="mm")
+        check_range("stiffness_exponent", self.stiffness_exponent, 0.0, 1.0)
+        check_range("ramp_time", self.ramp_time, 0.0, 1e6, low_open=True, unit="s")
+        check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True, unit="s")
+        check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max, unit="s")
+        check_range("error_tolerance_mm", self.error_tolerance_mm, 0.0, 10.0, low_open=True)
+        check_range("stop_increment_mm", self.stop_increment_mm, 0.0, 1.0, low_open=True)
+        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class DynamicsReport:
+    converged: bool = False
+    reason: str = ""
+    time: float = 0.0
+    steps: int = 0
+    rejected_steps: int = 0
+    newton_iterations: int = 0
+    last_dt: float = float("nan")
+    last_increment_mm: float = float("nan")
+    rejected_for_motion: int = 0
+    equilibrium_residual: float = float("nan")
+    wall_time_s: float = 0.0
+    history: list[dict] = field(default_factory=list)
+
+
+class _Stalled(RuntimeError):
+    """Raised from a TS callback to stop a run whose time step fell below the floor."""
+
+
+class DampedDynamicsSolver:
+    """BDF2 damped dynamics of a :class:`MembraneModel` with hooks (contact) and fixed dofs.
+
+    Parameters
+    ----------
+    model
+        The membrane (its ``u`` receives the final displacement).
+    bcs
+        Dirichlet conditions on ``model.V`` (or its components): which
+        displacement components are fixed; they keep their initial value and
+        their velocity is zero.
+    initial_displacement
+        Function on ``model.V``: the starting placement (also the value kept on
+        the fixed dofs).
+    target_pressure
+        Final pressure (kPa).
+    stiffness
+        ``{cell tag: k_tissue}`` (mN/mm) for the mass/damping scaling.
+    watch_nodes
+        Mesh node ids whose increments decide convergence.
+    hooks
+        Factories ``make(coupling) -> hook`` (contact), called with the
+        :class:`NodalCoupling` of the state space.
+    """
+
+    _count = 0
+
+    def __init__(self, model: MembraneModel, bcs: Sequence[fem.DirichletBC],
+                 initial_displacement: fem.Function, target_pressure: float,
+                 stiffness: dict[int, float], watch_nodes: Sequence[int],
+                 params: DynamicsParameters | None = None,
+                 hooks: Sequence[Callable[[NodalCoupling], object]] = (),
+                 snes_options: dict | None = None):
+        self.model = model
+        self.params = params or DynamicsParameters()
+        self.target_pressure = float(target_pressure)
+        mesh = model.domain.mesh
+        self.W = fem.functionspace(mesh, ("Lagrange", 1, (6,)))
+        self.U = fem.Function(self.W, name="state")
+        self.Udot = fem.Function(self.W, name="state_rate")
+        self.shift = fem.Constant(mesh, PETSc.ScalarType(0.0))
+        self.coupling = NodalCoupling(self.W, STATE_LAYOUT)
+        self.hooks = [make(self.coupling) for make in hooks]
+        self.watch_nodes = np.asarray(watch_nodes, dtype=np.int64)
+
+        # the P1 spaces V (3 components) and W (6) number their nodes independently
+        self._w_of_v = np.empty(len(model.u.x.array) // 3, dtype=np.int64)
+        self._w_of_v[node_to_dof(model.V)] = node_to_dof(self.W)
+        # initial state (u0, 0) and the fixed values
+        U_arr = self.U.x.array.reshape(-1, 6)
+        U_arr[self._w_of_v, :3] = initial_displacement.x.array.reshape(-1, 3)
+        U_arr[:, 3:] = 0.0
+        self.U.x.scatter_forward()
+        self.bcs = self._state_bcs(bcs)
+
+        self.damping, self.mass = self._coefficients(stiffness)
+        self.G_form, self.J_form = self._forms()
+        self.F_vec = fem_petsc.create_vector(self.W)
+        self.J_mat = fem_petsc.create_matrix(self.J_form)
+        self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        bs = 6
+        imap = self.W.dofmap.index_map
+        local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs])
+        local_bc = local_bc[local_bc < imap.size_local * bs]
+        self._bc_rows = (imap.local_range[0] * bs + local_bc).astype(PETSc.IntType)
+        self._snes_options = snes_options or {}
+        self.report = DynamicsReport()
+        self._ts = None
+
+    # --- setup -------------------------------------------------------------------
+    def _state_bcs(self, bcs: Sequence[fem.DirichletBC]) -> list[fem.DirichletBC]:
+        """Fix (u_c, v_c) of the state wherever a condition on V fixes u_c."""
+        fixed = np.concatenate([bc.dof_indices()[0] for bc in bcs] or [np.empty(0, np.int32)])
+        blocks, comps = self._w_of_v[fixed // 3], fixed % 3
+        out = []
+        for c in range(3):
+            nodes = np.unique(blocks[comps == c])
+            for comp in (c, c + 3):  # displacement keeps its value, velocity is zero
+                Wc, to_parent = self.W.sub(comp).collapse()
+                to_parent = np.asarray(to_parent).ravel()  # 0.11 returns [array]
+                child = np.full(len(self.U.x.array), -1, dtype=np.int64)
+                child[to_parent] = np.arange(len(to_parent))
+                parent = (6 * nodes + comp).astype(np.int32)
+                g = fem.Function(Wc)
+                g.x.array[:] = self.U.x.array[to_parent]
+                out.append(fem.dirichletbc(g, [parent, child[parent].astype(np.int32)],
+                                           self.W.sub(comp)))
+        return out
+
+    def _coefficients(self, stiffness: dict[int, float]) -> tuple[dict, dict]:
+        p = self.params
+        k_ref = min(stiffness.values())
+        damping, mass = {}, {}
+        for tag, k in stiffness.items():
+            c = (k / k_ref) ** p.stiffness_exponent * k_ref * p.relaxation_time / p.length_scale**2
+            damping[tag] = c
+            mass[tag] = c * p.mass_ratio * p.relaxation_time
+        return damping, mass
+
+    def _forms(self):
+        model = self.model
+        U, Udot = self.U, self.Udot
+        u = ufl.as_vector([U[i] for i in range(3)])
+        v = ufl.as_vector([U[i] for i in range(3, 6)])
+        udot = ufl.as_vector([Udot[i] for i in range(3)])
+        vdot = ufl.as_vector([Udot[i] for i in range(3, 6)])
+        w = ufl.TestFunction(self.W)
+        w_u = ufl.as_vector([w[i] for i in range(3)])
+        w_v = ufl.as_vector([w[i] for i in range(3, 6)])
+        dA = model.area_factor()
+        dxv = ufl.Measure("dx", domain=model.domain.mesh, subdomain_data=model.domain.cell_tags,
+                          metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
+        inertial = sum(
+            (self.damping[tag] * ufl.inner(udot - v, w_u)
+             + ufl.inner(self.mass[tag] * vdot + self.damping[tag] * v, w_v)) * dA * dxv(tag)
+            for tag in self.damping)
+        G = inertial + model.residual(w_v, u=u)
+        dU = ufl.TrialFunction(self.W)
+        J = ufl.derivative(G, U, dU) + self.shift * ufl.derivative(G, Udot, dU)
+        return fem.form(G), fem.form(J)
+
+    # --- PETSc TS callbacks ------------------------------------------------------------
+    def _load(self, t: float) -> float:
+        xi = min(1.0, max(0.0, t / self.params.ramp_time))
+        return self.target_pressure * xi * xi * (3.0 - 2.0 * xi)
+
+    def _set_state(self, t: float, X: PETSc.Vec, Xdot: PETSc.Vec) -> None:
+        self.model.pressure.value = self._load(t)
+        X.copy(self.U.x.petsc_vec)
+        self.U.x.scatter_forward()
+        Xdot.copy(self.Udot.x.petsc_vec)
+        self.Udot.x.scatter_forward()
+
+    def ifunction(self, ts, t, X, Xdot, F) -> None:
+        if ts is not None and ts.getTimeStep() < self.params.dt_min:
+            # failed Newton solves keep cutting dt; below the floor the run has stalled
+            self.report.reason = (
+                f"time step fell below the floor dt_min = {self.params.dt_min:g} s at "
+                f"t = {t:.6g} s, step {ts.getStepNumber()} (Newton kept failing; last |F| = "
+                f"{ts.getSNES().getFunctionNorm():.3g})")
+            raise _Stalled(self.report.reason)
+        self._set_state(t, X, Xdot)
+        with F.localForm() as f_local:
+            f_local.set(0.0)
+        fem_petsc.assemble_vector(F, self.G_form)
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        for hook in self.hooks:
+            hook.add_residual(self.U, F)
+        F.assemble()
+        fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
+
+    def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
+        self._set_state(t, X, Xdot)
+        self.shift.value = a
+        J.zeroEntries()
+        fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
+        J.assemble(PETSc.Mat.AssemblyType.FLUSH)
+        for hook in self.hooks:
+            hook.add_jacobian(self.U, J)
+        J.assemble()
+        if self.hooks:
+            J.zeroRows(self._bc_rows, diag=1.0)
+
+    # --- the run -------------------------------------------------------------------
+    def _make_ts(self) -> PETSc.TS:
+        p = self.params
+        comm = self.model.domain.comm
+        DampedDynamicsSolver._count += 1
+        prefix = f"valve_dyn{DampedDynamicsSolver._count}_"
+        ts = PETSc.TS().create(comm)
+        ts.setOptionsPrefix(prefix)
+        opts = PETSc.Options()
+        defaults = {
+            "ts_type": "bdf",
+            "ts_bdf_order": 2,
+            "ts_adapt_type": "basic",
+            "ts_adapt_dt_min": p.dt_min,
+            "ts_adapt_dt_max": p.dt_max,
+            "ts_adapt_clip": "0.1,4.0",
+            "ts_max_snes_failures": -1,
+            "ts_max_step_rejections": -1,
+            "snes_type": "newtonls",
+            # backtracking: a node in a crease of a crumpled (wrinkled) sheet makes the
+            # full Newton step cycle between two states; halving it breaks the cycle
+            "snes_linesearch_type": "bt",
+            "snes_max_it": p.newton_max_it,
+            # residuals are forces (mN); nodal pressure forces are ~1-10 mN, so 1e-4 mN is
+            # far below anything that moves a node (contact stiffness 10 mN/mm: 1e-5 mm).
+            # The step tolerance ends Newton when round-off (huge shift at tiny dt) stalls |F|.
+            "snes_rtol": 1e-6,
+            "snes_atol": 1e-4,
+            "snes_stol": 1e-12,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": "mumps",
+        }
+        for key, value in {**defaults, **self.params.petsc_options, **self._snes_options}.items():
+            opts[f"{prefix}{key}"] = value
+        ts.setIFunction(self.ifunction, self.F_vec)
+        ts.setIJacobian(self.ijacobian, self.J_mat)
+        ts.setTime(0.0)
+        ts.setTimeStep(p.dt_initial)
+        ts.setMaxTime(p.t_max)
+        ts.setMaxSteps(p.max_steps)
+        ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
+        atol = self.F_vec.duplicate()
+        with atol.localForm() as a_local:
+            arr = a_local.array.reshape(-1, 6)
+            arr[:, :3] = p.error_tolerance_mm
+            arr[:, 3:] = 1e30  # velocities are not error-controlled
+        ts.setTolerances(rtol=0.0, atol=atol)
+        ts.setFromOptions()
+        ts.setPostStep(self._post_step)
+        return ts
+
+    def _post_step(self, ts: PETSc.TS) -> None:
+        p = self.params
+        r = self.report
+        t = ts.getTime()
+        dt = ts.getTimeStep()
+        self._step_dt = t - self._t_prev
+        self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
+        self.U.x.scatter_forward()
+        displacement = self.coupling.displacements(self.U)
+        step = np.linalg.norm(displacement - self._last_displacement, axis=1)
+        largest = float(np.max(step))
+        if largest > p.max_increment_mm and self._step_dt > p.dt_min:
+            # a node moved further than the contact search can follow: redo the step shorter
+            ts.rollBack()
+            ts.setTimeStep(max(p.dt_min, 0.8 * self._step_dt * p.max_increment_mm / largest))
+            r.rejected_for_motion += 1
+            return
+        self._last_displacement = displacement
+        self._t_prev = t
+        increment = float(np.max(step[self.watch_nodes]))
+        if largest > 0.5 * p.max_increment_mm:  # keep the next step's motion bounded
+            ts.setTimeStep(min(dt, self._step_dt * p.max_increment_mm / largest))
+        for hook in self.hooks:
+            update = getattr(hook, "accept_state", None)
+            if update is not None:
+                update(self.U)
+        r.steps = ts.getStepNumber()
+        r.time, r.last_dt, r.last_increment_mm = t, dt, increment
+        snes = ts.getSNES()
+        r.newton_iterations += snes.getIterationNumber()
+        entry = {"step": r.steps, "time": t, "dt": dt, "increment_mm": increment,
+                 "max_increment_mm": largest,
+                 "pressure": self._load(t)}
+        for hook in self.hooks:
+            diag = getattr(hook, "diagnostics", None)
+            if diag is not None:
+                entry.update(diag())
+        r.history.append(entry)
+        if self._progress is not None:
+            self._progress(entry)
+        elapsed = time.perf_counter() - self._t0
+        if (t >= p.ramp_time and increment < p.stop_increment_mm
+                and self.equilibrium_residual(t) < p.equilibrium_tolerance):
+            r.converged, r.reason = True, (
+                f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and static residual "
+                f"< {p.equilibrium_tolerance:g} mN at t = {t:.4g} s")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+        elif elapsed > p.wall_time_limit_s:
+            r.reason = (f"wall-clock limit {p.wall_time_limit_s:g} s reached at t = {t:.4g} s, "
+                        f"step {r.steps}, dt = {dt:.3g} s, increment {increment:.3g} mm")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+        elif dt <= p.dt_min * (1 + 1e-9):
+            r.reason = (f"time step fell to the floor dt_min = {p.dt_min:g} s at t = {t:.4g} s, "
+                        f"step {r.steps}, increment {increment:.3g} mm")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+
+    def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
+        """Integrate until converged, stalled, or out of time; never raises on divergence.
+
+        The final state is copied into ``model.u`` whatever happened; the report
+        says whether it is the equilibrium and, if not, where it stopped.
+        """
+        self._progress = progress
+        self._t0 = time.perf_counter()
+        self.report = DynamicsReport()
+        self._last_displacement = self.coupling.displacements(self.U)
+        self._t_prev = 0.0
+        ts = self._make_ts()
+        X = self.U.x.petsc_vec.copy()
+        try:
+            ts.solve(X)
+        except PETSc.Error as err:
+            if not self.report.reason:
+                self.report.reason = (f"PETSc error {err.ierr} at t = {ts.getTime():.4g} s, "
+                                      f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")
+            log.error("damped dynamics failed: %s", self.report.reason)
+        reason = ts.getConvergedReason()
+        if not self.report.converged and not self.report.reason:
+            self.report.reason = (f"TS stopped with reason {reason} at t = {ts.getTime():.4g} s, "
+                                  f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")
+        self.report.rejected_steps = ts.getStepRejections()
+        self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
+        self.U.x.scatter_forward()
+        self._copy_displacement()
+        self.report.equilibrium_residual = self.equilibrium_residual()
+        self.report.wall_time_s = time.perf_counter() - self._t0
+        log.info("damped dynamics: %s; %d steps (%d rejected), %d Newton its, t = %.4g s, "
+                 "|R_static|_inf = %.3g mN, %.1f s", "converged" if self.report.converged
+                 else "NOT converged", self.report.steps, self.report.rejected_steps,
+                 self.report.newton_iterations, self.report.time,
+                 self.report.equilibrium_residual, self.report.wall_time_s)
+        self._ts = ts
+        return self.report
+
+    def _copy_displacement(self) -> None:
+        u = self.model.u.x.array.reshape(-1, 3)
+        u[:] = self.U.x.array.reshape(-1, 6)[self._w_of_v, :3]
+        self.model.u.x.scatter_forward()
+
+    def equilibrium_residual(self, t: float | None = None) -> float:
+        """max |R(u)| (mN) over free nodes at full pressure, velocities and rates set to 0."""
+        saved_U = self.U.x.array.copy()
+        X = self.U.x.petsc_vec.copy()
+        X.array.reshape(-1, 6)[:, 3:] = 0.0
+        Xdot = X.duplicate()
+        Xdot.set(0.0)
+        F = self.F_vec.duplicate()
+        t_full = max(self.params.ramp_time, self.report.time if t is None else t)
+        self.ifunction(None, t_full, X, Xdot, F)
+        value = F.norm(PETSc.NormType.INFINITY)
+        self.U.x.array[:] = saved_U
+        self.U.x.scatter_forward()
+        return float(value)
+
