@@ -36,20 +36,49 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
-from valve_dolfinx.materials import BOVINE_PERICARDIUM, NATIVE_LEAFLET, equibiaxial_response  # noqa: E402
+from valve_dolfinx.materials import (  # noqa: E402
+    BOVINE_PERICARDIUM,
+    NATIVE_LEAFLET,
+    FungMaterial,
+    equibiaxial_response,
+)
+
+MATERIALS = (NATIVE_LEAFLET, BOVINE_PERICARDIUM)
 
 
-def main(argv: list[str] | None = None) -> Path:
-    parser = argparse.ArgumentParser(description="equibiaxial curves of the tissue presets")
-    parser.add_argument("--out", type=Path, default=Path("docs"))
-    parser.add_argument("--max-stress", type=float, default=60.0, help="kPa")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+# %% [markdown]
+# ## The curves
+# `equibiaxial_response` solves, level by level, the two closed-form equations
+# $P_1(E_{11}, E_{22}) = P_2(E_{11}, E_{22}) = P$ for the strains.
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
-    for ax, m, unit in zip(axes, (NATIVE_LEAFLET, BOVINE_PERICARDIUM), (1.0, 100.0), strict=True):
-        curve = equibiaxial_response(m, args.max_stress, n=120)
+
+# %%
+def equibiaxial_curves(max_stress: float = 60.0, n: int = 120,
+                       materials: tuple[FungMaterial, ...] = MATERIALS
+                       ) -> dict[str, dict[str, np.ndarray]]:
+    """Per material name: ``stress`` levels (Lagrangian, kPa, 0..max_stress in n steps)
+    and the strains ``E11`` (fibre) and ``E22`` (cross-fibre) that carry them."""
+    return {m.name: equibiaxial_response(m, max_stress, n=n) for m in materials}
+
+
+# %% [markdown]
+# ## The figure
+# Strain on the horizontal axis (per cent for the pericardium, whose strains
+# are a thousand times smaller), stress up.
+
+
+# %%
+def plot_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
+                materials: tuple[FungMaterial, ...] = MATERIALS) -> Path:
+    """Draw the fibre and cross-fibre curves of each material side by side; write ``path``."""
+    max_stress = max(float(c["stress"][-1]) for c in curves.values())
+    fig, axes = plt.subplots(1, len(materials), figsize=(5.5 * len(materials), 4.4),
+                             constrained_layout=True)
+    for ax, m in zip(np.atleast_1d(axes), materials, strict=True):
+        curve = curves[m.name]
+        unit = 1.0 if curve["E22"][-1] > 0.01 else 100.0
         scale = "" if unit == 1.0 else " (%)"
         ax.plot(curve["E11"] * unit, curve["stress"], lw=2, label="fibre (E11)")
         ax.plot(curve["E22"] * unit, curve["stress"], lw=2, ls="--", label="cross-fibre (E22)")
@@ -59,14 +88,27 @@ def main(argv: list[str] | None = None) -> Path:
                      fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend()
-        ax.set_ylim(0, args.max_stress * 1.02)
-        logging.info("%s at %g kPa: E11 = %.4f, E22 = %.4f", m.name, args.max_stress,
-                     curve["E11"][-1], curve["E22"][-1])
+        ax.set_ylim(0, max_stress * 1.02)
     fig.suptitle("Equibiaxial response (equal Lagrangian stresses, E12 = 0)")
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "material_curves.png"
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=150)
     plt.close(fig)
+    return path
+
+
+# %%
+def main(argv: list[str] | None = None) -> Path:
+    parser = argparse.ArgumentParser(description="equibiaxial curves of the tissue presets")
+    parser.add_argument("--out", type=Path, default=Path("docs"))
+    parser.add_argument("--max-stress", type=float, default=60.0, help="kPa")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    curves = equibiaxial_curves(args.max_stress)
+    for name, curve in curves.items():
+        logging.info("%s at %g kPa: E11 = %.4f, E22 = %.4f", name, args.max_stress,
+                     curve["E11"][-1], curve["E22"][-1])
+    path = plot_curves(curves, args.out / "material_curves.png")
     logging.info("wrote %s", path)
     return path
 

@@ -17,6 +17,7 @@ from valve_dolfinx.geometry.flat_mesh import mesh_flat_leaflet, triangle_angles
 from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.geometry.valve import (
     ATTACHMENT,
+    DEFAULT_MESH_SIZE,
     FREE_EDGE,
     LEAFLET_TAGS,
     ValveParameters,
@@ -31,7 +32,7 @@ HEIGHT_MM = RISE_MM + 5.0
 
 @pytest.fixture(scope="module")
 def flat():
-    return mesh_flat_leaflet(LeafletShape(), 0.8)
+    return mesh_flat_leaflet(LeafletShape(), DEFAULT_MESH_SIZE)
 
 
 def _edge_lengths(points, triangles):
@@ -52,8 +53,22 @@ def test_flat_leaflet_dimensions(flat):
     assert RISE_MM == pytest.approx(7.41, abs=0.005)
 
 
+def _angles_deg(points, triangles):
+    """Interior angles by the law of cosines from the three side lengths (2-D or 3-D)."""
+    p = points[triangles]
+    side = [np.linalg.norm(p[:, (i + 1) % 3] - p[:, (i + 2) % 3], axis=1) for i in range(3)]
+    out = []
+    for i in range(3):  # angle at vertex i, opposite side[i]
+        a, b, c = side[i], side[(i + 1) % 3], side[(i + 2) % 3]
+        out.append(np.degrees(np.arccos(np.clip((b * b + c * c - a * a) / (2 * b * c), -1, 1))))
+    return np.stack(out, axis=1)
+
+
 def test_mesh_quality_and_orientation(flat):
     assert triangle_angles(flat.points, flat.triangles).min() >= 20.0
+    assert _angles_deg(flat.points, flat.triangles).min() >= 20.0
+    assert np.allclose(np.sort(_angles_deg(flat.points, flat.triangles)),
+                       np.sort(triangle_angles(flat.points, flat.triangles)), atol=1e-8)
     t = flat.points[flat.triangles]
     cross = ((t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1])
              - (t[:, 2, 0] - t[:, 0, 0]) * (t[:, 1, 1] - t[:, 0, 1]))
@@ -69,7 +84,7 @@ def test_mesh_quality_and_orientation(flat):
 
 @pytest.fixture(scope="module")
 def valve():
-    return build_valve(mesh_size=0.8)
+    return build_valve(mesh_size=DEFAULT_MESH_SIZE)
 
 
 def test_valve_attachment_on_cylinder(valve):
@@ -110,6 +125,67 @@ def test_commissures_shared(valve):
     from scipy.spatial import cKDTree
 
     assert len(cKDTree(valve.points).query_pairs(1e-6)) == 0
+
+
+@pytest.fixture(scope="module")
+def graft_valve():
+    return build_valve(mesh_size=DEFAULT_MESH_SIZE, graft_width_pct=21, graft_height_pct=27)
+
+
+# SPEC §1: leaflet k spans θ ∈ [120k − 60, 120k + 60] degrees, so the commissure posts shared
+# by leaflets k and k+1 stand at θ = 120k + 60: 60°, 180° and 300°, from the commissure bottom
+# (RISE_MM above the nadir) to the free edge (HEIGHT_MM), on the d = 20 mm cylinder.
+POST_DEG = (60.0, 180.0, 300.0)
+
+
+def _commissure_nodes(valve, k, side):
+    """3-D positions of leaflet k's left (-1) or right (+1) commissure, found from its flat
+    outline: the nodes at x = ±(1+W)·πd/6 (W = 0 for a native leaflet), sorted by height."""
+    patch = valve.leaflets[k]
+    half_width = (1 + patch.shape.width_pct / 100) * math.pi * D / 6
+    on = np.abs(patch.flat[:, 0] - side * half_width) < 1e-9 * D
+    xyz = valve.points[patch.nodes[on]]
+    return xyz[np.argsort(xyz[:, 2])]
+
+
+@pytest.mark.parametrize("which", ["normal", "graft"])
+def test_commissure_nodes_of_neighbours_coincide(which, valve, graft_valve):
+    v = valve if which == "normal" else graft_valve
+    for k in range(3):
+        right = _commissure_nodes(v, k, +1.0)
+        left = _commissure_nodes(v, (k + 1) % 3, -1.0)
+        # both sides carry the same nodes, at the same places (shared or tied)
+        assert len(right) == len(left) >= 3
+        assert np.max(np.linalg.norm(right - left, axis=1)) < 1e-9 * D
+        # ... on the commissure post of SPEC §1, worked out here from the angles
+        theta = math.radians(POST_DEG[k])
+        post = np.array([0.5 * D * math.cos(theta), 0.5 * D * math.sin(theta)])
+        assert np.max(np.linalg.norm(right[:, :2] - post, axis=1)) < 1e-9 * D
+        assert right[0, 2] == pytest.approx(RISE_MM, rel=1e-9)
+        assert right[-1, 2] == pytest.approx(HEIGHT_MM, rel=1e-9)
+        assert np.all(np.diff(right[:, 2]) > 0.1)  # distinct nodes up the post
+        # no other node of either leaflet sits on the post
+        for j in (k, (k + 1) % 3):
+            xyz = v.points[v.leaflets[j].nodes]
+            on_post = np.linalg.norm(xyz[:, :2] - post, axis=1) < 1e-6 * D
+            assert on_post.sum() == len(right)
+
+
+@pytest.mark.parametrize("which", ["native flat", "graft flat", "normal valve", "graft valve"])
+def test_minimum_angle_at_default_size(which, valve, graft_valve):
+    """Gmsh mesh quality: no triangle angle below 20° (the flat reference meshes, and the
+    assembled 3-D valve meshes, including the slack-placed W21/H27 graft)."""
+    if which == "native flat":
+        patch = valve.leaflet("left_coronary")
+        points, tris = patch.flat, patch.triangles
+    elif which == "graft flat":
+        patch = graft_valve.leaflet("non_coronary")
+        assert patch.is_graft
+        points, tris = patch.flat, patch.triangles
+    else:
+        v = valve if which == "normal valve" else graft_valve
+        points, tris = v.points, v.cells
+    assert _angles_deg(points, tris).min() >= 20.0
 
 
 def test_leaflet_angular_span(valve):
@@ -198,8 +274,8 @@ def test_graft_dimensions_and_attachment(w, h):
     assert np.all(np.isfinite(valve.points))
 
 
-def test_graft_placement_is_slack():
-    valve = build_valve(mesh_size=0.8, graft_width_pct=21, graft_height_pct=27)
+def test_graft_placement_is_slack(graft_valve):
+    valve = graft_valve
     from valve_dolfinx.geometry.valve import reference_jacobians
 
     tag = LEAFLET_TAGS["non_coronary"]

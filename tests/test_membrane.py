@@ -139,6 +139,14 @@ def test_patch_homogeneous_stretch():
 
 
 def test_sphere_pressure_radius_curve_and_convergence():
+    """Radius against the exact T = pR/2 curve, and its convergence under refinement.
+
+    Flat triangles facet the sphere, an O(h²) geometric error: the relative radius error at
+    10.666 kPa falls from 3.6e-4 (h = 2 mm) to 7.5e-5 (h = 1 mm), an observed rate of 2.25
+    in the nominal mesh size (2.07 over h = 2 → 0.5 mm; docs/convergence.md).  The rate is
+    asserted in a band around that measurement, 1.8-2.6, wide enough for the scatter of
+    unstructured Gmsh meshes, narrow enough to catch a first-order (or a locking) scheme.
+    """
     R = 10.0
     errors = {}
     for h in (2.0, 1.4, 1.0):
@@ -151,7 +159,7 @@ def test_sphere_pressure_radius_curve_and_convergence():
     hs = sorted(errors, reverse=True)
     assert errors[hs[0]] > errors[hs[1]] > errors[hs[2]]
     rate = math.log(errors[hs[0]] / errors[hs[2]]) / math.log(hs[0] / hs[2])
-    assert rate > 1.5  # faceting of the sphere by flat triangles: O(h²) expected
+    assert 1.8 < rate < 2.6  # measured 2.25 (docs/convergence.md)
     assert errors[1.0] < 5e-3
 
 
@@ -211,6 +219,49 @@ def test_slack_membrane_converges_without_compression():
 
 @pytest.mark.mpi
 def test_sphere_parallel_matches_serial():
-    r_par, *_ = solve_sphere(2.0, comm=MPI.COMM_WORLD)
-    r_ser, *_ = solve_sphere(2.0, comm=MPI.COMM_SELF)
+    """Under ``mpirun -n 2``: the sphere split over the ranks gives the radius of the serial
+    solve that each rank also runs on its own (COMM_SELF), on the same mesh.  Serially the
+    two solves coincide; the checks on the partition make the parallel run a real one."""
+    comm = MPI.COMM_WORLD
+    r_par, _, _, par = solve_sphere(2.0, comm=comm)
+    r_ser, _, _, ser = solve_sphere(2.0, comm=MPI.COMM_SELF)
+    n_cells = ser.num_cells_global()
+    owned = comm.allgather(par.mesh.topology.index_map(2).size_local)
+    assert sum(owned) == n_cells and par.num_nodes_global() == ser.num_nodes_global()
+    if comm.size > 1:  # every rank holds a proper part of the sphere
+        assert min(owned) > 0 and max(owned) < n_cells
     assert r_par == pytest.approx(r_ser, rel=1e-8)
+    # both are the exact radius up to the h = 2 mm discretisation error (3.6e-4)
+    assert r_par == pytest.approx(exact_sphere_radius(P80, 10.0, ISO), rel=1e-3)
+
+
+def test_failed_unregularised_solve_is_reported(monkeypatch):
+    """If the viscous regularisation cannot be removed, the report says converged=False and
+    why, and gives the (non-zero) residual of the true problem at the state it kept."""
+    domain = flat_sheet_domain(4.0, 4.0, 6, 6, comm=MPI.COMM_SELF)
+    domain.reference.x.array[:] *= 0.9  # slack: the viscous term is needed
+    model = MembraneModel(domain, {1: ISO})
+    edges = dolfinx.mesh.locate_entities_boundary(domain.mesh, 1,
+                                                  lambda X: np.full(X.shape[1], True))
+    bc = dolfinx.fem.dirichletbc(dolfinx.fem.Function(model.V),
+                                 dolfinx.fem.locate_dofs_topological(model.V, 1, edges))
+    solver = QuasiStaticSolver(model, [bc], 2.0,
+                               continuation=ContinuationParameters(viscosity=1e-3))
+    newton = solver._newton
+    ramp_done = []
+
+    def failing_after_the_ramp():
+        # the load ramp works; every solve after its last step (full load) fails
+        if ramp_done:
+            return False, 1
+        ok, its = newton()
+        ramp_done.extend([True] if ok and float(model.pressure.value) == 2.0 else [])
+        return ok, its
+
+    monkeypatch.setattr(solver, "_newton", failing_after_the_ramp)
+    report = solver.solve()
+    assert ramp_done and report.load_factor == 1.0
+    assert not report.converged
+    assert "regularisation" in report.message and "not of the true problem" in report.message
+    # the kept state balances the pressure only together with the viscous force
+    assert report.residual_norm > 1e-6

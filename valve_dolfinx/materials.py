@@ -36,9 +36,11 @@ The switch happens where ``n2·S·n2 = 0``, so the stress is continuous (the
 energy is C¹) across taut/wrinkled/slack boundaries, which Newton's method
 needs.  Wrinkles are taken along the principal strain direction (the
 "mixed" criterion); for an anisotropic law the exact Pipkin relaxation would
-also rotate the wrinkle direction until the stress is uniaxial -- a
-second-order refinement that would need a local iteration at every
-quadrature point.
+also rotate the wrinkle direction until the stress is uniaxial, which would
+need a local iteration at every quadrature point.  Without it, wrinkles
+oblique to the fibres keep a small compressive principal stress (down to
+−0.16 × the tension for the native leaflet, −0.02 for the pericardium); see
+docs/membrane.md, which documents the treatment, its parameters and sources.
 """
 
 from __future__ import annotations

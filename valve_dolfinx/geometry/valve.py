@@ -60,8 +60,9 @@ FREE_EDGE = 2
 GRAFT_POSITION = 2
 GRAFT_PLACEMENTS = ("conformal", "billowed")
 
-#: Default target edge length (mm); fixed by the mesh convergence study in
-#: docs/convergence.md.
+#: Default target edge length (mm).  docs/convergence.md holds the membrane convergence
+#: study; the coaptation-height study at this resolution (SPEC §8) goes there with the
+#: closure pipeline.
 DEFAULT_MESH_SIZE = 0.8
 
 

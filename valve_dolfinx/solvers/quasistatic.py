@@ -11,7 +11,8 @@ singular.  Optionally each load step adds a pseudo-transient viscous term
 converged state): the step then solves a well-posed problem.  The term
 vanishes at a steady state only, so after the ramp the solver removes it and
 re-solves (η → 0 through decades) to return the true equilibrium; the report
-gives the residual of the *unregularised* system.
+gives the residual of the *unregularised* system, and says ``converged=False``
+(with the reason in ``message``) if that last, unregularised solve fails.
 """
 
 from __future__ import annotations
@@ -79,6 +80,13 @@ class ContinuationParameters:
 
 @dataclass
 class SolveReport:
+    """Outcome of :meth:`QuasiStaticSolver.solve`.
+
+    ``converged`` is True only if the full load was reached *and* the unregularised
+    system was solved; otherwise ``message`` says why.  ``residual_norm`` is ‖R‖₂ of
+    the unregularised system at the returned state.
+    """
+
     converged: bool
     load_factor: float
     load_steps: int = 0
@@ -201,23 +209,31 @@ class QuasiStaticSolver:
                     report.wall_time_s = time.perf_counter() - t0
                     raise SolverError(report.message)
         report.load_factor = lam
-        if self.eta_ref > 0:
-            self._remove_regularisation(report)
+        failure = self._remove_regularisation(report) if self.eta_ref > 0 else ""
         self.eta.value = 0.0
+        # the residual of the true (unregularised) problem, whatever happened above
         report.residual_norm = self.system.residual_norm()
-        report.converged = True
+        report.converged = not failure
+        report.message = failure
         report.wall_time_s = time.perf_counter() - t0
+        if failure:
+            log.warning("quasi-static solve NOT converged: %s", failure)
         log.info("quasi-static solve: %d load steps (%d failed), %d Newton iterations, "
                  "|R| = %.3g, %.2f s", report.load_steps, report.failed_steps,
                  report.newton_iterations, report.residual_norm, report.wall_time_s)
         return report
 
-    def _remove_regularisation(self, report: SolveReport) -> None:
-        """Pseudo-time steps at full load with η decreasing by decades, ending at η = 0."""
+    def _remove_regularisation(self, report: SolveReport) -> str:
+        """Pseudo-time steps at full load with η decreasing by decades, ending at η = 0.
+
+        Returns ``""`` once the unregularised system is solved, else why it was not: the
+        state is then the last converged *regularised* one, not an equilibrium.
+        """
         eta = self.eta_ref
         u = self.model.u
         saved = u.x.array.copy()
-        for _ in range(40):
+        attempts, reason, eta_kept = 40, 0, eta
+        for _ in range(attempts):
             eta = 0.0 if eta < 1e-8 * max(self.eta_ref, 1e-300) else eta
             self.eta.value = eta
             saved[:] = u.x.array
@@ -227,15 +243,21 @@ class QuasiStaticSolver:
                 self.u_prev.x.array[:] = u.x.array
                 self._accept()
                 if eta == 0.0:
-                    return
+                    return ""
+                eta_kept = eta
                 eta *= 0.1
             else:
                 u.x.array[:] = saved
+                reason = self.snes.getConvergedReason()
                 if eta == 0.0:
                     eta = 1e-6 * self.eta_ref
                 else:
                     eta *= 3.0
-        log.warning("could not remove the viscous regularisation entirely (eta = %.3g)", eta)
+        return (f"could not remove the viscous regularisation: the unregularised Newton solve "
+                f"at full load did not converge in {attempts} attempts (last SNES reason "
+                f"{reason}); the state kept is the equilibrium of the regularised problem with "
+                f"eta = {eta_kept:.3g} kPa/mm ({eta_kept / self.eta_ref:.2g} × the ramp's value), "
+                "not of the true problem")
 
 
 def _lumped_viscous(model: MembraneModel, v, u_prev):
