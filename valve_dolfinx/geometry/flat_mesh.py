@@ -91,6 +91,15 @@ def mesh_flat_leaflet(shape: LeafletShape, mesh_size: float, n_commissure: int |
 
 
 def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLeafletMesh:
+    """Mesh the right half (x >= 0) with Gmsh and mirror it across the midline x = 0.
+
+    The leaflet is mirror-symmetric, and so is its mesh: the midline is a chain
+    of mesh edges.  In the closed valve every leaflet folds along its midline
+    at the centre of the valve (the free-edge middle meets the other two
+    leaflets there), so the fold can form exactly along mesh edges instead of
+    cutting through triangles, and the central coaptation height does not
+    depend on where an unstructured mesh happens to put its nodes.
+    """
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.option.setNumber("General.Verbosity", 1)
     name = f"leaflet_{id(shape)}"
@@ -98,20 +107,19 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
     try:
         geo = gmsh.model.geo
         a, top = shape.half_width, shape.height
-        xs = np.linspace(-a, a, _LOWER_EDGE_POINTS)
+        xs = np.linspace(0.0, a, _LOWER_EDGE_POINTS // 2 + 1)
         ys = shape.lower_edge(xs)
         lower_pts = [geo.addPoint(x, y, 0.0, h) for x, y in zip(xs, ys, strict=True)]
-        tl = geo.addPoint(-a, top, 0.0, h)
         tr = geo.addPoint(a, top, 0.0, h)
+        tm = geo.addPoint(0.0, top, 0.0, h)
         lower = geo.addSpline(lower_pts)
         right = geo.addLine(lower_pts[-1], tr)
-        free = geo.addLine(tr, tl)
-        left = geo.addLine(tl, lower_pts[0])
-        loop = geo.addCurveLoop([lower, right, free, left])
+        free = geo.addLine(tr, tm)
+        mid = geo.addLine(tm, lower_pts[0])
+        loop = geo.addCurveLoop([lower, right, free, mid])
         surf = geo.addPlaneSurface([loop])
         geo.synchronize()
-        for curve in (left, right):
-            gmsh.model.mesh.setTransfiniteCurve(curve, n_commissure)
+        gmsh.model.mesh.setTransfiniteCurve(right, n_commissure)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * h)
         gmsh.option.setNumber("Mesh.MeshSizeMax", h)
         gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
@@ -127,33 +135,26 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
         triangles = np.array([index[int(t)] for t in enodes[tri_pos]], dtype=np.int64)
         triangles = triangles.reshape(-1, 3)
 
-        def chain(curve: int, start_xy: tuple[float, float]) -> np.ndarray:
+        def chain(curve: int, key) -> np.ndarray:
             node_tags, _, _ = gmsh.model.mesh.getNodes(1, curve, includeBoundary=True)
-            ids = np.array([index[int(t)] for t in node_tags], dtype=np.int64)
-            ids = np.unique(ids)
-            # order the curve's nodes by distance along it from its start point
-            p = points[ids]
-            order = np.argsort(np.hypot(p[:, 0] - start_xy[0], p[:, 1] - start_xy[1])
-                               if curve != lower else p[:, 0])
-            return ids[order]
+            ids = np.unique(np.array([index[int(t)] for t in node_tags], dtype=np.int64))
+            return ids[np.argsort(key(points[ids]))]
 
-        b = shape.commissure_bottom
-        lower_ids = chain(lower, (-a, b))
-        right_ids = chain(right, (a, b))
-        left_ids = chain(left, (-a, b))
-        free_ids = chain(free, (-a, top))
+        lower_ids = chain(lower, lambda p: p[:, 0])       # midline -> right corner
+        right_ids = chain(right, lambda p: p[:, 1])       # bottom -> top
+        free_ids = chain(free, lambda p: p[:, 0])         # midline -> right corner
+        mid_ids = chain(mid, lambda p: p[:, 1])           # bottom -> top
     finally:
         gmsh.model.remove()
 
     # snap boundary nodes exactly onto the analytic outline
+    b = shape.commissure_bottom
     points[lower_ids, 1] = shape.lower_edge(points[lower_ids, 0])
-    points[left_ids, 0], points[right_ids, 0] = -a, a
-    heights = np.linspace(b, top, n_commissure)
-    if len(left_ids) != n_commissure or len(right_ids) != n_commissure:
-        raise MeshError(f"Gmsh placed {len(left_ids)}/{len(right_ids)} commissure nodes, "
-                        f"expected {n_commissure}")
-    points[left_ids, 1] = heights
-    points[right_ids, 1] = heights
+    points[right_ids, 0] = a
+    points[mid_ids, 0] = 0.0
+    if len(right_ids) != n_commissure:
+        raise MeshError(f"Gmsh placed {len(right_ids)} commissure nodes, expected {n_commissure}")
+    points[right_ids, 1] = np.linspace(b, top, n_commissure)
     points[free_ids, 1] = top
 
     # drop nodes on no triangle (Gmsh also meshes the spline's control points)
@@ -161,8 +162,20 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
     renumber = np.full(len(points), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
     points, triangles = points[used], renumber[triangles]
-    lower_ids, left_ids, right_ids, free_ids = (renumber[c] for c in (lower_ids, left_ids,
-                                                                      right_ids, free_ids))
+    lower_ids, right_ids, free_ids, mid_ids = (renumber[c] for c in (lower_ids, right_ids,
+                                                                     free_ids, mid_ids))
+
+    # mirror: every node off the midline gets an image at -x
+    n = len(points)
+    image = np.full(n, -1, dtype=np.int64)
+    off = np.setdiff1d(np.arange(n), mid_ids)
+    image[off] = n + np.arange(len(off))
+    image[mid_ids] = mid_ids
+    points = np.concatenate([points, points[off] * np.array([-1.0, 1.0])])
+    triangles = np.concatenate([triangles, image[triangles]])
+    left_ids = image[right_ids]
+    lower_ids = np.concatenate([image[lower_ids[::-1]], lower_ids[1:]])
+    free_ids = np.concatenate([image[free_ids[::-1]], free_ids[1:]])
     triangles = _orient_ccw(points, triangles)
     log.debug("flat leaflet W=%g%% H=%g%%: %d nodes, %d triangles", shape.width_pct,
               shape.height_pct, len(points), len(triangles))
