@@ -111,6 +111,36 @@ def test_jacobian_matches_finite_differences(seed):
                                    atol=1e-7 * np.abs(fd).max() + 1e-14)
 
 
+def test_disjoint_node_sets_sum_to_the_whole():
+    """Each pair is evaluated by the owner of its first segment's first node, so the results
+    of the ranks of a partition (the hook passes each rank's owned nodes) sum to the serial
+    result, Jacobian included."""
+    rng = np.random.default_rng(4)
+    u = np.linspace(-1.0, 1.0, 9)
+    x = np.concatenate([np.stack([u, 0.1 * np.sin(3 * u), 0.03 + 0 * u], axis=1),
+                        np.stack([0.1 * np.cos(2 * u), u, 0 * u], axis=1),
+                        np.stack([u, 0.3 - 0.1 * u, 0.02 + 0 * u], axis=1)])
+    x += rng.normal(scale=0.005, size=x.shape)
+    segments = np.array([[k * 9 + i, k * 9 + i + 1] for k in range(3) for i in range(8)])
+    f_ext = np.zeros_like(x)
+    f_ext[:9, 2], f_ext[9:18, 2], f_ext[18:, 2] = -1.0, 1.0, -1.0   # a ↓ onto b, b ↑ onto c
+    contact = EdgeContact(segments, len(x), ContactParameters())
+    far = x.copy()
+    far[:9, 2] += 1.0
+    contact.update_history(far)
+    whole = contact.evaluate(x, f_ext)
+    assert whole.n_active >= 2
+    mine = (np.arange(len(x)) < 9) | (rng.random(len(x)) < 0.3)   # a-b pairs: part 0
+    parts = [contact.evaluate(x, f_ext, np.flatnonzero(mine)),
+             contact.evaluate(x, f_ext, np.flatnonzero(~mine))]
+    assert all(p.n_active > 0 for p in parts)
+    np.testing.assert_allclose(parts[0].forces + parts[1].forces, whole.forces, rtol=0,
+                               atol=1e-14 * np.abs(whole.forces).max())
+    J = dense(parts[0], len(x)) + dense(parts[1], len(x))
+    np.testing.assert_allclose(J, dense(whole, len(x)), rtol=0, atol=1e-14 * np.abs(J).max())
+    assert parts[0].n_active + parts[1].n_active == whole.n_active
+
+
 def test_reference_exclusion_drops_nearby_segments_of_one_polyline():
     x = np.array([[0, 0, 0], [1, 0, 0], [1.05, 0.3, 0], [0.05, 0.3, 0.0]], dtype=float)
     segments = np.array([[0, 1], [1, 2], [2, 3]])

@@ -202,6 +202,8 @@ class CellIndex:
         keys, nodes = keys[on_grid], nodes[on_grid]
         order = np.argsort(keys, kind="stable")
         self.sorted_nodes = nodes[order]
+        #: coordinates of the sorted nodes, by axis: the box test reads them run by run
+        self.sorted_xt = np.ascontiguousarray(xt[:, self.sorted_nodes])
         #: ``first[k]``: position in ``sorted_nodes`` of the first node of cell ``k`` or later.
         self.first = np.zeros(self.grid.num_cells + 1, dtype=np.int64)
         np.cumsum(np.bincount(keys, minlength=self.grid.num_cells), out=self.first[1:])
@@ -220,15 +222,14 @@ class CellIndex:
         offsets = np.cumsum(count) - count
         position = np.arange(int(offsets[-1] + count[-1]), dtype=np.int64) \
             + np.repeat(start - offsets, count)
-        node = self.sorted_nodes[position]
         box = np.repeat(box, count)
-        inside = np.ones(len(node), dtype=bool)
+        inside = np.ones(len(position), dtype=bool)
         for axis in self.grid.axes:
-            coordinate = self.xt[axis][node]
+            coordinate = self.sorted_xt[axis][position]
             inside &= coordinate >= lo[axis][box]
             inside &= coordinate <= hi[axis][box]
         keep = np.flatnonzero(inside)
-        return node[keep], box[keep]
+        return self.sorted_nodes[position[keep]], box[keep]
 
     def blocks(self, lo: np.ndarray, hi: np.ndarray, block_size: int = BLOCK_SIZE
                ) -> Iterator[tuple[np.ndarray, np.ndarray]]:

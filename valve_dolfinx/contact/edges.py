@@ -248,4 +248,6 @@ class EdgeContact:
                              jac_blocks=blocks.reshape(-1, 3, 3), n_active=int(active.sum()),
                              max_penetration=float(np.max(-d[active], initial=0.0)),
                              total_force=float(phi.sum()),
-                             pairs=np.stack([a[active, 0], -1 - b[active, 0]], axis=1))
+                             pairs=np.stack([a[active, 0], -1 - b[active, 0]], axis=1),
+                             max_crossing=float(np.max(-(d[active] + self.params.thickness),
+                                                       initial=0.0)))

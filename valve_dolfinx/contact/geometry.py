@@ -103,31 +103,28 @@ def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: n
     d5 = np.einsum("ij,ij->i", ab, cp)
     d6 = np.einsum("ij,ij->i", ac, cp)
 
-    bary = np.empty((len(p), 3))
-    done = np.zeros(len(p), dtype=bool)
-
-    def assign(mask: np.ndarray, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:
-        m = mask & ~done
-        bary[m, 0], bary[m, 1], bary[m, 2] = u[m], v[m], w[m]
-        done[m] = True
-
-    one, zero = np.ones(len(p)), np.zeros(len(p))
-    assign((d1 <= 0) & (d2 <= 0), one, zero, zero)  # vertex a
-    assign((d3 >= 0) & (d4 <= d3), zero, one, zero)  # vertex b
     vc = d1 * d4 - d3 * d2
+    vb = d5 * d2 - d1 * d6
+    va = d3 * d6 - d5 * d4
     with np.errstate(divide="ignore", invalid="ignore"):
         t_ab = d1 / (d1 - d3)
-        assign((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1 - t_ab, t_ab, zero)  # edge ab
-        assign((d6 >= 0) & (d5 <= d6), zero, zero, one)  # vertex c
-        vb = d5 * d2 - d1 * d6
         t_ac = d2 / (d2 - d6)
-        assign((vb <= 0) & (d2 >= 0) & (d6 <= 0), 1 - t_ac, zero, t_ac)  # edge ac
-        va = d3 * d6 - d5 * d4
         t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        assign((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), zero, 1 - t_bc, t_bc)  # edge bc
         denom = 1.0 / (va + vb + vc)
-        v = vb * denom
-        w = vc * denom
-        assign(np.ones(len(p), dtype=bool), 1 - v - w, v, w)  # face interior
+        v, w = vb * denom, vc * denom
+        face = 1 - v - w
+    # the regions in Ericson's order; the first that holds wins (np.select)
+    regions = [(d1 <= 0) & (d2 <= 0),                                   # vertex a
+               (d3 >= 0) & (d4 <= d3),                                  # vertex b
+               (vc <= 0) & (d1 >= 0) & (d3 <= 0),                       # edge ab
+               (d6 >= 0) & (d5 <= d6),                                  # vertex c
+               (vb <= 0) & (d2 >= 0) & (d6 <= 0),                       # edge ac
+               (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)]         # edge bc
+    #              a    b    ab        c    ac        bc          face interior
+    weights = ([1.0, 0.0, 1 - t_ab, 0.0, 1 - t_ac, 0.0], face), \
+              ([0.0, 1.0, t_ab, 0.0, 0.0, 1 - t_bc], v), \
+              ([0.0, 0.0, 0.0, 1.0, t_ac, t_bc], w)
+    bary = np.stack([np.select(regions, choices, default=inside)
+                     for choices, inside in weights], axis=1)
     q = bary[:, [0]] * a + bary[:, [1]] * b + bary[:, [2]] * c
     return q, bary

@@ -43,7 +43,7 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import barycentric_gradients
 
-__all__ = ["direction_derivatives", "geometric_stiffness", "skew"]
+__all__ = ["direction_derivatives", "geometric_blocks", "geometric_stiffness", "skew"]
 
 #: Barycentric coordinates below this count as zero when telling an edge contact
 #: (two vertices carry the contact point) from a vertex contact (one does).
@@ -142,6 +142,22 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
     return dn, dlam
 
 
+def geometric_blocks(lam: np.ndarray, normal: np.ndarray, force: np.ndarray, dn: np.ndarray,
+                     dlam: np.ndarray) -> np.ndarray:
+    """Blocks of the turning direction and sliding contact point, ``(A, 4, 4, 3, 3)``.
+
+    ``blocks[a, r, m]`` is ``∂force[ids[a, r]]/∂x[ids[a, m]]`` (mN/mm) with
+    ``ids = [node, support...]`` of contact ``a``; the other arguments are as in
+    :func:`geometric_stiffness`.
+    """
+    count = len(force)
+    B = np.concatenate([np.ones((count, 1)), -lam], axis=1)
+    phi = force[:, None, None, None, None]
+    blocks = B[:, :, None, None, None] * phi * dn[:, None]                # (A, 4r, 4m, 3, 3)
+    blocks[:, 1:] -= phi * normal[:, None, None, :, None] * dlam[:, :, :, None, :]
+    return blocks
+
+
 def geometric_stiffness(node: np.ndarray, support: np.ndarray, lam: np.ndarray,
                         normal: np.ndarray, force: np.ndarray, dn: np.ndarray, dlam: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,12 +171,8 @@ def geometric_stiffness(node: np.ndarray, support: np.ndarray, lam: np.ndarray,
     rows, cols, blocks
         Node ids and ``(16 A, 3, 3)`` blocks ``∂force[row]/∂x[col]`` (mN/mm).
     """
-    count = len(node)
     ids = np.concatenate([node[:, None], support], axis=1)               # (A, 4)
-    B = np.concatenate([np.ones((count, 1)), -lam], axis=1)
-    phi = force[:, None, None, None, None]
-    blocks = B[:, :, None, None, None] * phi * dn[:, None]                # (A, 4r, 4m, 3, 3)
-    blocks[:, 1:] -= phi * normal[:, None, None, :, None] * dlam[:, :, :, None, :]
+    blocks = geometric_blocks(lam, normal, force, dn, dlam)
     rows = np.repeat(ids, 4, axis=1).ravel()
     cols = np.tile(ids, (1, 4)).ravel()
     return rows, cols, blocks.reshape(-1, 3, 3)
