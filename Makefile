@@ -18,7 +18,8 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/python demos/valve_geometry.py
+	$(BIN)/python demos/valve_geometry.py --out results/geometry
+	$(BIN)/valve-dolfinx run --symmetric-reference --out results/normal_valve_reference
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -194,11 +194,21 @@ def test_band_missing_on_one_side_gives_zero_min_height():
     # B now covers 3-D x >= 0 only: A's columns x >= 0 keep the 4 mm band; A's nodes at
     # flat x <= -1 (3-D x <= -1.1) are >= sqrt(0.3² + 1.1²) > 0.5 from B, so h = 0 there.
     valve, x = _band_valve(b_x_from=0.0)
-    a = analyse_coaptation(x, valve, THRESHOLD, orifice=False).leaflets["left_coronary"]
+    a = analyse_coaptation(x, valve, THRESHOLD, orifice=False,
+                           central_band_mm=0.0).leaflets["left_coronary"]
     assert np.allclose(a.height_mm[a.x_mm >= -1e-9], 4.0, atol=1e-9)
     assert np.all(a.height_mm[a.x_mm <= -1.05] == 0.0)
     assert a.central_height_mm == pytest.approx(4.0, abs=1e-9)
+    assert a.midline_height_mm == pytest.approx(4.0, abs=1e-9)
     assert a.min_height_mm == 0.0
+    # default band b = 1 mm: the central height is c0 of the line c0 + c1|x| fitted over
+    # 1 <= |x| <= 2.  Flat x <= -1 (3-D x <= -1.1) is >= 1.14 mm from B, so h = 0 there and
+    # h = 4 at x >= 0: a symmetric sample set of zeros and fours has c1 = 0, c0 = 2
+    a = analyse_coaptation(x, valve, THRESHOLD, orifice=False).leaflets["left_coronary"]
+    assert a.central_height_mm == pytest.approx(2.0, abs=1e-9)
+    assert a.midline_height_mm == pytest.approx(4.0, abs=1e-9)
+    assert a.min_height_mm == 0.0
+    assert a.min_height_x_mm <= -1.0
 
 
 def test_coaptation_height_profile_counts_vertical_edges_once():

@@ -3,6 +3,8 @@
 Commands
 --------
 mesh    write the default valve meshes (normal and graft) for ParaView and reuse
+run     close one valve (normal, or with a graft) under 80 mmHg and write
+        result.json, ParaView fields and figures to --out
 """
 
 from __future__ import annotations
@@ -28,7 +30,22 @@ def _add_geometry_args(p: argparse.ArgumentParser) -> None:
                    help="graft height enlargement in per cent")
 
 
+def _graft_size(parser: argparse.ArgumentParser, args: argparse.Namespace
+                ) -> tuple[float, float] | None:
+    """(W, H) in per cent from ``--graft-width``/``--graft-height``, or None for the normal
+    valve; one without the other is a usage error (argparse exits with status 2)."""
+    w, h = args.graft_width, args.graft_height
+    if (w is None) != (h is None):
+        given, missing = ("--graft-width", "--graft-height") if h is None else (
+            "--graft-height", "--graft-width")
+        parser.error(f"{given} needs {missing} as well: give both graft enlargements in per "
+                     "cent (e.g. --graft-width 21 --graft-height 27; 0 keeps the native size), "
+                     "or neither for the normal valve")
+    return None if w is None else (w, h)
+
+
 def _cmd_mesh(args: argparse.Namespace) -> int:
+    graft = _graft_size(args.parser, args)  # usage errors before the slow imports
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
     from valve_dolfinx.geometry.valve import build_valve
@@ -36,8 +53,8 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
 
     comm = MPI.COMM_WORLD
     cases = [(None, None)]
-    if args.graft_width is not None or args.graft_height is not None:
-        cases = [(args.graft_width or 0.0, args.graft_height or 0.0)]
+    if graft is not None:
+        cases = [graft]
     elif args.defaults:
         cases = [(None, None), (21.0, 27.0)]
     for w, h in cases:
@@ -53,6 +70,79 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     return 0
 
 
+def _progress_bar(comm, total_time: float):
+    """A tqdm bar over simulated time on rank 0 (a no-op callback elsewhere)."""
+    if comm.rank != 0:
+        return lambda entry: None, lambda: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total_time, unit="s", desc="closing", dynamic_ncols=True,
+               bar_format="{desc}: t = {n:.3g} s {postfix} [{elapsed}]")
+
+    def update(entry: dict) -> None:
+        bar.n = entry["time"]
+        bar.set_postfix_str(f"step {entry['step']}, dt {entry['dt']:.2g} s, increment "
+                            f"{entry['increment_mm']:.1e} mm, {entry.get('contacts', 0)} "
+                            "contacts", refresh=False)
+        bar.refresh()
+
+    return update, bar.close
+
+
+def _finished_result(out: Path, config) -> dict | None:
+    """The result.json in ``out`` if it was computed with exactly ``config``."""
+    import json
+
+    try:
+        data = json.loads((out / "result.json").read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+    same = json.loads(json.dumps(config.to_dict())) == {
+        k: v for k, v in data.get("parameters", {}).items() if k in config.to_dict()}
+    return data if same else None
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    graft = _graft_size(args.parser, args)
+    if graft is not None and args.symmetric_reference:
+        args.parser.error("--symmetric-reference is the normal valve: drop --graft-width/"
+                          "--graft-height, or drop --symmetric-reference")
+    from dataclasses import replace
+
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.closure import CaseConfig, run_case
+    from valve_dolfinx.geometry.valve import ValveParameters
+    from valve_dolfinx.solvers.dynamics import DynamicsParameters
+
+    config = CaseConfig(geometry=ValveParameters(mesh_size=args.mesh_size),
+                        symmetric_reference=args.symmetric_reference)
+    if graft is not None:
+        config = config.with_graft(*graft)
+    dynamics = {"wall_time_limit_s": args.wall_time_limit}
+    if args.dt_min is not None:
+        dynamics["dt_min"] = args.dt_min
+    config = replace(config, dynamics=replace(DynamicsParameters(), **dynamics))
+    comm = MPI.COMM_WORLD
+    done = _finished_result(args.out, config)
+    if done is not None and not args.force:
+        if comm.rank == 0:
+            print(f"{args.out}/result.json already holds this case (converged: "
+                  f"{done['converged']}); --force recomputes it")
+        return 0 if done["converged"] else 3
+    update, close = _progress_bar(comm, config.dynamics.ramp_time)
+    try:
+        result = run_case(config, args.out, comm=comm, progress=update)
+    finally:
+        close()
+    if comm.rank == 0:
+        state = "converged" if result.converged else f"NOT converged ({result.solver_message})"
+        print(f"{state}: central coaptation height {result.central_coaptation_height_mm:.2f} mm, "
+              f"minimum {result.min_coaptation_height_mm:.2f} mm, regurgitant orifice "
+              f"{result.regurgitant_orifice_area_mm2:.2f} mm², root diameter "
+              f"{result.root_diameter_mm:.2f} mm; {result.wall_time_s:.0f} s -> {args.out}")
+    return 0 if result.converged else 3
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="valve-dolfinx", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -64,7 +154,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--defaults", action="store_true",
                    help="write the normal valve and the W21/H27 graft valve")
     _add_geometry_args(p)
-    p.set_defaults(func=_cmd_mesh)
+    p.set_defaults(func=_cmd_mesh, parser=p)
+
+    p = sub.add_parser("run", help="close one valve under 80 mmHg and analyse its coaptation")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--symmetric-reference", action="store_true",
+                   help="one leaflet against the two symmetry planes (the normal valve's "
+                   "cheap reference of SPEC §4)")
+    p.add_argument("--wall-time-limit", type=float, default=3600.0, metavar="SECONDS",
+                   help="stop (converged: false, results written) after this wall time")
+    p.add_argument("--dt-min", type=float, default=None, metavar="SECONDS",
+                   help="time-step floor below which the run counts as stalled")
+    p.add_argument("--force", action="store_true",
+                   help="recompute even if --out already holds this case's result.json")
+    _add_geometry_args(p)
+    p.set_defaults(func=_cmd_run, parser=p)
 
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,

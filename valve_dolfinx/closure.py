@@ -58,6 +58,9 @@ BETWEEN_LEAFLETS_DEPTH = 1.0
 #: own-body triangles closer than this many contact reaches (reference state) are not
 #: contacts (see SurfaceContact: a fold meets itself across about 1.57 reaches of material)
 SELF_EXCLUSION_FACTOR = 1.5
+#: leaflets never contact each other within this distance (mm) of where they are sewn
+#: together, measured on the unloaded valve (see SurfaceContact: attached_reference)
+COMMISSURE_EXCLUSION_MM = 1.0
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -78,9 +81,12 @@ class CaseConfig:
     root: RootParameters = field(default_factory=RootParameters)
     contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
     edge_contact: bool = True
+    lag_contact_driving_force: bool = False
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
     coaptation_threshold_mm: float = 0.5
     orifice_pixel_mm: float = 0.05
+    central_band_mm: float = 1.0
+    commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
     quadrature_degree: int = 1
     symmetric_reference: bool = False
 
@@ -134,6 +140,7 @@ class CaseResult:
     competent: bool = False
     root_diameter_mm: float = float("nan")
     max_penetration_mm: float = float("nan")
+    max_contact_layer_overlap_mm: float = float("nan")
     n_dofs: int = 0
     n_ranks: int = 1
     wall_time_s: float = 0.0
@@ -241,8 +248,9 @@ def mirror_leaflet(valve: ValveMesh, positions: np.ndarray) -> tuple[ValveMesh, 
                                nodes=patch.nodes + k * n, flat=flat_nodes, triangles=tri))
     mirrored = ValveMesh(points=np.concatenate(all_points), cells=np.concatenate(all_cells),
                          cell_tags=np.concatenate(all_tags), flat=np.concatenate(all_flat),
-                         fibres=np.concatenate(all_fib), edges=np.empty((0, 2), np.int64),
-                         edge_tags=np.empty(0, np.int32), leaflets=tuple(patches),
+                         fibres=np.concatenate(all_fib),
+                         edges=np.concatenate([valve.edges + k * n for k in range(3)]),
+                         edge_tags=np.tile(valve.edge_tags, 3), leaflets=tuple(patches),
                          parameters=valve.parameters)
     return mirrored, np.concatenate(all_pos)
 
@@ -259,6 +267,9 @@ class CaseState:
     contact_forces: np.ndarray  # (N, 3)
     report: object
     coaptation: object | None = None
+    #: (valve, positions) to draw: the valve itself, or the single leaflet of the symmetric
+    #: reference with its two mirror images
+    display: tuple | None = None
 
 
 def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
@@ -298,13 +309,16 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      between_bodies_depth=BETWEEN_LEAFLETS_DEPTH,
                                      reference=valve.flat,
                                      self_exclusion_radius=SELF_EXCLUSION_FACTOR
-                                     * config.contact.reach))
+                                     * config.contact.reach,
+                                     attached_reference=valve.points,
+                                     attached_exclusion_radius=config.commissure_exclusion_mm))
         if config.edge_contact:
             models.append(EdgeContact(valve.edges[valve.edge_tags == FREE_EDGE],
                                       valve.num_nodes, config.contact, reference=valve.points,
                                       exclusion_radius=SELF_EXCLUSION_FACTOR
                                       * config.contact.reach))
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
+                           lag_driving_force=config.lag_contact_driving_force,
                            fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
 
     solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
@@ -323,8 +337,15 @@ def analyse_case(state: CaseState, config: CaseConfig):
     valve, positions = state.domain.valve, state.positions
     if config.symmetric_reference:
         valve, positions = mirror_leaflet(valve, positions)
-    return analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
-                              pixel_mm=config.orifice_pixel_mm)
+    result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
+                                pixel_mm=config.orifice_pixel_mm,
+                                central_band_mm=config.central_band_mm)
+    if config.symmetric_reference:
+        # the heights are the solved leaflet's (its images see each other only through it)
+        solved = result.leaflets[valve.leaflets[0].name]
+        result.min_native_height_mm = solved.min_height_mm
+        result.central_native_height_mm = solved.central_height_mm
+    return result
 
 
 def run_case(config: CaseConfig, out_dir: str | Path | None = None,
@@ -343,8 +364,10 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
     state = solve_case(config, comm, progress)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
+    if config.symmetric_reference:
+        state.display = mirror_leaflet(state.domain.valve, state.positions)
     report = state.report
-    max_pen = max((h.get("max_penetration_mm", 0.0) for h in report.history[-1:]), default=0.0)
+    last = report.history[-1] if report.history else {}
     fields_ = coaptation.result_fields()
     result = CaseResult(
         graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
@@ -355,7 +378,8 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         regurgitant_orifice_area_mm2=fields_["regurgitant_orifice_area_mm2"],
         competent=bool(fields_["competent"]) and bool(report.converged),
         root_diameter_mm=state.root.diameter,
-        max_penetration_mm=float(max_pen),
+        max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
+        max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
         n_dofs=state.model.V.dofmap.index_map.size_global * 3,
         n_ranks=comm.size,
         mesh_size_mm=g.mesh_size,

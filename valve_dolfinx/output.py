@@ -114,18 +114,20 @@ def _write_figures(out: Path, state, result) -> None:
     from valve_dolfinx.analysis.plots import plot_coaptation_map
     from valve_dolfinx.plotting import plot_valve_3d
 
-    valve = state.domain.valve
+    valve, positions = state.display or (state.domain.valve, state.positions)
     graft_tag = next((p.tag for p in valve.leaflets if p.is_graft), None)
     name = _title(result)
+    if state.display is not None:
+        name += " (one leaflet and its mirror images)"
     try:
-        plot_valve_3d(state.positions, valve.cells, valve.cell_tags,
+        plot_valve_3d(positions, valve.cells, valve.cell_tags,
                       out / "closed_valve_ventricular.png", graft_tag=graft_tag,
                       view="ventricular", title=f"{name}: closed valve from the ventricle")
-        plot_valve_3d(state.positions, valve.cells, valve.cell_tags, out / "closed_valve.png",
+        plot_valve_3d(positions, valve.cells, valve.cell_tags, out / "closed_valve.png",
                       graft_tag=graft_tag, view="iso", title=f"{name}: closed under "
                       f"{result.parameters.get('pressure_mmhg', 80):g} mmHg")
-        plot_cut_planes(state.positions, valve, out / "cut_planes.png", title=name)
-        plot_cross_sections(state.positions, valve, out / "cross_sections.png", title=name)
+        plot_cut_planes(positions, valve, out / "cut_planes.png", title=name)
+        plot_cross_sections(positions, valve, out / "cross_sections.png", title=name)
         if state.coaptation is not None and len(valve.leaflets) > 1:
             plot_coaptation_map(state.coaptation, valve, out / "coaptation_map.png")
     except Exception as err:  # a figure must never cost the computed result

@@ -21,7 +21,7 @@ tension-field relaxation gives them no stiffness), and resists distension
 beyond it.  The root nodes (the leaflets' attachment) are then held at radius
 R for step 2.
 
-Default wall data (cite in docs/model.md):
+Default wall data (see docs/closure.md):
 * Young's modulus 2.0 MPa: the isotropic aortic-wall modulus that best matched
   measured root wall displacements in "Large-displacement 3D structural
   analysis of an aortic valve model with nonlinear material properties",

@@ -13,8 +13,18 @@ Definitions (the reasoning is in ``docs/coaptation.md``):
   length of the part of the line perpendicular to the free edge (the vertical
   line at abscissa ``x``) that lies in the region.  Computed exactly for the
   P1 gap by clipping the line against every triangle.  ``min_height`` is the
-  minimum of ``h`` over the free-edge span; ``central_height`` is ``h`` at the
-  midline.
+  minimum of ``h`` over the free-edge span and ``central_height`` the height at
+  the midline, both read outside a central band ``|x| < b`` (``b`` = 1 mm):
+  ``central_height`` is ``c0`` of the least-squares line ``h ≈ c0 + c1·|x|``
+  over ``b <= |x| <= 2b`` (the V-shaped profile beside the midline,
+  extrapolated to it), ``min_height = min(central_height, min_{|x|>=b} h)``.
+  The midline ends at the triple point where the three free edges meet.  A
+  membrane has no bending stiffness and its free edge is slack (15 % longer
+  than the distended commissure-to-centre span), so the last millimetre of
+  the free edge's tip folds one way or another depending on the mesh, and
+  ``h(0)`` jumps by ±0.5 mm between meshes while ``h`` at ``|x| >= 1 mm``
+  agrees within 0.15 mm (docs/closure.md).  Real leaflets fill this spot
+  with the nodulus of Arantius.  ``h(0)`` is reported as ``midline_height``.
 * **Coaptation area**: the region's area on the loaded triangles (and, for
   reference, on the flat triangles), exact for the P1 level set.
 * **Regurgitant orifice area**: see :mod:`valve_dolfinx.analysis.orifice`.
@@ -37,6 +47,7 @@ from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh
 __all__ = [
     "DEFAULT_THRESHOLD_MM",
     "DEFAULT_PIXEL_MM",
+    "DEFAULT_CENTRAL_BAND_MM",
     "PROFILE_SAMPLES",
     "LeafletCoaptation",
     "CoaptationResult",
@@ -57,6 +68,8 @@ DEFAULT_THRESHOLD_MM = 0.5
 DEFAULT_PIXEL_MM = 0.05
 #: Abscissae of the coaptation height profile along the flat free edge.
 PROFILE_SAMPLES = 201
+#: Half-width (mm, flat) of the central band left out of the heights (triple-point tip)
+DEFAULT_CENTRAL_BAND_MM = 1.0
 #: Nearest centroids examined first by the point–surface distance search.
 _FIRST_NEIGHBOURS = 16
 #: Point–triangle pairs evaluated at once (bounds the memory of the exact test).
@@ -82,11 +95,19 @@ class LeafletCoaptation:
     x_mm: np.ndarray = field(repr=False)
     height_mm: np.ndarray = field(repr=False)
     node_gap_mm: np.ndarray = field(repr=False)
+    midline_height_mm: float = math.nan
+    central_band_mm: float = 0.0
 
     @property
     def min_height_x_mm(self) -> float:
-        """Flat abscissa where ``h(x)`` is smallest (first occurrence)."""
-        return float(self.x_mm[int(np.argmin(self.height_mm))])
+        """Flat abscissa where ``h(x)`` is smallest outside the central band."""
+        outside = np.abs(self.x_mm - self._midline) >= self.central_band_mm
+        h = np.where(outside, self.height_mm, np.inf)
+        return float(self.x_mm[int(np.argmin(h))])
+
+    @property
+    def _midline(self) -> float:
+        return 0.5 * float(self.x_mm[0] + self.x_mm[-1])
 
     def to_dict(self) -> dict:
         return {
@@ -95,6 +116,8 @@ class LeafletCoaptation:
             "min_height_mm": _json_float(self.min_height_mm),
             "min_height_x_mm": _json_float(self.min_height_x_mm),
             "central_height_mm": _json_float(self.central_height_mm),
+            "midline_height_mm": _json_float(self.midline_height_mm),
+            "central_band_mm": _json_float(self.central_band_mm),
             "area_mm2": _json_float(self.area_mm2),
             "reference_area_mm2": _json_float(self.reference_area_mm2),
         }
@@ -346,24 +369,36 @@ def coaptation_height_profile(flat: np.ndarray, triangles: np.ndarray, gap: np.n
 
 
 def _leaflet_coaptation(patch: LeafletPatch, loaded: np.ndarray, gap: np.ndarray,
-                        threshold: float, samples: int) -> LeafletCoaptation:
+                        threshold: float, samples: int, band: float) -> LeafletCoaptation:
     fx = patch.flat[patch.free_edge, 0]
     x_left, x_right = float(fx.min()), float(fx.max())
-    x = np.linspace(x_left, x_right, samples)
-    h = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold, x)
     midline = 0.5 * (x_left + x_right)  # x = 0 for the symmetric leaflet outlines
-    central = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold,
-                                        np.array([midline]))[0]
+    x = np.linspace(x_left, x_right, samples)
+    # the band's edges are sampled exactly
+    x = np.union1d(x, [midline - 2 * band, midline - band, midline, midline + band,
+                       midline + 2 * band])
+    h = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold, x)
+    midline_height = float(h[int(np.argmin(np.abs(x - midline)))])
+    offset = np.abs(x - midline)
+    outside = offset >= band - 1e-12
+    if band > 0.0:  # h ≈ c0 + c1·|x| beside the tip: extrapolate to the midline
+        fit = outside & (offset <= 2 * band + 1e-12)
+        design = np.stack([np.ones(int(fit.sum())), offset[fit]], axis=1)
+        central = float(np.linalg.lstsq(design, h[fit], rcond=None)[0][0])
+    else:
+        central = midline_height
     return LeafletCoaptation(
         name=patch.name,
         is_graft=bool(patch.is_graft),
-        min_height_mm=float(h.min()),
-        central_height_mm=float(central),
+        min_height_mm=float(min(h[outside].min(), central)),
+        central_height_mm=central,
         area_mm2=region_area(loaded, patch.triangles, gap, threshold),
         reference_area_mm2=region_area(patch.flat, patch.triangles, gap, threshold),
         x_mm=x,
         height_mm=h,
         node_gap_mm=gap,
+        midline_height_mm=midline_height,
+        central_band_mm=band,
     )
 
 
@@ -389,7 +424,8 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
                        threshold_mm: float = DEFAULT_THRESHOLD_MM,
                        pixel_mm: float = DEFAULT_PIXEL_MM, *,
                        profile_samples: int = PROFILE_SAMPLES,
-                       orifice: bool = True) -> CoaptationResult:
+                       orifice: bool = True,
+                       central_band_mm: float = DEFAULT_CENTRAL_BAND_MM) -> CoaptationResult:
     """Coaptation region, heights, area and competence of a loaded valve (SPEC §6).
 
     Parameters
@@ -410,6 +446,11 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         Compute the regurgitant orifice area (the default).  ``False`` skips it
         -- for constructed surfaces that have no orifice around the z axis --
         and reports it as NaN (``competent`` is then ``False``).
+    central_band_mm
+        Half-width ``b`` (flat mm) of the band around the midline that the
+        heights leave out: the central height is extrapolated to the midline
+        from ``b <= |x| <= 2b`` and the minimum is taken over ``|x| >= b`` (see
+        the module docstring).  0 reads ``h`` at the midline itself.
 
     Returns
     -------
@@ -422,12 +463,13 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         raise ParameterError(f"profile_samples = {profile_samples!r}; use at least 3 "
                              "(201 by default)")
     threshold = float(threshold_mm)
+    band = check_range("central_band_mm", central_band_mm, 0.0, 5.0, unit="mm")
     pair_gaps = leaflet_pair_gaps(x, valve)
     leaflets = {}
     for i, patch in enumerate(valve.leaflets):
         gap = np.min([g for (a, _), g in pair_gaps.items() if a == i], axis=0)
         leaflets[patch.name] = _leaflet_coaptation(patch, x[patch.nodes], gap, threshold,
-                                                   int(profile_samples))
+                                                   int(profile_samples), band)
     ro_area = (orifice_leak_map(x, valve, pair_gaps, threshold, float(pixel_mm))[0]
                if orifice else math.nan)
     native = [lc for lc in leaflets.values() if not lc.is_graft]
