@@ -559,3 +559,27 @@ def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
               - contact.evaluate(x - step, f_ext).forces) / 2
         np.testing.assert_allclose(J @ step.ravel(), fd.ravel(), rtol=0,
                                    atol=1e-5 * np.abs(fd).max())
+
+
+def test_face_band_beyond_a_free_edge_fades_smoothly_with_exact_jacobian():
+    """A node 0.15 beyond the square's free edge x = 1, 0.05 above its plane.
+
+    Default bands: out of reach (distance to the edge 0.158 > h).  With
+    ``boundary_band = 1`` the face row of triangle (0, 1, 2) reaches it (the
+    search boxes are 0.2 wide) with presence smoothstep((λ0 + 1)/1),
+    λ0 = 1 - x = -0.15: 0.85²(3 - 1.7) = 0.93925.
+    """
+    x, f_ext = node_over_square(0.05, xy=(1.15, 0.5))
+    assert not np.any(SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext).forces)
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL, boundary_band=1.0)
+    contact.update_history(x)
+    result = contact.evaluate(x, f_ext)
+    assert result.forces[4] == pytest.approx([0.0, 0.0, 0.93925 * spec_force(0.05, 0.8)], rel=1e-9)
+    np.testing.assert_allclose(result.forces.sum(axis=0), 0.0, atol=1e-12)
+    J = dense_jacobian(result, 5)
+    rng = np.random.default_rng(3)
+    eps = 1e-7
+    for _ in range(3):
+        step = eps * rng.normal(size=(5, 3))
+        fd = contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces
+        np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-5, atol=1e-11)

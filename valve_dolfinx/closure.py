@@ -60,7 +60,10 @@ BETWEEN_LEAFLETS_DEPTH = 1.0
 SELF_EXCLUSION_FACTOR = 1.5
 #: leaflets never contact each other within this distance (mm) of where they are sewn
 #: together, measured on the unloaded valve (see SurfaceContact: attached_reference)
-COMMISSURE_EXCLUSION_MM = 1.0
+COMMISSURE_EXCLUSION_MM = 2.5
+#: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
+#: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
+FREE_EDGE_BAND = 1.0
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -87,6 +90,7 @@ class CaseConfig:
     orifice_pixel_mm: float = 0.05
     central_band_mm: float = 1.0
     commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
+    free_edge_band: float = FREE_EDGE_BAND
     quadrature_degree: int = 1
     symmetric_reference: bool = False
 
@@ -311,7 +315,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      self_exclusion_radius=SELF_EXCLUSION_FACTOR
                                      * config.contact.reach,
                                      attached_reference=valve.points,
-                                     attached_exclusion_radius=config.commissure_exclusion_mm))
+                                     attached_exclusion_radius=config.commissure_exclusion_mm,
+                                     boundary_band=config.free_edge_band))
         if config.edge_contact:
             models.append(EdgeContact(valve.edges[valve.edge_tags == FREE_EDGE],
                                       valve.num_nodes, config.contact, reference=valve.points,

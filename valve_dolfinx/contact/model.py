@@ -620,6 +620,16 @@ class SurfaceContact:
         sewn together at a commissure share its nodes; next to it they close
         like the pages of a book, closer than the contact thickness however
         they deform, so the layers would fight the suture line.
+    boundary_band
+        Width (barycentric, i.e. in triangle heights) of the band beyond the
+        surface's boundary edges over which face contacts with *other* bodies
+        fade out (``FACE_BAND`` = 0.1 elsewhere).  Two leaflets coapt up to
+        their free edges, which lie level with each other: with a narrow band
+        a node at one free edge slides on and off the edge of its neighbour's
+        surface as the edges move by a few hundredths of a millimetre, and the
+        force appears and vanishes within that distance.  A band of about one
+        triangle continues the neighbour's last row of faces as a plane (as
+        the symmetry planes of the reference do).
     between_bodies_depth
         Penetration window (mm) of contacts between bodies when their side is
         fixed (``between_bodies_side``); default ``params.penetration_depth``.
@@ -643,7 +653,8 @@ class SurfaceContact:
                  geometric_stiffness: bool = True,
                  between_bodies_depth: float | None = None,
                  attached_reference: np.ndarray | None = None,
-                 attached_exclusion_radius: float = 0.0) -> None:
+                 attached_exclusion_radius: float = 0.0,
+                 boundary_band: float = FACE_BAND) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
             raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
@@ -689,6 +700,17 @@ class SurfaceContact:
             # other bodies only: self-contact keeps its own (flat reference) rule
             extra = [e[self.node_body[e] != self.triangle_body[t]] for t, e in enumerate(extra)]
             self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)
+        #: ``(M, 3)`` band (barycentric) beyond the side opposite each vertex over which face
+        #: rows of *other* bodies fade out: ``boundary_band`` on the surface's boundary
+        #: (free edges), ``FACE_BAND`` on interior sides (the neighbour takes over there)
+        self.side_band = np.full((len(triangles), 3), FACE_BAND)
+        if boundary_band != FACE_BAND:
+            sides = np.stack([triangles[:, [1, 2]], triangles[:, [2, 0]], triangles[:, [0, 1]]],
+                             axis=1).reshape(-1, 2)
+            _, inverse, counts = np.unique(np.sort(sides, axis=1), axis=0, return_inverse=True,
+                                           return_counts=True)
+            boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
+            self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
         self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
@@ -764,7 +786,8 @@ class SurfaceContact:
         side_distance = s * d0
         face_lam_min = np.minimum(np.minimum(plane_lam[:, 0], plane_lam[:, 1]), plane_lam[:, 2])
         # face rows: Π_j ramp(λ_j + band), smooth also near the vertices (a min would kink)
-        fades = _ramp(plane_lam + FACE_BAND, FACE_BAND)
+        band = self._row_bands(node, tri)
+        fades = _ramp(plane_lam + band, band)
         band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
         presence = np.where(edge, _ramp(side_distance, eps), band_fade)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
@@ -781,6 +804,7 @@ class SurfaceContact:
             v[keep] for v in (node, tri, d, lam, weight, presence, normal, edge, side_distance))
         plane_lam, s, n_tri, face_lam_min = plane_lam[keep], s[keep], n_tri[keep], \
             face_lam_min[keep]
+        band = band[keep]
         clock.add("narrow")
         blend = self._blend_weights(node, tri, d, presence)
         f, dfdd = _law(p, f_ext[node], normal, d)
@@ -808,7 +832,8 @@ class SurfaceContact:
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
         banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
         if len(banded):  # face rows fading out beyond their triangle's boundary
-            slopes = _log_ramp_slope(lam[banded] + FACE_BAND, FACE_BAND)            # (K, 3)
+            width = band[a][banded]
+            slopes = _log_ramp_slope(lam[banded] + width, width)                      # (K, 3)
             grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
         geometric = grad_f = None
         if self.geometric_stiffness:
@@ -840,7 +865,12 @@ class SurfaceContact:
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
-        lateral = self.params.reach * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
+        width = np.full(len(self.triangles), self.params.reach)
+        wide = self.side_band > FACE_BAND  # face rows reach beyond a free edge: widen too
+        if np.any(wide):
+            extent = np.where(wide, self.side_band * np.asarray(frames.altitudes).T, 0.0)
+            width = np.maximum(width, extent.max(axis=1))
+        lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
         index = CellIndex(xt, lo, hi, nodes)
@@ -894,16 +924,19 @@ class SurfaceContact:
                             -lam2 * alt[2][tri])
         h = self.params.reach
         lam_min = np.minimum(np.minimum(lam0, lam1), lam2)
-        reach = np.flatnonzero((lam_min > -FACE_BAND) | ((beyond < h) & (np.abs(d0) < h)))
+        band = self._row_bands(node, tri)
+        in_band = (lam0 > -band[:, 0]) & (lam1 > -band[:, 1]) & (lam2 > -band[:, 2])
+        reach = np.flatnonzero(in_band | ((beyond < h) & (np.abs(d0) < h)))
         node, tri, d0, lam0, lam1, lam2 = (v[reach] for v in (node, tri, d0, lam0, lam1, lam2))
         keep = ~self._in_neighbourhood(node, tri)
         node, tri, d0, lam0, lam1, lam2 = (v[keep] for v in (node, tri, d0, lam0, lam1, lam2))
         lam = np.stack([lam0, lam1, lam2], axis=1)
         lam_min, beyond = lam_min[reach][keep], beyond[reach][keep]
+        in_band = in_band[reach][keep]
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
-        face = np.flatnonzero(lam_min > -FACE_BAND)
+        face = np.flatnonzero(in_band)
         out = np.flatnonzero((lam_min < -INSIDE_TOLERANCE)
                              & (np.hypot(beyond, d0) < h + _BOUND_MARGIN))
         xo = xt.T
@@ -920,6 +953,11 @@ class SurfaceContact:
                 np.concatenate([lam[face], bary]),
                 np.concatenate([d0[face, None] * n[:, tri[face]].T, v]),
                 lam[rows])
+
+    def _row_bands(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
+        """``(K, 3)`` fade bands of face rows: wide beyond another body's free edge."""
+        other = self.node_body[node] != self.triangle_body[tri]
+        return np.where(other[:, None], self.side_band[tri], FACE_BAND)
 
     def _in_neighbourhood(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """True where the node is a vertex of the triangle or an edge-neighbour of one."""
