@@ -332,16 +332,15 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     hook = solver.hooks[0]
     positions = solver.coupling.positions(solver.U)
     forces = hook.contact_forces(solver.U)
-    return CaseState(domain, model, root, positions, forces, report)
+    display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
+    return CaseState(domain, model, root, positions, forces, report, display=display)
 
 
 def analyse_case(state: CaseState, config: CaseConfig):
     """Coaptation analysis of a solved case (on every rank; it is serial and cheap)."""
     from valve_dolfinx.analysis import analyse_coaptation
 
-    valve, positions = state.domain.valve, state.positions
-    if config.symmetric_reference:
-        valve, positions = mirror_leaflet(valve, positions)
+    valve, positions = state.display or (state.domain.valve, state.positions)
     result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
                                 pixel_mm=config.orifice_pixel_mm,
                                 central_band_mm=config.central_band_mm)
@@ -369,8 +368,6 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
     state = solve_case(config, comm, progress)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
-    if config.symmetric_reference:
-        state.display = mirror_leaflet(state.domain.valve, state.positions)
     report = state.report
     last = report.history[-1] if report.history else {}
     fields_ = coaptation.result_fields()

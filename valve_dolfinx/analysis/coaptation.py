@@ -153,13 +153,11 @@ class CoaptationResult:
 
     def result_fields(self) -> dict:
         """The coaptation fields of a case result under their SPEC §7 names."""
-        return {
-            "min_coaptation_height_mm": _json_float(self.min_native_height_mm),
-            "central_coaptation_height_mm": _json_float(self.central_native_height_mm),
-            "coaptation_area_mm2": _json_float(self.coaptation_area_mm2),
-            "regurgitant_orifice_area_mm2": _json_float(self.regurgitant_orifice_area_mm2),
-            "competent": bool(self.competent),
-        }
+        d = self.to_dict()
+        return {"min_coaptation_height_mm": d["min_native_height_mm"],
+                "central_coaptation_height_mm": d["central_native_height_mm"],
+                **{k: d[k] for k in ("coaptation_area_mm2", "regurgitant_orifice_area_mm2",
+                                     "competent")}}
 
 
 def _json_float(value: float) -> float | None:

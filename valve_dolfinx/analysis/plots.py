@@ -60,8 +60,9 @@ def plot_coaptation_map(result: CoaptationResult, valve: ValveMesh, path: str | 
     Top row: each leaflet's flat (reference) outline -- attachment edge thin,
     free edge thick -- with the region ``gap <= threshold`` filled.  Bottom
     row: the coaptation height profile ``h(x)`` along the free edge, its
-    minimum and its central value.  All panels share one length scale; the
-    graft is drawn in blue and labelled.
+    minimum and its central value, with the central band that both leave out
+    (the free-edge tip at the triple point, see :mod:`.coaptation`) shaded.
+    All panels share one length scale; the graft is drawn in blue and labelled.
     """
     plt = _pyplot()
     path = Path(path)
@@ -86,14 +87,19 @@ def plot_coaptation_map(result: CoaptationResult, valve: ValveMesh, path: str | 
             ax.set_ylabel("y above nadir (mm)")
         bx = axes[1, k]
         bx.plot(lc.x_mm, lc.height_mm, color=_GRAFT_COLOUR if patch.is_graft else "k", lw=1.3)
+        band = lc.central_band_mm
+        if band > 0.0:
+            bx.axvspan(-band, band, color="0.85", zorder=0,
+                       label=f"free-edge tip, |x| < {band:g} mm: left out")
         bx.axhline(lc.min_height_mm, color=_REGION_COLOUR, ls="--", lw=1.0,
-                   label=f"min {lc.min_height_mm:.2f} mm at x = {lc.min_height_x_mm:.1f}")
+                   label=f"min {lc.min_height_mm:.2f} mm")
         bx.plot([0.0], [lc.central_height_mm], "o", color=_REGION_COLOUR,
-                label=f"central {lc.central_height_mm:.2f} mm")
+                label=f"central {lc.central_height_mm:.2f} mm"
+                      + (" (extrapolated)" if band > 0.0 else ""))
         bx.set(xlim=(-xlim, xlim), ylim=(0, hmax), xlabel="x along free edge (mm)")
         if k == 0:
             bx.set_ylabel("coaptation height h(x) (mm)")
-        bx.legend(loc="upper center", fontsize=8, frameon=False)
+        bx.legend(loc="lower center", fontsize=7.5, frameon=False)
         bx.grid(alpha=0.3)
     fig.suptitle(f"Coaptation region (gap ≤ {result.threshold_mm:g} mm to another leaflet) on "
                  f"the flat leaflets — regurgitant orifice "

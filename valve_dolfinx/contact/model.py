@@ -265,22 +265,6 @@ def reference_neighbours(triangles: np.ndarray, reference: np.ndarray, body: np.
     return out
 
 
-def attached_neighbours(triangles: np.ndarray, points: np.ndarray, radius: float
-                        ) -> list[np.ndarray]:
-    """For each triangle, the nodes within ``radius`` of it in the placement ``points`` (N, 3).
-
-    Same superset test as :func:`reference_neighbours` (centroid distance below
-    ``radius`` plus the centroid-to-vertex radius), over all bodies.
-    """
-    from scipy.spatial import cKDTree
-
-    corners = points[triangles]
-    centroid = corners.mean(axis=1)
-    size = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
-    hits = cKDTree(points).query_ball_point(centroid, radius + size)
-    return [np.asarray(found, dtype=np.int64) for found in hits]
-
-
 def _merge_exclusions(halo: np.ndarray, extra: list[np.ndarray]) -> np.ndarray:
     """Padded table of the union, per row, of ``halo`` (padded with -1) and ``extra``."""
     rows = [np.union1d(h[h >= 0], e) for h, e in zip(halo, extra, strict=True)]
@@ -694,9 +678,10 @@ class SurfaceContact:
                                          self_exclusion_radius)
             self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)
         if attached_reference is not None and attached_exclusion_radius > 0.0:
-            extra = attached_neighbours(triangles, _check_positions(
-                attached_reference, self.num_nodes, "attached_reference"),
-                attached_exclusion_radius)
+            placed = _check_positions(attached_reference, self.num_nodes, "attached_reference")
+            extra = reference_neighbours(triangles, placed[triangles],
+                                         np.zeros(len(triangles), dtype=np.int64),
+                                         attached_exclusion_radius)
             # other bodies only: self-contact keeps its own (flat reference) rule
             extra = [e[self.node_body[e] != self.triangle_body[t]] for t, e in enumerate(extra)]
             self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)

@@ -106,12 +106,13 @@ class ContactHook:
     def accept_state(self, state: dolfinx.fem.Function) -> None:
         """Record an accepted (time/load) step: sides and driving forces come from it."""
         x = self.coupling.positions(state)
-        current = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
-        if self._unit_forces is None or not self.lag_driving_force:
-            self._unit_forces = current
-        else:  # under-relaxed update: damps the step-to-step flip-flop of a lagged load
-            beta = self.driving_force_relaxation
-            self._unit_forces = (1.0 - beta) * self._unit_forces + beta * current
+        if self.lag_driving_force:  # (otherwise every evaluation computes its own)
+            current = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
+            if self._unit_forces is None:
+                self._unit_forces = current
+            else:  # under-relaxed update: damps the step-to-step flip-flop of a lagged load
+                beta = self.driving_force_relaxation
+                self._unit_forces = (1.0 - beta) * self._unit_forces + beta * current
         self._key = None
         for m in self.models:
             update = getattr(m, "update_history", None)
