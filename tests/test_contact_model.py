@@ -8,6 +8,7 @@ plain loops, never from the code under test.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -484,6 +485,35 @@ def test_plane_contact_node_subsets_and_two_planes():
     np.testing.assert_allclose(res.forces[0], [spec_force(0.05, 1.0), 0, spec_force(0.05, 1.0)],
                                rtol=1e-13)
     assert planes.evaluate(x, f_ext, np.array([], dtype=int)).n_active == 0
+
+
+def test_symmetry_plane_acts_like_the_mirror_image_sheet():
+    """A node δ from a symmetry plane feels the law at d = 2δ − t_c: the distance to its
+    mirror image, as from a neighbouring sheet (SPEC §4 reference); Jacobian by FD.
+    One-pass pairing: the node's own row only; two-pass: also the image's reactions, 2×."""
+    params = ContactParameters(thickness=0.25, taper=0.0, pairing="one_pass")
+    x = np.array([[0.3, 0.0, 0.16], [1.0, 0.0, 0.05]])   # 2δ − t = 0.07 and −0.15
+    f_ext = np.array([[0.0, 0.0, -2.0], [0.0, 0.0, -2.0]])
+    plane = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], params, mirror=True)
+    res = plane.evaluate(x, f_ext)
+    assert res.forces[0, 2] == pytest.approx(spec_force(2 * 0.16 - 0.25, 2.0), rel=1e-12)
+    assert res.forces[1, 2] == pytest.approx(spec_force(2 * 0.05 - 0.25, 2.0), rel=1e-12)
+    assert res.max_crossing == 0.0   # mid-surfaces 0.1 mm apart: not crossed
+    J = dense_jacobian(res, 2)
+    step = 1e-7
+    for node in range(2):
+        shifted = x.copy()
+        shifted[node, 2] += step
+        fd = (plane.evaluate(shifted, f_ext).forces - res.forces).ravel() / step
+        np.testing.assert_allclose(J[:, 3 * node + 2], fd, rtol=1e-5, atol=1e-6)
+    wall = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], params)
+    assert wall.evaluate(x, f_ext).forces[0, 2] == pytest.approx(
+        spec_force(0.16 - 0.125, 2.0), rel=1e-12)
+    two_pass = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]],
+                            replace(params, pairing="two_pass"), mirror=True)
+    both = two_pass.evaluate(x, f_ext)
+    np.testing.assert_allclose(both.forces, 2 * res.forces, rtol=1e-13)
+    np.testing.assert_allclose(dense_jacobian(both, 2), 2 * J, rtol=1e-13)
 
 
 # -- input checks --------------------------------------------------------------------------

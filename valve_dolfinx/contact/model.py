@@ -1056,10 +1056,22 @@ class PlaneContact:
         ``(P, 3)`` a point on each plane (mm) and its normal (normalised here).
     params
         Contact law parameters.
+    mirror
+        ``False``: a rigid wall, ``d = δ − t_c/2`` (δ the distance to the plane,
+        the sheet's half of the contact layer).  ``True``: a symmetry plane
+        whose far side holds the sheet's mirror image (SPEC §4's one-leaflet
+        reference): the law sees the distance to that image, ``d = 2δ − t_c``,
+        exactly as a neighbouring sheet's node would, so the symmetric
+        reference and the full valve share one contact law.  With two-pass
+        pairing (``params.pairing``) the image's nodes would also push back on
+        the sheet's triangles; for a mirror image those reactions equal the
+        sheet's own contact forces, so the force is doubled (the sheets rest
+        where each pass carries half the load, as between leaflets).
     """
 
     def __init__(self, points: np.ndarray, normals: np.ndarray,
-                 params: ContactParameters = DEFAULT_PARAMETERS) -> None:
+                 params: ContactParameters = DEFAULT_PARAMETERS, *,
+                 mirror: bool = False) -> None:
         points = np.atleast_2d(np.asarray(points, dtype=float))
         normals = np.atleast_2d(np.asarray(normals, dtype=float))
         if points.shape != normals.shape or points.shape[1:] != (3,):
@@ -1071,6 +1083,7 @@ class PlaneContact:
         self.points = points
         self.normals = normals / length[:, None]
         self.params = params
+        self.mirror = bool(mirror)
 
     def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
                  ) -> ContactResult:
@@ -1083,13 +1096,19 @@ class PlaneContact:
         f_ext = _check_positions(f_ext, num_nodes, "f_ext")
         nodes = _check_nodes(nodes, num_nodes)
         d = (x[nodes] @ self.normals.T) - np.einsum("ij,ij->i", self.points, self.normals)
-        d = d - 0.5 * self.params.thickness  # the mirror-image neighbour is at twice the distance
+        # d(x) = scale·δ(x) − offset: the image is at 2δ, the wall at δ
+        scale = 2.0 if self.mirror else 1.0
+        offset = scale * 0.5 * self.params.thickness
+        passes = 2.0 if self.mirror and self.params.pairing == "two_pass" else 1.0
+        d = scale * d - offset
         k, i = np.nonzero(d < self.params.cutoff)                 # (node, plane) candidates
         node, normal = nodes[k], self.normals[i]
         f, dfdd = _law(self.params, f_ext[node], normal, d[k, i])
+        f, dfdd = passes * f, passes * dfdd
         a = f > 0.0
         empty = np.empty((int(a.sum()), 0))
+        # dfdd enters the Jacobian as f'(d)·∂d/∂x with ∂d/∂x = n: carry the scale in it
         contacts = _Contacts(node=node[a], support=empty.astype(np.int64), weights=empty,
-                             normal=normal[a], d=d[k, i][a], f=f[a], dfdd=dfdd[a],
-                             partner=-1 - i[a], surface_offset=0.5 * self.params.thickness)
+                             normal=normal[a], d=d[k, i][a], f=f[a], dfdd=scale * dfdd[a],
+                             partner=-1 - i[a], surface_offset=offset)
         return contacts.result(num_nodes)
