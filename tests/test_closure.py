@@ -129,6 +129,8 @@ def test_bad_configuration_names_the_parameter():
         DynamicsParameters(wall_time_limit_s=0.0)
     with pytest.raises(ParameterError, match="symmetric_reference"):
         CaseConfig(symmetric_reference=True).with_graft(21.0, 27.0)
+    with pytest.raises(ParameterError, match="bending_modulus_kpa"):
+        CaseConfig(bending_modulus_kpa=-1.0)
 
 
 @pytest.mark.mpi

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx, package_versions
+from valve_dolfinx.bending import BendingHook, bending_stiffness_matrix, flexural_rigidity
 from valve_dolfinx.boundary_conditions import clamp_edges
 from valve_dolfinx.contact import ContactParameters, PlaneContact, SurfaceContact
 from valve_dolfinx.contact.edges import EdgeContact
@@ -64,6 +65,8 @@ COMMISSURE_EXCLUSION_MM = 2.5
 #: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
 #: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
 FREE_EDGE_BAND = 1.0
+#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/closure.md)
+BENDING_MODULUS_KPA = 200.0
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -74,7 +77,19 @@ class CaseConfig:
 
     ``symmetric_reference=True`` runs the cheap reference of SPEC §4 instead of
     the valve: the left-coronary leaflet alone, closing against the two planes
-    through the valve axis at ±60° that its neighbours mirror it across.
+    through the valve axis at ±60° that its neighbours mirror it across (the
+    contact law sees the distance to the mirror image, as between leaflets).
+
+    ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
+    ``D = E_b·t³/12`` (:mod:`valve_dolfinx.bending`; 0 = pure membrane): it
+    regularises the slack free-edge tip at the triple point, without which the
+    three-leaflet valve does not converge (docs/closure.md).  ``edge_contact`` adds free-edge "scissors"
+    contact (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by
+    default because with it the three-leaflet valve does not settle, and face
+    contact with the free-edge band already keeps the free edges apart.
+    ``central_band_mm`` (1 mm) reads the coaptation heights outside a band
+    around the triple-point tip of the midline and extrapolates the profile to
+    the midline (:mod:`valve_dolfinx.analysis.coaptation`); 0 reads ``h(0)``.
     """
 
     geometry: ValveParameters = field(default_factory=ValveParameters)
@@ -83,7 +98,7 @@ class CaseConfig:
     graft_material: FungMaterial = BOVINE_PERICARDIUM
     root: RootParameters = field(default_factory=RootParameters)
     contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
-    edge_contact: bool = True
+    edge_contact: bool = False
     lag_contact_driving_force: bool = False
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
     coaptation_threshold_mm: float = 0.5
@@ -93,12 +108,15 @@ class CaseConfig:
     free_edge_band: float = FREE_EDGE_BAND
     quadrature_degree: int = 1
     symmetric_reference: bool = False
+    bending_modulus_kpa: float = BENDING_MODULUS_KPA
 
     def __post_init__(self) -> None:
         check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
                     unit="mmHg", hint="diastolic aortic pressure is about 80 mmHg")
         check_range("coaptation_threshold_mm", self.coaptation_threshold_mm, 0.0, 5.0,
                     low_open=True, unit="mm")
+        check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
+                    hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
         if self.symmetric_reference and self.geometry.has_graft:
             raise ParameterError("symmetric_reference needs the normal valve (no graft)")
 
@@ -193,6 +211,17 @@ def _leaflet_energy_on_cylinder(model: MembraneModel, wrap_radius: float
         return float(value)
 
     return evaluate
+
+
+def leaflet_bending_matrix(valve: ValveMesh, model: MembraneModel, modulus_kpa: float):
+    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.bending`), D = E_b·t³/12 with
+    the thickness of each node's tissue; no curvature is measured on the boundary."""
+    node_rigidity = np.zeros(valve.num_nodes)
+    for tag, material in model.materials.items():
+        cells = valve.cells[valve.cell_tags == tag]
+        node_rigidity[cells.ravel()] = flexural_rigidity(modulus_kpa, material.thickness)
+    return bending_stiffness_matrix(valve.cells, valve.flat, valve.num_nodes,
+                                    np.unique(valve.edges), node_rigidity)
 
 
 def _single_leaflet(valve: ValveMesh) -> ValveMesh:
@@ -305,7 +334,7 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         models = []
         if config.symmetric_reference:
             points, normals = symmetry_planes()
-            models.append(PlaneContact(points, normals, config.contact))
+            models.append(PlaneContact(points, normals, config.contact, mirror=True))
             # a single leaflet may still fold onto itself
         models.append(SurfaceContact(valve.cells, valve.num_nodes, config.contact,
                                      triangle_body=valve.cell_tags,
@@ -326,8 +355,12 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                            lag_driving_force=config.lag_contact_driving_force,
                            fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
 
+    hooks = [make_hook]
+    if config.bending_modulus_kpa > 0:
+        K = leaflet_bending_matrix(valve, model, config.bending_modulus_kpa)
+        hooks.append(lambda coupling: BendingHook(coupling, K))
     solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
-                                  config.dynamics, hooks=[make_hook])
+                                  config.dynamics, hooks=hooks)
     report = solver.solve(progress=progress)
     hook = solver.hooks[0]
     positions = solver.coupling.positions(solver.U)

@@ -1,0 +1,137 @@
+"""A small bending stiffness for the membrane: the quadratic (isometric) bending model.
+
+The leaflets are membranes (SPEC §4), but a membrane's slack free edge has no
+stiffness against folding: at the triple point, where the three free edges
+meet, the last millimetre of each free edge folds one way or another at the
+scale of the mesh, the coaptation height read there jumps between meshes and
+Newton fails on the three-leaflet valve (docs/closure.md).  A real leaflet has
+a flexural rigidity ``D = E_b·t³/12``; this module adds it as the energy of a
+plate whose stress-free state is the flat leaflet,
+
+    Π_b = D/2 ∫ (2H)² dA   (H the mean curvature),
+
+which for isometric deformations (the leaflet is close to one where it bends
+freely: slack, or the nearly inextensible graft) is the whole Kirchhoff plate
+energy, the Gaussian-curvature term integrating to a boundary term.  It is
+discretised with the cotangent Laplacian of the flat reference (Wardetzky et
+al. 2007; the "quadratic bending" model of Bergou et al. 2006): at an interior
+node i with lumped area A_i, ``Σ_j L_ij x_j = −(S x)_i / A_i`` is the mean
+curvature vector 2H·n, so
+
+    Π_b = ½ xᵀ K x,  K = D · Sᵀ P A⁻¹ P S   (per Cartesian component),
+
+with S the P1 stiffness matrix of the Laplacian on the flat leaflet (entries
+``−½ cot`` of the opposite angles), A the lumped nodal areas and P keeping the
+interior nodes (the Laplacian at a boundary node is not a curvature).  K is
+constant, symmetric positive semi-definite, and vanishes on every flat
+placement and every rigid motion of the flat leaflet; the force is ``−K x``
+and the Jacobian ``K``: Newton sees it exactly.  The energy is exact for
+isometric bending and an approximation where the membrane also stretches,
+which is where membrane tension, not bending, carries the load.
+
+Checked in tests/test_bending.py against the closed form ``D·A/(2R²)`` of a
+flat sheet wrapped isometrically onto a cylinder of radius R, and for zero
+energy and force on flat placements and rigid motions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from valve_dolfinx._compat import PETSc, dolfinx
+from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.solvers.nodal import NodalCoupling
+
+__all__ = ["bending_stiffness_matrix", "BendingHook", "flexural_rigidity"]
+
+
+def flexural_rigidity(modulus_kpa: float, thickness_mm: float) -> float:
+    """D = E·t³/12 (kPa·mm³ = mN·mm) of a plate (Poisson ratio 0)."""
+    check_range("bending_modulus_kpa", modulus_kpa, 0.0, 1e7, unit="kPa")
+    check_range("thickness", thickness_mm, 0.0, 5.0, low_open=True, unit="mm")
+    return modulus_kpa * thickness_mm**3 / 12.0
+
+
+def _cotangent_laplacian(cells: np.ndarray, flat: np.ndarray, num_nodes: int
+                         ) -> tuple[sp.csr_matrix, np.ndarray]:
+    """P1 stiffness matrix S of −Δ and lumped nodal areas on per-cell flat coordinates."""
+    rows, cols, vals = [], [], []
+    e = [flat[:, (k + 2) % 3] - flat[:, (k + 1) % 3] for k in range(3)]  # edge opposite k
+    cross = e[1][:, 0] * e[2][:, 1] - e[1][:, 1] * e[2][:, 0]
+    area2 = np.abs(cross)
+    if np.any(area2 <= 1e-14 * np.max(area2)):
+        raise ParameterError("bending: degenerate (zero-area) triangle in the flat reference; "
+                             "remesh the leaflet")
+    for k in range(3):
+        i, j = cells[:, (k + 1) % 3], cells[:, (k + 2) % 3]
+        # cot of the angle at vertex k = (a·b)/|a×b| with a, b the edges leaving vertex k
+        a = flat[:, (k + 1) % 3] - flat[:, k]
+        b = flat[:, (k + 2) % 3] - flat[:, k]
+        cot = np.einsum("ij,ij->i", a, b) / area2
+        rows += [i, j, i, j]
+        cols += [j, i, i, j]
+        vals += [-0.5 * cot, -0.5 * cot, 0.5 * cot, 0.5 * cot]
+    S = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(num_nodes, num_nodes))
+    lumped = np.zeros(num_nodes)
+    np.add.at(lumped, cells.ravel(), np.repeat(area2 / 6.0, 3))
+    return S, lumped
+
+
+def bending_stiffness_matrix(cells: np.ndarray, flat: np.ndarray, num_nodes: int,
+                             boundary_nodes: np.ndarray, rigidity) -> sp.csr_matrix:
+    """K (N×N, one Cartesian component) with Π_b = ½ Σ_c x_cᵀ K x_c; see the module docstring.
+
+    Parameters
+    ----------
+    cells, flat
+        ``(M, 3)`` node ids and ``(M, 3, 2)`` flat (stress-free) coordinates per cell.
+    boundary_nodes
+        Nodes on the mesh boundary (free edge, attachment): no curvature is
+        measured at them (they still bend with their interior neighbours).
+    rigidity
+        Flexural rigidity D (mN·mm), a number or one value per node (the
+        tissue of the leaflet the node belongs to); 0 gives a zero matrix.
+    """
+    rigidity = np.broadcast_to(np.asarray(rigidity, dtype=float), (num_nodes,))
+    if np.any(rigidity < 0) or not np.all(np.isfinite(rigidity)):
+        raise ParameterError("bending rigidity must be finite and >= 0 (mN·mm); use 0 to "
+                             "switch bending off")
+    S, lumped = _cotangent_laplacian(np.asarray(cells), np.asarray(flat, float), num_nodes)
+    interior = np.ones(num_nodes, dtype=bool)
+    interior[np.asarray(boundary_nodes, dtype=np.int64)] = False
+    weight = np.where(interior & (lumped > 0), rigidity / np.where(lumped > 0, lumped, 1.0), 0.0)
+    return (S.T @ sp.diags(weight) @ S).tocsr()
+
+
+class BendingHook:
+    """Adds the bending force ``−K x`` (to the residual: ``+K x``) and ``K`` to a solve.
+
+    Same interface as :class:`~valve_dolfinx.solvers.contact_hook.ContactHook`;
+    each rank adds the rows of the nodes it owns.
+    """
+
+    def __init__(self, coupling: NodalCoupling, stiffness: sp.csr_matrix):
+        self.coupling = coupling
+        K = sp.csr_matrix(stiffness)
+        owned = np.zeros(K.shape[0], dtype=bool)
+        owned[coupling.owned_nodes] = True
+        self.K_owned = sp.diags(owned.astype(float)) @ K  # rows of the owned nodes
+        coo = self.K_owned.tocoo()
+        keep = coo.data != 0.0
+        self._rows, self._cols = coo.row[keep], coo.col[keep]
+        self._blocks = coo.data[keep][:, None, None] * np.eye(3)
+
+    def energy(self, state: dolfinx.fem.Function) -> float:
+        """Π_b of the current placement (on every rank)."""
+        x = self.coupling.positions(state)
+        total = float(np.einsum("ij,ij->", x, self.K_owned @ x)) * 0.5
+        return self.coupling.comm.allreduce(total)
+
+    def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
+        x = self.coupling.positions(state)
+        self.coupling.add_forces(b, self.K_owned @ x, scale=1.0)
+
+    def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
+        self.coupling.add_blocks(A, self._rows, self._cols, self._blocks, scale=1.0)
