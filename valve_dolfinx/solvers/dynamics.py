@@ -27,6 +27,9 @@ them (tested).  They are scaled per tissue to its stiffness,
 ``k = t·c_Fung·λmax(M)`` (:attr:`FungMaterial.stiffness_scale`), so that the
 pericardial graft -- hundreds of times stiffer in-plane than the native
 leaflet -- is not integrated with the native leaflet's time scale (SPEC §4).
+Optionally (``strain_rate_damping_time`` τ_v > 0) a Kelvin–Voigt viscosity
+``τ_v·k_tissue·Ė`` damps the membrane's stretching rate (not rigid or flapping
+motion); it too vanishes at rest (tested in tests/test_dynamics.py).
 """
 
 from __future__ import annotations
@@ -69,6 +72,14 @@ class DynamicsParameters:
         L (mm) in the stiffness-per-area estimate k/L².
     stiffness_exponent
         β in ``c ∝ (k_tissue/k_ref)^β`` (1: damping proportional to stiffness).
+    strain_rate_damping_time
+        τ_v (s) of a Kelvin–Voigt viscosity on the membrane strain rate,
+        tension ``τ_v·k_tissue·Ė`` (``k_tissue`` the tissue's stiffness scale):
+        it damps stretching, not rigid or flapping motion, in proportion to
+        each tissue's stiffness, and its Jacobian is a regular, always positive
+        block even where the tissue switches between slack and taut (the
+        nearly inextensible graft).  0 switches it off.  Like mass and
+        damping it vanishes at rest and leaves the equilibrium unchanged.
     ramp_time
         Pressure ramp duration (s), smooth-step shaped.
     dt_initial, dt_min, dt_max
@@ -104,6 +115,7 @@ class DynamicsParameters:
     mass_ratio: float = 0.05
     length_scale: float = 10.0
     stiffness_exponent: float = 1.0
+    strain_rate_damping_time: float = 0.0
     ramp_time: float = 1.0
     dt_initial: float = 1e-3
     dt_min: float = 1e-8
@@ -123,6 +135,8 @@ class DynamicsParameters:
         check_range("mass_ratio", self.mass_ratio, 0.0, 1e3, unit="")
         check_range("length_scale", self.length_scale, 0.0, 1e3, low_open=True, unit="mm")
         check_range("stiffness_exponent", self.stiffness_exponent, 0.0, 1.0)
+        check_range("strain_rate_damping_time", self.strain_rate_damping_time, 0.0, 1e6,
+                    unit="s")
         check_range("ramp_time", self.ramp_time, 0.0, 1e6, low_open=True, unit="s")
         check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True, unit="s")
         check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max, unit="s")
@@ -210,6 +224,8 @@ class DampedDynamicsSolver:
         self.bcs = self._state_bcs(bcs)
 
         self.damping, self.mass = self._coefficients(stiffness)
+        self.viscosity = {tag: self.params.strain_rate_damping_time * k
+                          for tag, k in stiffness.items()}
         self.G_form, self.J_form = self._forms()
         self.F_vec = fem_petsc.create_vector(self.W)
         self.J_mat = fem_petsc.create_matrix(self.J_form)
@@ -271,6 +287,19 @@ class DampedDynamicsSolver:
              + ufl.inner(self.mass[tag] * vdot + self.damping[tag] * v, w_v)) * dA * dxv(tag)
             for tag in self.damping)
         G = inertial + model.residual(w_v, u=u)
+        if any(eta > 0.0 for eta in self.viscosity.values()):
+            ref = model.domain.reference
+            F = model.deformation_gradient(u)
+
+            def rate(z):  # sym(Fᵀ ∇z J0): strain rate (z = v) or its variation (z = w)
+                dF = ufl.grad(z) * ref
+                return 0.5 * (F.T * dF + dF.T * F)
+
+            dxq = ufl.Measure("dx", domain=model.domain.mesh,
+                              subdomain_data=model.domain.cell_tags,
+                              metadata={"quadrature_degree": model.quadrature_degree})
+            G = G + sum(eta * ufl.inner(rate(v), rate(w_v)) * dA * dxq(tag)
+                        for tag, eta in self.viscosity.items() if eta > 0.0)
         dU = ufl.TrialFunction(self.W)
         J = ufl.derivative(G, U, dU) + self.shift * ufl.derivative(G, Udot, dU)
         return fem.form(G), fem.form(J)
