@@ -85,9 +85,9 @@ class CaseConfig:
     regularises the slack free-edge tip at the triple point, without which the
     three-leaflet valve does not converge (docs/closure.md).  ``edge_contact``
     adds free-edge "scissors" contact
-    (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by default
-    because with it the three-leaflet valve does not settle, and face contact
-    with the free-edge band already keeps the free edges apart.
+    (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by default:
+    with it and the bending stiffness the three-leaflet valve crossed earlier
+    than without it (docs/closure.md).
     ``central_band_mm`` (1 mm) reads the coaptation heights outside a band
     around the triple-point tip of the midline and extrapolates the profile to
     the midline (:mod:`valve_dolfinx.analysis.coaptation`); 0 reads ``h(0)``.
