@@ -57,9 +57,8 @@ def _cotangent_laplacian(cells: np.ndarray, flat: np.ndarray, num_nodes: int
                          ) -> tuple[sp.csr_matrix, np.ndarray]:
     """P1 stiffness matrix S of −Δ and lumped nodal areas on per-cell flat coordinates."""
     rows, cols, vals = [], [], []
-    e = [flat[:, (k + 2) % 3] - flat[:, (k + 1) % 3] for k in range(3)]  # edge opposite k
-    cross = e[1][:, 0] * e[2][:, 1] - e[1][:, 1] * e[2][:, 0]
-    area2 = np.abs(cross)
+    e1, e2 = flat[:, 1] - flat[:, 0], flat[:, 2] - flat[:, 0]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # twice the triangle areas
     if np.any(area2 <= 1e-14 * np.max(area2)):
         raise ParameterError("bending: degenerate (zero-area) triangle in the flat reference; "
                              "remesh the leaflet")
@@ -122,12 +121,6 @@ class BendingHook:
         keep = coo.data != 0.0
         self._rows, self._cols = coo.row[keep], coo.col[keep]
         self._blocks = coo.data[keep][:, None, None] * np.eye(3)
-
-    def energy(self, state: dolfinx.fem.Function) -> float:
-        """Π_b of the current placement (on every rank)."""
-        x = self.coupling.positions(state)
-        total = float(np.einsum("ij,ij->", x, self.K_owned @ x)) * 0.5
-        return self.coupling.comm.allreduce(total)
 
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
         x = self.coupling.positions(state)

@@ -133,12 +133,17 @@ class MembraneModel:
         :meth:`strain_energy`, but written so that ``u`` and ``w`` may be any UFL
         expressions (e.g. components of a mixed displacement–velocity state).
         """
-        F = self.deformation_gradient(u)
-        dF = ufl.grad(w) * self.domain.reference
-        dE = to_material_axes(0.5 * (F.T * dF + dF.T * F), self.domain.fibre)
+        dE = to_material_axes(self.strain_variation(w, u), self.domain.fibre)
         dA = self.area_factor()
         return sum(material.thickness * ufl.inner(self.stress(material, u), dE) * dA
                    * self.dx(tag) for tag, material in self.materials.items())
+
+    def strain_variation(self, w, u=None):
+        """``sym(Fᵀ ∇w J0)`` in the (orthonormal) chart axes: the Green–Lagrange strain's
+        variation for a virtual displacement w, or its rate for a velocity w."""
+        F = self.deformation_gradient(u)
+        dF = ufl.grad(w) * self.domain.reference
+        return 0.5 * (F.T * dF + dF.T * F)
 
     def residual(self, v=None, u=None):
         """R(u; v) = δΠ − δW_p."""

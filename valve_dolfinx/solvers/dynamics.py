@@ -288,17 +288,9 @@ class DampedDynamicsSolver:
             for tag in self.damping)
         G = inertial + model.residual(w_v, u=u)
         if any(eta > 0.0 for eta in self.viscosity.values()):
-            ref = model.domain.reference
-            F = model.deformation_gradient(u)
-
-            def rate(z):  # sym(Fᵀ ∇z J0): strain rate (z = v) or its variation (z = w)
-                dF = ufl.grad(z) * ref
-                return 0.5 * (F.T * dF + dF.T * F)
-
-            dxq = ufl.Measure("dx", domain=model.domain.mesh,
-                              subdomain_data=model.domain.cell_tags,
-                              metadata={"quadrature_degree": model.quadrature_degree})
-            G = G + sum(eta * ufl.inner(rate(v), rate(w_v)) * dA * dxq(tag)
+            # Kelvin–Voigt: tension η·Ė with Ė the strain rate of the velocity v
+            rate, virtual = model.strain_variation(v, u), model.strain_variation(w_v, u)
+            G = G + sum(eta * ufl.inner(rate, virtual) * dA * model.dx(tag)
                         for tag, eta in self.viscosity.items() if eta > 0.0)
         dU = ufl.TrialFunction(self.W)
         J = ufl.derivative(G, U, dU) + self.shift * ufl.derivative(G, Udot, dU)
