@@ -97,8 +97,8 @@ def _finished_result(out: Path, config) -> dict | None:
         data = json.loads((out / "result.json").read_text())
     except (FileNotFoundError, json.JSONDecodeError):
         return None
-    same = json.loads(json.dumps(config.to_dict())) == {
-        k: v for k, v in data.get("parameters", {}).items() if k in config.to_dict()}
+    wanted = json.loads(json.dumps(config.to_dict()))
+    same = wanted == {k: v for k, v in data.get("parameters", {}).items() if k in wanted}
     return data if same else None
 
 
@@ -121,7 +121,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     dynamics = {"wall_time_limit_s": args.wall_time_limit}
     if args.dt_min is not None:
         dynamics["dt_min"] = args.dt_min
-    config = replace(config, dynamics=replace(DynamicsParameters(), **dynamics))
+    config = replace(config, dynamics=DynamicsParameters(**dynamics))
     comm = MPI.COMM_WORLD
     done = _finished_result(args.out, config)
     if done is not None and not args.force:
