@@ -53,3 +53,38 @@ def test_viscous_power_of_a_uniform_stretching_rate(tau_v):
     power = float(np.sum((with_visc - without) * v))
     eta = tau_v * NATIVE_LEAFLET.stiffness_scale
     assert power == pytest.approx(eta * 1.0 * LX * LY, rel=1e-10)
+
+
+def test_newton_stops_on_a_tiny_update_whatever_the_residual():
+    """Where the residual is discontinuous (a node in a crease of a folded sheet switching
+    triangles) Newton cycles between two states ~1e-5 mm apart; an update that moves no node
+    by more than ``newton_step_tolerance_mm`` ends the iteration as converged."""
+    from valve_dolfinx._compat import PETSc
+
+    domain = flat_sheet_domain(LX, LY, 4, 3, comm=MPI.COMM_SELF)
+    model = MembraneModel(domain, {1: NATIVE_LEAFLET})
+    solver = DampedDynamicsSolver(model, [], dolfinx.fem.Function(model.V), 0.0,
+                                  {1: NATIVE_LEAFLET.stiffness_scale}, [0],
+                                  DynamicsParameters(newton_step_tolerance_mm=1e-4))
+    reason = PETSc.SNES.ConvergedReason
+    snes = PETSc.SNES().create(MPI.COMM_SELF)
+    snes.setTolerances(rtol=1e-6, atol=1e-4, max_it=20)
+    X = solver.U.x.petsc_vec.copy()
+    snes.setSolution(X)
+    assert solver._newton_converged(snes, 0, (0.0, 0.0, 1000.0)) == reason.ITERATING
+    X.array[6 * 2 + 1] += 5e-5            # one node's displacement: 5e-5 mm < 1e-4 mm
+    X.array[6 * 3 + 4] += 1.0             # a velocity does not count
+    assert solver._newton_converged(snes, 1, (0.0, 0.0, 0.5)) == reason.CONVERGED_SNORM_RELATIVE
+    X.array[6 * 2 + 1] += 2e-4            # 2e-4 mm: keep iterating
+    assert solver._newton_converged(snes, 2, (0.0, 0.0, 0.5)) == reason.ITERATING
+    assert solver._newton_converged(snes, 3, (0.0, 0.0, 5e-4)) == reason.CONVERGED_FNORM_RELATIVE
+    assert solver._newton_converged(snes, 4, (0.0, 0.0, 5e-5)) == reason.CONVERGED_FNORM_ABS
+    X.array[6 * 2 + 1] += 1.0
+    assert solver._newton_converged(snes, 20, (0.0, 0.0, 0.5)) == reason.DIVERGED_MAX_IT
+
+
+def test_newton_step_tolerance_must_stay_below_the_truncation_error_target():
+    from valve_dolfinx.exceptions import ParameterError
+
+    with pytest.raises(ParameterError, match="newton_step_tolerance_mm"):
+        DynamicsParameters(newton_step_tolerance_mm=0.005, error_tolerance_mm=0.01)
