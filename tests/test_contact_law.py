@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from valve_dolfinx.contact import ContactParameters, contact_force, driving_force
+from valve_dolfinx.contact.law import law_force
 from valve_dolfinx.exceptions import ParameterError
 
 K, H = 10.0, 0.1
@@ -117,6 +118,8 @@ def test_driving_force_modes():
         ("penetration_depth", -0.1),
         ("min_driving_force", 0.0),
         ("driving_force", "absolute"),
+        ("crossing_stiffness", -1.0),
+        ("crossing_width", 0.0),
     ],
 )
 def test_bad_parameters_raise_naming_the_parameter(field, value):
@@ -147,3 +150,45 @@ def test_taper_removes_the_jump_and_keeps_the_contact_point():
         ContactParameters(taper=1.5)
     with pytest.raises(ParameterError, match="pairing"):
         ContactParameters(pairing="three_pass")
+
+
+# -- the barrier against crossing mid-surfaces (ContactParameters.crossing_stiffness) -------
+
+def barrier_by_hand(d: float, t_c: float, k_x: float, w: float) -> float:
+    e = -(d + t_c)
+    if e <= 0.0:
+        return 0.0
+    return k_x * (e * e / (2.0 * w) if e < w else e - w / 2.0)
+
+
+@pytest.mark.parametrize("t_c", [0.0, 0.25])
+def test_crossing_barrier_adds_nothing_until_the_mid_surfaces_cross(t_c):
+    params = ContactParameters(thickness=t_c, crossing_stiffness=1000.0, crossing_width=0.02)
+    d = np.array([0.05, 0.0, -0.5 * t_c, -t_c, -t_c - 0.01, -t_c - 0.02, -t_c - 0.3])
+    F = 2.0
+    f, dfdd = law_force(d, F, params)
+    spec = np.array([spec_force(v, F) for v in d])
+    extra = np.array([barrier_by_hand(v, t_c, 1000.0, 0.02) for v in d])
+    np.testing.assert_allclose(f, spec + extra, rtol=1e-12, atol=1e-12)
+    assert extra[:4].max() == 0.0 and extra[-1] == pytest.approx(1000.0 * (0.3 - 0.01))
+    # C¹: the derivative matches central differences, including at both kinks
+    eps = 1e-7
+    fd = (law_force(d + eps, F, params)[0] - law_force(d - eps, F, params)[0]) / (2 * eps)
+    np.testing.assert_allclose(dfdd, fd, rtol=1e-5, atol=5e-3)  # eps × curvature jump
+    # without it the law is the SPEC law alone
+    f0, _ = law_force(d, F, ContactParameters(thickness=t_c))
+    np.testing.assert_allclose(f0, spec, rtol=1e-12, atol=1e-12)
+
+
+def test_crossing_barrier_holds_a_pulled_node_near_the_surface():
+    """A node pulled into the surface by 20 mN more than its pressure force (a taut free
+    edge): without the barrier the SPEC penalty lets its mid-surface cross by
+    20/k − t_c = 1.75 mm; with k_x it stops where k·|d| + k_x·(e − w/2) = 20 mN."""
+    t_c, k_x, w, pull, F = 0.25, 1000.0, 0.02, 20.0, 2.0
+    params = ContactParameters(thickness=t_c, crossing_stiffness=k_x, crossing_width=w)
+    # on the linear branch: K·(t_c + e) + k_x·(e − w/2) = pull
+    e = (pull - K * t_c + k_x * w / 2) / (K + k_x)
+    d = -(t_c + e)
+    f, _ = law_force(np.array([d]), F, params)
+    assert e > w and f[0] == pytest.approx(F + pull, rel=1e-12)
+    assert e < 0.03  # the mid-surfaces cross by 0.027 mm, not 1.75 mm

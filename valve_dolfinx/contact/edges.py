@@ -38,8 +38,8 @@ import numpy as np
 
 from valve_dolfinx.contact.law import (
     ContactParameters,
-    contact_force,
     contact_force_slope_in_F,
+    law_force,
 )
 from valve_dolfinx.contact.linearisation import skew
 from valve_dolfinx.contact.model import ContactResult
@@ -175,7 +175,7 @@ class EdgeContact:
         f_a = (1 - s)[:, None] * f_ext[a[:, 0]] + s[:, None] * f_ext[a[:, 1]]
         F_raw = -np.einsum("ij,ij->i", f_a, n)
         F = np.maximum(F_raw, p.min_driving_force)
-        f, dfdd = contact_force(d, F, p.stiffness, p.cutoff, p.taper)
+        f, dfdd = law_force(d, F, p)
         dfdF = np.where(F_raw > p.min_driving_force,
                         contact_force_slope_in_F(d, F, p.stiffness, p.cutoff, p.taper), 0.0)
         pa, dpa = _ramp(end_a, eps)

@@ -41,9 +41,9 @@ from valve_dolfinx.contact.geometry import (
 )
 from valve_dolfinx.contact.law import (
     ContactParameters,
-    contact_force,
     contact_force_slope_in_F,
     driving_force,
+    law_force,
 )
 from valve_dolfinx.contact.linearisation import direction_derivatives
 from valve_dolfinx.exceptions import MeshError, ParameterError
@@ -100,7 +100,9 @@ class ContactResult:
     n_active
         Number of contacts (node–triangle or node–plane) with ``f > 0``.
     max_penetration
-        ``max(-d, 0)`` over the active contacts (mm), 0.0 if none.
+        ``max(-d, 0)`` over the active contacts whose node is over the surface
+        (mm; contacts fading out beyond a boundary, presence < 1/2, are not
+        counted), 0.0 if none.
     total_force
         Sum of the contact force magnitudes ``f`` (mN).
     max_crossing
@@ -451,13 +453,17 @@ class _Contacts:
             clock.add("jacobian")
         active = magnitude > 0.0
         groups = self.group[active] if self.group is not None else None
+        # a penetration is measured where the node is over the surface: rows fading out
+        # beyond a boundary (presence G < 1/2, e.g. a node that has slid past a
+        # neighbour's free edge) push a little but are not a crossing of that surface
+        over = active & (G >= 0.5)
         return ContactResult(
             forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
             n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
-            max_penetration=float(np.max(-self.d[active], initial=0.0)),
+            max_penetration=float(np.max(-self.d[over], initial=0.0)),
             total_force=float(magnitude.sum()),
             pairs=np.stack([self.node[active], self.partner[active]], axis=1),
-            max_crossing=float(np.max(-(self.d[active] + self.surface_offset), initial=0.0)),
+            max_crossing=float(np.max(-(self.d[over] + self.surface_offset), initial=0.0)),
         )
 
 
@@ -529,7 +535,7 @@ def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
 def _law(params: ContactParameters, f_ext: np.ndarray, normal: np.ndarray, d: np.ndarray
          ) -> tuple[np.ndarray, np.ndarray]:
     F = driving_force(f_ext, normal, params)
-    return contact_force(d, F, params.stiffness, params.cutoff, params.taper)
+    return law_force(d, F, params)
 
 
 class SurfaceContact:
