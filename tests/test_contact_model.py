@@ -613,3 +613,19 @@ def test_face_band_beyond_a_free_edge_fades_smoothly_with_exact_jacobian():
         step = eps * rng.normal(size=(5, 3))
         fd = contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces
         np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-5, atol=1e-11)
+
+
+@pytest.mark.parametrize(("x_node", "counted"), [(1.05, True), (1.19, False)])
+def test_penetration_is_measured_only_over_the_surface(x_node, counted):
+    """A node 0.05 below the square's plane, beyond its free edge x = 1, face band 0.3.
+
+    Presence smoothstep((λ0 + 0.3)/0.3) with λ0 = 1 - x: 0.926 at x = 1.05 (over the
+    band: a penetration of 0.05 mm), 0.305 at x = 1.19 (the node has slid past the
+    edge: it is still pushed, faintly, but it has not crossed the sheet).
+    """
+    x, f_ext = node_over_square(-0.05, xy=(x_node, 0.5))
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL, boundary_band=0.3)
+    contact.update_history(node_over_square(0.05, xy=(x_node, 0.5))[0])
+    result = contact.evaluate(x, f_ext)
+    assert result.forces[4, 2] > 0.0
+    assert result.max_penetration == pytest.approx(0.05 if counted else 0.0, abs=1e-12)

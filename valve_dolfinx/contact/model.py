@@ -454,9 +454,9 @@ class _Contacts:
         active = magnitude > 0.0
         groups = self.group[active] if self.group is not None else None
         # a penetration is measured where the node is over the surface: rows fading out
-        # beyond a boundary (presence G < 1/2, e.g. a node that has slid past a
+        # beyond a boundary (presence p < 1/2, e.g. a node that has slid past a
         # neighbour's free edge) push a little but are not a crossing of that surface
-        over = active & (G >= 0.5)
+        over = active & (p >= 0.5)
         return ContactResult(
             forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
             n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
