@@ -376,7 +376,8 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
     (barycentric) outside it, with presence ``Π_j smoothstep(λ_j + band)``;
     edge/vertex rows (closest point on the boundary, found segment by segment)
     where it projects outside, within the cut-off, with presence
-    ``smoothstep(s·d0/ε)`` (only nodes on their own side).  The rows of one
+    ``smoothstep(s·d0/ε)·smoothstep(ρ/ε)``, ρ = √(gap² − d0²) the in-plane distance
+    of the projection from the triangle (only nodes on their own side).  The rows of one
     (node, body) are blended with weights ``p e^{-d/ε}`` (normalised) and the
     group's force is scaled by ``G = 1 - Π(1 - p)``.
     """
@@ -419,7 +420,9 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
                     cands.append((np.linalg.norm(x[node] - point), point, ww))
                 gap, point, ww = min(cands, key=lambda c: c[0])
                 if gap < params.cutoff:
-                    rows.append((gap, (x[node] - point) / gap, ww, smoothstep(s * d0, eps)))
+                    in_plane = np.sqrt(max(gap * gap - d0 * d0, 0.0))
+                    rows.append((gap, (x[node] - point) / gap, ww,
+                                 smoothstep(s * d0, eps) * smoothstep(in_plane, eps)))
             for d, normal, w, presence in rows:
                 if not -params.penetration_depth < d < params.cutoff or presence == 0.0:
                     continue
@@ -629,3 +632,37 @@ def test_penetration_is_measured_only_over_the_surface(x_node, counted):
     result = contact.evaluate(x, f_ext)
     assert result.forces[4, 2] > 0.0
     assert result.max_penetration == pytest.approx(0.05 if counted else 0.0, abs=1e-12)
+
+
+def test_edge_row_fades_in_as_the_projection_leaves_the_triangle():
+    """A node crossing the square's boundary edge x = 1 in its plane's projection.
+
+    Inside, only the face row acts; just outside, the face row (fading over the
+    band) and the edge row (closest point on the edge, same distance) both exist.
+    At d = 0.08 mm both are faded by the cut-off taper (presence 0.35), so the
+    group's presence 1 − Π(1 − p) would jump from 0.35 to 0.58 if the edge row
+    appeared at once.  Its presence grows from 0 with the in-plane distance ρ of the
+    projection (smoothstep(ρ/ε)), so the force is continuous across the edge --
+    before, it jumped and Newton cycled (a graft node near a free edge) -- and the
+    Jacobian, fade included, matches central differences on a tilted square.
+    """
+    params = ContactParameters(taper=0.5, pairing="two_pass", blend_distance=0.05)
+    contact = SurfaceContact(SQUARE_TRIANGLES, 5, params)
+    delta = 1e-7
+    inside, f_ext = node_over_square(0.08, xy=(1.0 - delta, 0.5))
+    outside, _ = node_over_square(0.08, xy=(1.0 + delta, 0.5))
+    contact.update_history(node_over_square(0.06, xy=(1.0, 0.5))[0])
+    jump = contact.evaluate(outside, f_ext).forces - contact.evaluate(inside, f_ext).forces
+    assert np.max(np.abs(jump)) < 1e-4
+    rng = np.random.default_rng(7)
+    x, f_ext = node_over_square(0.08, xy=(1.02, 0.45))   # ρ = 0.02 < ε: inside the fade
+    x[:4, 2] += 0.01 * rng.normal(size=4)                # tilt and warp the square a little
+    contact.update_history(x + np.array([0.0, 0.0, 0.02]))
+    result = contact.evaluate(x, f_ext)
+    assert result.forces[4, 2] > 0.0
+    J = dense_jacobian(result, 5)
+    eps = 1e-7
+    for _ in range(4):
+        step = eps * rng.normal(size=(5, 3))
+        fd = contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces
+        np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-5, atol=1e-10)

@@ -781,6 +781,12 @@ class SurfaceContact:
         fades = _ramp(plane_lam + band, band)
         band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
         presence = np.where(edge, _ramp(side_distance, eps), band_fade)
+        # an edge/vertex row also fades in with the in-plane distance of the node's projection
+        # from the triangle, √(gap² − d0²): where the projection re-enters the triangle its
+        # face row takes over, and a row that vanished with a finite weight there made the
+        # blend (and the residual) jump -- Newton cycled (a graft node at a free edge)
+        in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
+        presence = np.where(edge, presence * _ramp(in_plane, eps), presence)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
             presence *= _ramp(p.cutoff - d, eps)
         else:
@@ -793,6 +799,7 @@ class SurfaceContact:
         keep &= weight > 0.0
         node, tri, d, lam, weight, presence, normal, edge, side_distance = (
             v[keep] for v in (node, tri, d, lam, weight, presence, normal, edge, side_distance))
+        in_plane, offset, d0 = in_plane[keep], offset[keep], d0[keep]
         plane_lam, s, n_tri, face_lam_min = plane_lam[keep], s[keep], n_tri[keep], \
             face_lam_min[keep]
         band = band[keep]
@@ -818,6 +825,14 @@ class SurfaceContact:
             sided = (s[a][on_edge, None] * n_tri[a][on_edge])
             grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
                                    * plane_B[:, :, None] * sided[:, None, :])
+            # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
+            # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
+            rho = in_plane[a][on_edge]
+            grad_rho = (B[on_edge][:, :, None] * offset[a][on_edge][:, None, :]
+                        - (d0[a][on_edge, None, None] * plane_B[:, :, None]
+                           * n_tri[a][on_edge][:, None, :]))
+            grad_logp[on_edge] += ((_log_ramp_slope(rho, eps) / np.maximum(rho, 1e-300))
+                                   [:, None, None] * grad_rho)
         group = node * len(self.body_labels) + self.triangle_body[tri]
         support = self.triangles[tri]
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
