@@ -780,13 +780,12 @@ class SurfaceContact:
         band = self._row_bands(node, tri)
         fades = _ramp(plane_lam + band, band)
         band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
-        presence = np.where(edge, _ramp(side_distance, eps), band_fade)
-        # an edge/vertex row also fades in with the in-plane distance of the node's projection
+        # edge/vertex rows also fade in with the in-plane distance of the node's projection
         # from the triangle, √(gap² − d0²): where the projection re-enters the triangle its
         # face row takes over, and a row that vanished with a finite weight there made the
         # blend (and the residual) jump -- Newton cycled (a graft node at a free edge)
         in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
-        presence = np.where(edge, presence * _ramp(in_plane, eps), presence)
+        presence = np.where(edge, _ramp(side_distance, eps) * _ramp(in_plane, eps), band_fade)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
             presence *= _ramp(p.cutoff - d, eps)
         else:

@@ -375,7 +375,8 @@ class DampedDynamicsSolver:
             "snes_max_it": p.newton_max_it,
             # residuals are forces (mN); nodal pressure forces are ~1-10 mN, so 1e-4 mN is
             # far below anything that moves a node (contact stiffness 10 mN/mm: 1e-5 mm).
-            # The step tolerance ends Newton when round-off (huge shift at tiny dt) stalls |F|.
+            # A step test ends Newton when round-off (huge shift at tiny dt) stalls |F|:
+            # newton_step_tolerance_mm (_newton_converged), or PETSc's stol when that is 0.
             "snes_rtol": 1e-6,
             "snes_atol": 1e-4,
             "snes_stol": 1e-12,
