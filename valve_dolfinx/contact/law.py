@@ -110,7 +110,9 @@ class ContactParameters:
         barrier :func:`crossing_barrier` leaves the SPEC law untouched wherever
         the mid-surfaces have not crossed -- every equilibrium of the normal
         valve -- and is C¹ (quadratic onset over ``crossing_width``).  0 (the
-        default) is the SPEC law alone.
+        default, also in closure) is the SPEC law alone; docs/contact.md §3.11
+        says where it helped (graft valves) and where it stalled a run (a
+        transient free-edge scissors crossing of the normal valve).
     crossing_width
         Width (mm) of the barrier's quadratic onset.
     """
