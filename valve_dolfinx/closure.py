@@ -53,7 +53,8 @@ MMHG_TO_KPA = 0.133322
 #: choices of docs/contact.md: the leaflets' contact surfaces are offset 0.125 mm (half of
 #: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
 #: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
-VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05)
+VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05,
+                                  edge_row_fade_in=False)
 #: Penetration window (mm) between leaflets, whose contact side is known (ventricular faces)
 BETWEEN_LEAFLETS_DEPTH = 1.0
 #: own-body triangles closer than this many contact reaches (reference state) are not

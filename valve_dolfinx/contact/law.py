@@ -115,6 +115,13 @@ class ContactParameters:
         transient free-edge scissors crossing of the normal valve).
     crossing_width
         Width (mm) of the barrier's quadratic onset.
+    edge_row_fade_in
+        Fade an edge/vertex row in with the in-plane distance of the node's
+        projection from the triangle (over ``blend_distance``), so that it does
+        not appear with a finite weight where the projection leaves the
+        triangle (a jump in the force under the cut-off taper; docs/contact.md
+        §3.4).  Closure keeps it off until the three-leaflet valve has been
+        shown to converge with it (docs/contact.md §3.4).
     """
 
     stiffness: float = 10.0
@@ -128,6 +135,7 @@ class ContactParameters:
     thickness: float = 0.0
     crossing_stiffness: float = 0.0
     crossing_width: float = 0.02
+    edge_row_fade_in: bool = True
 
     def __post_init__(self) -> None:
         check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",

@@ -785,7 +785,10 @@ class SurfaceContact:
         # face row takes over, and a row that vanished with a finite weight there made the
         # blend (and the residual) jump -- Newton cycled (a graft node at a free edge)
         in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
-        presence = np.where(edge, _ramp(side_distance, eps) * _ramp(in_plane, eps), band_fade)
+        edge_fade = _ramp(side_distance, eps)
+        if p.edge_row_fade_in:
+            edge_fade = edge_fade * _ramp(in_plane, eps)
+        presence = np.where(edge, edge_fade, band_fade)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
             presence *= _ramp(p.cutoff - d, eps)
         else:
@@ -824,6 +827,7 @@ class SurfaceContact:
             sided = (s[a][on_edge, None] * n_tri[a][on_edge])
             grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
                                    * plane_B[:, :, None] * sided[:, None, :])
+        if len(on_edge) and p.edge_row_fade_in:
             # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
             # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
             rho = in_plane[a][on_edge]
