@@ -88,3 +88,61 @@ def test_newton_step_tolerance_must_stay_below_the_truncation_error_target():
 
     with pytest.raises(ParameterError, match="newton_step_tolerance_mm"):
         DynamicsParameters(newton_step_tolerance_mm=0.005, error_tolerance_mm=0.01)
+
+
+def _stretched_sheet(params: DynamicsParameters):
+    """Flat sheet whose boundary is held at a homogeneous stretch (no pressure): the exact
+    equilibrium is that stretch everywhere (patch test); the interior starts away from it
+    (the solver holds the fixed dofs at their starting values, so the bump vanishes there)."""
+    domain = flat_sheet_domain(LX, LY, 8, 6, fibre_angle_deg=30.0, comm=MPI.COMM_SELF)
+    model = MembraneModel(domain, {1: NATIVE_LEAFLET})
+    stretch = np.diag([0.12, 0.2, 0.0])
+
+    def homogeneous(X):
+        return stretch @ X
+
+    exact = dolfinx.fem.Function(model.V)
+    exact.interpolate(homogeneous)
+    boundary = dolfinx.mesh.locate_entities_boundary(domain.mesh, 1,
+                                                     lambda X: np.full(X.shape[1], True))
+    bc = dolfinx.fem.dirichletbc(exact, dolfinx.fem.locate_dofs_topological(model.V, 1, boundary))
+    start = dolfinx.fem.Function(model.V)
+    start.interpolate(lambda X: homogeneous(X) + 0.05 * np.sin(np.pi * X[0] / LX)
+                      * np.sin(np.pi * X[1] / LY) * np.array([[1.0], [-0.5], [2.0]]))
+    centre = int(np.argmin(np.linalg.norm(domain.mesh.geometry.x - [LX / 2, LY / 2, 0], axis=1)))
+    solver = DampedDynamicsSolver(model, [bc], start, 0.0, {1: NATIVE_LEAFLET.stiffness_scale},
+                                  [centre], params)
+    report = solver.solve()
+    error = np.max(np.abs(model.u.x.array - exact.x.array))
+    return report, error
+
+
+def test_static_finish_lands_on_the_exact_equilibrium():
+    """Once the motion is slow, Newton on the static equilibrium ends the run at the exact
+    (homogeneous) state; the plain dynamics reach the same state, in more steps."""
+    base = dict(ramp_time=0.01, dt_initial=1e-3)
+    finished, error = _stretched_sheet(DynamicsParameters(static_finish_increment_mm=1e-3,
+                                                          **base))
+    assert finished.converged and finished.static_finished, finished.reason
+    assert "static" in finished.reason
+    # static residual < 0.1 × equilibrium_tolerance = 5e-3 mN against a membrane stiffness of
+    # ~1e2 mN/mm per node: a few 1e-5 mm at most
+    assert error < 1e-5
+    plain, plain_error = _stretched_sheet(DynamicsParameters(static_finish_increment_mm=0.0,
+                                                            **base))
+    assert plain.converged and not plain.static_finished, plain.reason
+    assert plain_error < 1e-3  # at rest to the increment criterion, not to round-off
+    assert finished.steps < plain.steps
+
+
+def test_static_finish_that_moves_too_far_is_rejected():
+    """A finish may not move any node further than ``static_finish_max_motion_mm`` (it could
+    have jumped through a contact surface): an attempt while the sheet still moves is refused
+    and the dynamics go on (a state already at rest passes without moving anything)."""
+    report, error = _stretched_sheet(DynamicsParameters(
+        ramp_time=0.01, dt_initial=1e-3, static_finish_increment_mm=1.0,
+        static_finish_interval=1, static_finish_max_motion_mm=1e-9))
+    assert report.static_finish_attempts >= 2  # the first, right after the ramp, was refused
+    assert report.history[0].get("static_finish") is None
+    assert report.converged, report.reason
+    assert error < 1e-3

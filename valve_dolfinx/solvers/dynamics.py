@@ -43,7 +43,7 @@ import numpy as np
 import ufl
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.exceptions import check_range
+from valve_dolfinx.exceptions import MeshError, check_range
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
@@ -120,6 +120,24 @@ class DynamicsParameters:
         update, and the normal valve then crept on with increments above
         ``stop_increment_mm`` at t = 530 s instead of converging at 27 s.  The
         graft experiments used 1e-4 mm (docs/closure.md).
+    static_finish_increment_mm
+        Once the full load is on and the watched increment of an accepted step
+        is below this (mm), try to finish with Newton's method on the *static*
+        equilibrium (no mass, no damping) from the current state, at most once
+        every ``static_finish_interval`` steps; if it converges (static residual
+        below a tenth of ``equilibrium_tolerance``, no node moved further than
+        ``static_finish_max_motion_mm``, no new mid-surface crossing) that state
+        is the answer, otherwise the dynamics carry on from where they were.
+        The settling phase of the damped dynamics is the slow part of a run
+        (Newton has to be restarted at small steps wherever contact or
+        wrinkling switches); the static solve skips it.  0 switches it off.
+    static_finish_interval
+        Accepted steps between two static-finish attempts.
+    static_finish_max_motion_mm
+        Largest nodal motion a static finish may make (mm): further than this it
+        may have jumped through a contact surface, and it is rejected.
+    static_finish_max_it
+        Newton iterations of one static-finish attempt.
     petsc_options
         Extra PETSc options for the TS/SNES/KSP (without prefix), e.g.
         ``{"snes_linesearch_type": "l2"}``.
@@ -143,6 +161,10 @@ class DynamicsParameters:
     max_steps: int = 20000
     newton_max_it: int = 20
     newton_step_tolerance_mm: float = 0.0
+    static_finish_increment_mm: float = 1e-3
+    static_finish_interval: int = 10
+    static_finish_max_motion_mm: float = 0.3
+    static_finish_max_it: int = 20
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -160,6 +182,12 @@ class DynamicsParameters:
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
         check_range("newton_step_tolerance_mm", self.newton_step_tolerance_mm, 0.0,
                     0.1 * self.error_tolerance_mm, unit="mm")
+        check_range("static_finish_increment_mm", self.static_finish_increment_mm, 0.0, 1.0,
+                    unit="mm")
+        check_range("static_finish_interval", self.static_finish_interval, 1, 1e6)
+        check_range("static_finish_max_it", self.static_finish_max_it, 1, 1e4)
+        check_range("static_finish_max_motion_mm", self.static_finish_max_motion_mm, 0.0,
+                    10.0, low_open=True, unit="mm")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -178,6 +206,8 @@ class DynamicsReport:
     rejected_for_motion: int = 0
     equilibrium_residual: float = float("nan")
     wall_time_s: float = 0.0
+    static_finish_attempts: int = 0
+    static_finished: bool = False
     history: list[dict] = field(default_factory=list)
 
 
@@ -476,6 +506,11 @@ class DampedDynamicsSolver:
         if self._progress is not None:
             self._progress(entry)
         elapsed = time.perf_counter() - self._t0
+        if (p.static_finish_increment_mm > 0.0 and t >= p.ramp_time
+                and increment < p.static_finish_increment_mm and r.steps >= self._next_finish):
+            self._next_finish = r.steps + p.static_finish_interval
+            if self._static_finish(ts, t, entry):
+                return
         if (t >= p.ramp_time and increment < p.stop_increment_mm
                 and self.equilibrium_residual(t) < p.equilibrium_tolerance):
             r.converged, r.reason = True, (
@@ -491,6 +526,87 @@ class DampedDynamicsSolver:
                         f"step {r.steps}, increment {increment:.3g} mm")
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
 
+    def _static_finish(self, ts: PETSc.TS, t: float, entry: dict) -> bool:
+        """Newton's method on the static equilibrium from the current state (see
+        ``static_finish_increment_mm``); on success the TS solution becomes that state."""
+        p, r = self.params, self.report
+        r.static_finish_attempts += 1
+        start = ts.getSolution()
+        X = start.copy()
+        with X.localForm() as x_local:
+            x_local.array.reshape(-1, 6)[:, 3:] = 0.0
+        Xdot, F, dX = X.duplicate(), X.duplicate(), X.duplicate()
+        Xdot.set(0.0)
+        t_full = max(p.ramp_time, t)
+        x0 = self.coupling.displacements(self.U)
+        crossing0 = self._crossing()
+        ksp = self._static_ksp()
+        tol = 0.1 * p.equilibrium_tolerance
+        comm = self.model.domain.comm
+        ok, why, fnorm = False, "", float("nan")
+        try:
+            for _ in range(p.static_finish_max_it):
+                self.ifunction(None, t_full, X, Xdot, F)
+                fnorm = F.norm(PETSc.NormType.INFINITY)
+                if not np.isfinite(fnorm):
+                    why = "the residual became non-finite"
+                    break
+                motion = comm.allreduce(float(np.max(np.linalg.norm(
+                    self.coupling.displacements(self.U) - x0, axis=1), initial=0.0)), op=MPI.MAX)
+                if motion > p.static_finish_max_motion_mm:
+                    why = f"it moved a node {motion:.3g} mm"
+                    break
+                if fnorm < tol:
+                    crossing = self._crossing()
+                    ok = crossing <= max(crossing0, 0.0) + 1e-3
+                    why = "" if ok else f"it crossed surfaces by {crossing:.3g} mm"
+                    break
+                self.ijacobian(None, t_full, X, Xdot, 0.0, self.J_mat, self.J_mat)
+                ksp.setOperators(self.J_mat)
+                ksp.solve(F, dX)
+                if ksp.getConvergedReason() < 0:
+                    why = f"the linear solve failed ({ksp.getConvergedReason()})"
+                    break
+                step = comm.allreduce(float(np.max(np.linalg.norm(
+                    dX.array_r.reshape(-1, 6)[:, :3], axis=1), initial=0.0)), op=MPI.MAX)
+                # at most max_increment_mm per iteration, as for a time step (contact search)
+                X.axpy(-min(1.0, p.max_increment_mm / max(step, 1e-300)), dX)
+        except (PETSc.Error, MeshError) as err:  # MeshError: non-finite positions
+            why = f"{type(err).__name__}: {err}"
+        if not ok:
+            why = why or (f"Newton did not converge in {p.static_finish_max_it} iterations "
+                          f"(|F| = {fnorm:.3g} mN)")
+            log.info("static finish at t = %.4g s rejected: %s", t, why)
+            self._set_state(t, start, Xdot)  # back to the dynamic state
+            return False
+        start.array[:] = X.array_r
+        self._set_state(t, start, Xdot)
+        for hook in self.hooks:
+            update = getattr(hook, "accept_state", None)
+            if update is not None:
+                update(self.U)
+        r.static_finished, r.converged = True, True
+        r.reason = (f"static Newton finish from t = {t:.4g} s: static residual {fnorm:.2e} mN "
+                    f"< {tol:g} mN")
+        entry["static_finish"] = True
+        ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+        return True
+
+    def _crossing(self) -> float:
+        """Largest mid-surface crossing the hooks report (mm) for the current state."""
+        values = [hook.diagnostics().get("max_penetration_mm", 0.0) for hook in self.hooks
+                  if hasattr(hook, "diagnostics")]
+        return max(values, default=0.0)
+
+    def _static_ksp(self) -> PETSc.KSP:
+        if getattr(self, "_ksp", None) is None:
+            ksp = PETSc.KSP().create(self.model.domain.comm)
+            ksp.setType("preonly")
+            ksp.getPC().setType("lu")
+            ksp.getPC().setFactorSolverType("mumps")
+            self._ksp = ksp
+        return self._ksp
+
     def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
         """Integrate until converged, stalled, or out of time; never raises on divergence.
 
@@ -502,6 +618,7 @@ class DampedDynamicsSolver:
         self.report = DynamicsReport()
         self._last_displacement = self.coupling.displacements(self.U)
         self._t_prev = 0.0
+        self._next_finish = 0
         ts = self._make_ts()
         X = self.U.x.petsc_vec.copy()
         try:
