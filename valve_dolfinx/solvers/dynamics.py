@@ -285,6 +285,7 @@ class DampedDynamicsSolver:
         self._snes_options = snes_options or {}
         self.report = DynamicsReport()
         self._ts = None
+        self._ksp = None  # LU of the static finish, made on first use
 
     # --- setup -------------------------------------------------------------------
     def _state_bcs(self, bcs: Sequence[fem.DirichletBC]) -> list[fem.DirichletBC]:
@@ -456,9 +457,8 @@ class DampedDynamicsSolver:
             return reason.CONVERGED_FNORM_ABS
         if fnorm <= rtol * self._fnorm0:
             return reason.CONVERGED_FNORM_RELATIVE
-        local = float(np.max(np.linalg.norm(x - self._newton_x, axis=1), initial=0.0))
+        step = self._largest_node_motion(x - self._newton_x)
         self._newton_x = x.copy()
-        step = self.model.domain.comm.allreduce(local, op=MPI.MAX)
         if step < self.params.newton_step_tolerance_mm:
             return reason.CONVERGED_SNORM_RELATIVE
         if its >= max_it:
@@ -487,10 +487,7 @@ class DampedDynamicsSolver:
         increment = float(np.max(step[self.watch_nodes]))
         if largest > 0.5 * p.max_increment_mm:  # keep the next step's motion bounded
             ts.setTimeStep(min(dt, self._step_dt * p.max_increment_mm / largest))
-        for hook in self.hooks:
-            update = getattr(hook, "accept_state", None)
-            if update is not None:
-                update(self.U)
+        self._accept_state()
         r.steps = ts.getStepNumber()
         r.time, r.last_dt, r.last_increment_mm = t, dt, increment
         snes = ts.getSNES()
@@ -531,28 +528,23 @@ class DampedDynamicsSolver:
         ``static_finish_increment_mm``); on success the TS solution becomes that state."""
         p, r = self.params, self.report
         r.static_finish_attempts += 1
-        start = ts.getSolution()
-        X = start.copy()
-        with X.localForm() as x_local:
-            x_local.array.reshape(-1, 6)[:, 3:] = 0.0
-        Xdot, F, dX = X.duplicate(), X.duplicate(), X.duplicate()
-        Xdot.set(0.0)
-        t_full = max(p.ramp_time, t)
+        start = ts.getSolution()  # self.U holds the same state (_post_step)
+        X, Xdot, t_full = self._at_rest(t)
+        F, dX = X.duplicate(), X.duplicate()
         x0 = self.coupling.displacements(self.U)
-        crossing0 = self._crossing()
         ksp = self._static_ksp()
         tol = 0.1 * p.equilibrium_tolerance
-        comm = self.model.domain.comm
         ok, why, fnorm = False, "", float("nan")
         try:
-            for _ in range(p.static_finish_max_it):
+            for it in range(p.static_finish_max_it):
                 self.ifunction(None, t_full, X, Xdot, F)
+                if it == 0:  # the hooks have just evaluated the starting positions
+                    crossing0 = self._crossing()
                 fnorm = F.norm(PETSc.NormType.INFINITY)
                 if not np.isfinite(fnorm):
                     why = "the residual became non-finite"
                     break
-                motion = comm.allreduce(float(np.max(np.linalg.norm(
-                    self.coupling.displacements(self.U) - x0, axis=1), initial=0.0)), op=MPI.MAX)
+                motion = self._largest_node_motion(self.coupling.displacements(self.U) - x0)
                 if motion > p.static_finish_max_motion_mm:
                     why = f"it moved a node {motion:.3g} mm"
                     break
@@ -567,8 +559,7 @@ class DampedDynamicsSolver:
                 if ksp.getConvergedReason() < 0:
                     why = f"the linear solve failed ({ksp.getConvergedReason()})"
                     break
-                step = comm.allreduce(float(np.max(np.linalg.norm(
-                    dX.array_r.reshape(-1, 6)[:, :3], axis=1), initial=0.0)), op=MPI.MAX)
+                step = self._largest_node_motion(dX.array_r.reshape(-1, 6)[:, :3])
                 # at most max_increment_mm per iteration, as for a time step (contact search)
                 X.axpy(-min(1.0, p.max_increment_mm / max(step, 1e-300)), dX)
         except (PETSc.Error, MeshError) as err:  # MeshError: non-finite positions
@@ -581,16 +572,34 @@ class DampedDynamicsSolver:
             return False
         start.array[:] = X.array_r
         self._set_state(t, start, Xdot)
-        for hook in self.hooks:
-            update = getattr(hook, "accept_state", None)
-            if update is not None:
-                update(self.U)
+        self._accept_state()
         r.static_finished, r.converged = True, True
         r.reason = (f"static Newton finish from t = {t:.4g} s: static residual {fnorm:.2e} mN "
                     f"< {tol:g} mN")
         entry["static_finish"] = True
         ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
         return True
+
+    def _accept_state(self) -> None:
+        """Tell the hooks that ``self.U`` is an accepted state."""
+        for hook in self.hooks:
+            update = getattr(hook, "accept_state", None)
+            if update is not None:
+                update(self.U)
+
+    def _largest_node_motion(self, motion: np.ndarray) -> float:
+        """max over nodes (and ranks) of |motion| for an (n, 3) array of nodal vectors."""
+        local = float(np.max(np.linalg.norm(motion, axis=1), initial=0.0))
+        return self.model.domain.comm.allreduce(local, op=MPI.MAX)
+
+    def _at_rest(self, t: float | None = None) -> tuple[PETSc.Vec, PETSc.Vec, float]:
+        """The current state with velocities and rates zero, and the time of full load."""
+        X = self.U.x.petsc_vec.copy()
+        X.array.reshape(-1, 6)[:, 3:] = 0.0
+        Xdot = X.duplicate()
+        Xdot.set(0.0)
+        t_full = max(self.params.ramp_time, self.report.time if t is None else t)
+        return X, Xdot, t_full
 
     def _crossing(self) -> float:
         """Largest mid-surface crossing the hooks report (mm) for the current state."""
@@ -599,7 +608,7 @@ class DampedDynamicsSolver:
         return max(values, default=0.0)
 
     def _static_ksp(self) -> PETSc.KSP:
-        if getattr(self, "_ksp", None) is None:
+        if self._ksp is None:
             ksp = PETSc.KSP().create(self.model.domain.comm)
             ksp.setType("preonly")
             ksp.getPC().setType("lu")
@@ -654,12 +663,8 @@ class DampedDynamicsSolver:
     def equilibrium_residual(self, t: float | None = None) -> float:
         """max |R(u)| (mN) over free nodes at full pressure, velocities and rates set to 0."""
         saved_U = self.U.x.array.copy()
-        X = self.U.x.petsc_vec.copy()
-        X.array.reshape(-1, 6)[:, 3:] = 0.0
-        Xdot = X.duplicate()
-        Xdot.set(0.0)
+        X, Xdot, t_full = self._at_rest(t)
         F = self.F_vec.duplicate()
-        t_full = max(self.params.ramp_time, self.report.time if t is None else t)
         self.ifunction(None, t_full, X, Xdot, F)
         value = F.norm(PETSc.NormType.INFINITY)
         self.U.x.array[:] = saved_U
