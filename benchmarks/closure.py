@@ -15,7 +15,9 @@ study and the full-valve comparison in docs/closure.md (the full valve takes
 suite).
 
 Run: ``.venv/bin/python benchmarks/closure.py --mesh-sizes 1.0 0.8 0.6 [--full]``
-(add ``--out DIR`` to keep each case's outputs and figures).
+(add ``--out DIR`` to keep each case's outputs and figures; ``--solver relaxation``
+for the explicit dynamic relaxation instead of the BDF2 dynamics, whose "steps"
+are then iterations).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ def main(argv=None) -> int:
     parser.add_argument("--mesh-sizes", type=float, nargs="+", default=[1.0, 0.8, 0.6])
     parser.add_argument("--full", action="store_true", help="also run the three-leaflet valve")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--solver", choices=("dynamics", "relaxation"), default="dynamics")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
     print(f"{'case':<10} {'mesh':>5} {'conv':>5} {'central':>8} {'min':>8} {'RO mm2':>7} "
@@ -54,7 +57,7 @@ def main(argv=None) -> int:
             if not symmetric and not args.full:
                 continue
             config = CaseConfig(geometry=ValveParameters(mesh_size=mesh),
-                                symmetric_reference=symmetric)
+                                symmetric_reference=symmetric, solver=args.solver)
             out = None if args.out is None else args.out / f"{label}_{mesh:g}"
             t0 = time.perf_counter()
             result = run_case(config, out, comm=comm, figures=out is not None,

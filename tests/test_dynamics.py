@@ -90,7 +90,7 @@ def test_newton_step_tolerance_must_stay_below_the_truncation_error_target():
         DynamicsParameters(newton_step_tolerance_mm=0.005, error_tolerance_mm=0.01)
 
 
-def _stretched_sheet(params: DynamicsParameters):
+def _stretched_sheet(params: DynamicsParameters, solver_class=DampedDynamicsSolver, **options):
     """Flat sheet whose boundary is held at a homogeneous stretch (no pressure): the exact
     equilibrium is that stretch everywhere (patch test); the interior starts away from it
     (the solver holds the fixed dofs at their starting values, so the bump vanishes there)."""
@@ -110,8 +110,8 @@ def _stretched_sheet(params: DynamicsParameters):
     start.interpolate(lambda X: homogeneous(X) + 0.05 * np.sin(np.pi * X[0] / LX)
                       * np.sin(np.pi * X[1] / LY) * np.array([[1.0], [-0.5], [2.0]]))
     centre = int(np.argmin(np.linalg.norm(domain.mesh.geometry.x - [LX / 2, LY / 2, 0], axis=1)))
-    solver = DampedDynamicsSolver(model, [bc], start, 0.0, {1: NATIVE_LEAFLET.stiffness_scale},
-                                  [centre], params)
+    solver = solver_class(model, [bc], start, 0.0, {1: NATIVE_LEAFLET.stiffness_scale},
+                          [centre], params, **options)
     report = solver.solve()
     error = np.max(np.abs(model.u.x.array - exact.x.array))
     return report, error
@@ -146,3 +146,43 @@ def test_static_finish_that_moves_too_far_is_rejected():
     assert report.history[0].get("static_finish") is None
     assert report.converged, report.reason
     assert error < 1e-3
+
+
+def test_dynamic_relaxation_lands_on_the_exact_equilibrium():
+    """Explicit relaxation (no Newton, no damping) reaches the same exact homogeneous state.
+    The error is bounded by residual / (softest stiffness of the sheet, ~35 mN/mm): a few
+    1e-4 mm at the default tolerance (5e-3 mN), a few 1e-6 mm at 1e-4 mN."""
+    from valve_dolfinx.solvers.relaxation import DynamicRelaxationSolver, RelaxationParameters
+
+    report, error = _stretched_sheet(DynamicsParameters(), DynamicRelaxationSolver)
+    assert report.converged, report.reason
+    assert "relaxation" in report.reason
+    assert report.equilibrium_residual < 5e-3
+    assert error < 5e-4
+    tight, tight_error = _stretched_sheet(
+        DynamicsParameters(), DynamicRelaxationSolver,
+        relaxation=RelaxationParameters(residual_tolerance=1e-4))
+    assert tight.converged, tight.reason
+    assert tight_error < 1e-5
+    assert report.history and {"residual_mN", "increment_mm"} <= set(report.history[-1])
+
+
+def test_dynamic_relaxation_out_of_iterations_says_where():
+    from valve_dolfinx.solvers.relaxation import DynamicRelaxationSolver, RelaxationParameters
+
+    report, error = _stretched_sheet(DynamicsParameters(), DynamicRelaxationSolver,
+                                     relaxation=RelaxationParameters(max_iterations=5))
+    assert not report.converged
+    assert "max_iterations = 5" in report.reason and "residual" in report.reason
+    assert report.equilibrium_residual > 0.05  # stopped far from the equilibrium
+    assert error > 1e-3
+
+
+def test_relaxation_parameters_name_the_bad_one():
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.solvers.relaxation import RelaxationParameters
+
+    with pytest.raises(ParameterError, match="max_step_mm"):
+        RelaxationParameters(max_step_mm=-0.1)
+    with pytest.raises(ParameterError, match="residual_tolerance"):
+        RelaxationParameters(residual_tolerance=0.0)

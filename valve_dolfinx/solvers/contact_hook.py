@@ -60,6 +60,11 @@ class ContactHook:
         Sign of the pressure force relative to the triangle normal.
     """
 
+    #: explicit solvers leave this hook's Jacobian out of their nodal masses (its entries
+    #: ``f/d`` where a contact force turns around a triangle edge are unbounded as d -> 0;
+    #: see :mod:`valve_dolfinx.solvers.relaxation`)
+    stiffness_in_nodal_mass = False
+
     def __init__(self, coupling: NodalCoupling, models: Sequence, pressure_triangles: np.ndarray,
                  pressure: dolfinx.fem.Constant, pressure_side: float, *,
                  lag_driving_force: bool = True, driving_force_relaxation: float = 0.5,

@@ -270,6 +270,7 @@ class DampedDynamicsSolver:
         self.U.x.scatter_forward()
         self.bcs = self._state_bcs(bcs)
 
+        self.stiffness = dict(stiffness)
         self.damping, self.mass = self._coefficients(stiffness)
         self.viscosity = {tag: self.params.strain_rate_damping_time * k
                           for tag, k in stiffness.items()}
