@@ -86,6 +86,12 @@ class RelaxationParameters:
         Iteration limit; the wall-clock limit is the dynamics' ``wall_time_limit_s``.
     history_interval
         Iterations between two rows of the history (and progress reports).
+    quench_per_body
+        Apply FIRE's power test, step and steering to each leaflet (cell tag)
+        separately: a node chattering where a contact force switches triangles
+        (the triple point) then quenches its own leaflet only, and the heavy,
+        slowly swinging graft keeps its momentum (docs/closure.md).  False: one
+        test for the whole valve.
     """
 
     residual_tolerance: float = 5e-3
@@ -94,6 +100,7 @@ class RelaxationParameters:
     contact_mass: float = 40.0
     max_iterations: int = 200000
     history_interval: int = 50
+    quench_per_body: bool = True
 
     def __post_init__(self) -> None:
         check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
@@ -107,6 +114,27 @@ class RelaxationParameters:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+class _FireState:
+    """FIRE step and steering of each body (Bitzek et al. 2006)."""
+
+    def __init__(self, n_bodies: int):
+        self.n = n_bodies
+        self.dt = np.full(n_bodies, 0.5 * _DT_MAX)
+        self.alpha = np.full(n_bodies, _FIRE_ALPHA0)
+        self.positive = np.zeros(n_bodies, dtype=np.int64)
+
+    def update(self, power: np.ndarray) -> np.ndarray:
+        """Advance with each body's power ``R·u̇``; return which bodies are quenched."""
+        quench = power <= 0.0
+        self.positive = np.where(quench, 0, self.positive + 1)
+        grow = ~quench & (self.positive > _FIRE_DELAY)
+        self.dt = np.where(grow, np.minimum(self.dt * _FIRE_GROW, _DT_MAX), self.dt)
+        self.alpha = np.where(grow, self.alpha * _FIRE_ALPHA_DECAY, self.alpha)
+        self.dt = np.where(quench, np.maximum(self.dt * _FIRE_CUT, _DT_MIN), self.dt)
+        self.alpha = np.where(quench, _FIRE_ALPHA0, self.alpha)
+        return quench
 
 
 class DynamicRelaxationSolver(DampedDynamicsSolver):
@@ -165,6 +193,23 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         m[m <= 0.0] = 1.0  # fixed nodes (no force) on an unloaded, uncontacted sheet
         return m
 
+    def _bodies(self) -> np.ndarray:
+        """Owned nodes' body (index of their leaflet's cell tag): FIRE quenches each alone."""
+        mesh = self.model.domain.mesh
+        tags = self.model.domain.cell_tags
+        all_tags = np.unique(np.concatenate(self.model.domain.comm.allgather(tags.values)))
+        block = node_to_dof(self.W)
+        cells = mesh.geometry.dofmaps[0]
+        body = np.zeros(len(self.U.x.array) // 6, dtype=np.int64)
+        for a in range(3):  # every owned node lies in some local (owned or ghost) cell
+            body[block[cells[tags.indices, a]]] = np.searchsorted(all_tags, tags.values)
+        return body[:self.W.dofmap.index_map.size_local]
+
+    @staticmethod
+    def _per_body(comm, body: np.ndarray, values: np.ndarray, n_bodies: int) -> np.ndarray:
+        """Sum of nodal ``values`` per body over all ranks."""
+        return comm.allreduce(np.bincount(body, weights=values, minlength=n_bodies), op=MPI.SUM)
+
     # --- the run ------------------------------------------------------------------------
     def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
         """Relax until converged or out of iterations/time; never raises on divergence.
@@ -182,13 +227,11 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         x = X.array.reshape(-1, 6)
         floor = self._mass_floor()
         v = np.zeros((len(x), 3))
-        dt, alpha, positive = _DT_MAX / 2, _FIRE_ALPHA0, 0
+        body = self._bodies() if q.quench_per_body else np.zeros(len(x), dtype=np.int64)
+        fire = _FireState(comm.allreduce(int(body.max(initial=-1)) + 1, op=MPI.MAX))
         pseudo_time, masses = 0.0, None
         watch_start = self.coupling.displacements(self.U)[self.watch_nodes]
         fmax = step = float("nan")
-
-        def total(value: float) -> float:
-            return comm.allreduce(value, op=MPI.SUM)
 
         for it in range(q.max_iterations):
             self.ifunction(None, t_full, X, Xdot, F)
@@ -199,21 +242,18 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
             if not np.isfinite(fmax):
                 r.reason = f"the residual became non-finite at iteration {it}"
                 break
-            if total(float(np.sum(f * v))) > 0.0:
-                positive += 1
-                if positive > _FIRE_DELAY:
-                    dt, alpha = min(dt * _FIRE_GROW, _DT_MAX), alpha * _FIRE_ALPHA_DECAY
-            else:  # moving against the force: quench
-                positive, alpha = 0, _FIRE_ALPHA0
-                dt = max(dt * _FIRE_CUT, _DT_MIN)
-                x[:, :3] -= 0.5 * dt * v
-                v[:] = 0.0
+            quenched = fire.update(self._per_body(comm, body, np.sum(f * v, axis=1), fire.n))
+            dt = fire.dt[body][:, None]
+            x[:, :3] -= np.where(quenched[body][:, None], 0.5 * dt * v, 0.0)
+            v[quenched[body]] = 0.0
             acceleration = f / masses[:, None]
             v += dt * acceleration
-            v_norm, a_norm = np.sqrt(total(float(np.sum(v * v)))), \
-                np.sqrt(total(float(np.sum(acceleration * acceleration))))
-            if a_norm > 0.0:  # steer the velocity towards the force
-                v = (1.0 - alpha) * v + alpha * v_norm / a_norm * acceleration
+            # steer each body's velocity towards its force (FIRE mixing)
+            v_norm = np.sqrt(self._per_body(comm, body, np.sum(v * v, axis=1), fire.n))
+            a_norm = np.sqrt(self._per_body(comm, body, np.sum(acceleration**2, axis=1), fire.n))
+            ratio = np.divide(v_norm, a_norm, out=np.zeros_like(v_norm), where=a_norm > 0.0)
+            alpha = np.where(a_norm > 0.0, fire.alpha, 0.0)
+            v = (1.0 - alpha[body][:, None]) * v + (alpha * ratio)[body][:, None] * acceleration
             motion = dt * v
             step = self._largest_node_motion(motion)
             if step > q.max_step_mm:
@@ -222,7 +262,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                 v *= scale
                 step = q.max_step_mm
             x[:, :3] += motion
-            pseudo_time += dt
+            pseudo_time += float(fire.dt.min())
             done = fmax < q.residual_tolerance and step < p.stop_increment_mm
             out_of_time = time.perf_counter() - t0 > p.wall_time_limit_s
             if done or out_of_time or (it + 1) % q.history_interval == 0:
@@ -232,9 +272,9 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                 increment = float(np.max(np.linalg.norm(watched - watch_start, axis=1),
                                          initial=0.0))
                 watch_start = watched
-                r.steps, r.time, r.last_dt, r.last_increment_mm = it + 1, pseudo_time, dt, \
-                    increment
-                entry = {"step": it + 1, "time": pseudo_time, "dt": dt,
+                r.steps, r.time, r.last_dt, r.last_increment_mm = it + 1, pseudo_time, \
+                    float(fire.dt.min()), increment
+                entry = {"step": it + 1, "time": pseudo_time, "dt": r.last_dt,
                          "increment_mm": increment, "max_increment_mm": step,
                          "pressure": self.target_pressure, "residual_mN": fmax}
                 for hook in self.hooks:
