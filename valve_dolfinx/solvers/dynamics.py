@@ -287,6 +287,7 @@ class DampedDynamicsSolver:
         self.report = DynamicsReport()
         self._ts = None
         self._ksp = None  # LU of the static finish, made on first use
+        self._progress: Callable[[dict], None] | None = None
 
     # --- setup -------------------------------------------------------------------
     def _state_bcs(self, bcs: Sequence[fem.DirichletBC]) -> list[fem.DirichletBC]:
@@ -375,16 +376,18 @@ class DampedDynamicsSolver:
         F.assemble()
         fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
 
-    def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
+    def ijacobian(self, ts, t, X, Xdot, a, J, P, hooks: Sequence | None = None) -> None:
+        """TS Jacobian callback; ``hooks`` (default: all) are the hooks whose blocks it adds."""
+        hooks = self.hooks if hooks is None else hooks
         self._set_state(t, X, Xdot)
         self.shift.value = a
         J.zeroEntries()
         fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
         J.assemble(PETSc.Mat.AssemblyType.FLUSH)
-        for hook in self.hooks:
+        for hook in hooks:
             hook.add_jacobian(self.U, J)
         J.assemble()
-        if self.hooks:
+        if hooks:
             J.zeroRows(self._bc_rows, diag=1.0)
 
     # --- the run -------------------------------------------------------------------
@@ -496,13 +499,7 @@ class DampedDynamicsSolver:
         entry = {"step": r.steps, "time": t, "dt": dt, "increment_mm": increment,
                  "max_increment_mm": largest,
                  "pressure": self._load(t)}
-        for hook in self.hooks:
-            diag = getattr(hook, "diagnostics", None)
-            if diag is not None:
-                entry.update(diag())
-        r.history.append(entry)
-        if self._progress is not None:
-            self._progress(entry)
+        self._record(entry)
         elapsed = time.perf_counter() - self._t0
         if (p.static_finish_increment_mm > 0.0 and t >= p.ramp_time
                 and increment < p.static_finish_increment_mm and r.steps >= self._next_finish):
@@ -580,6 +577,16 @@ class DampedDynamicsSolver:
         entry["static_finish"] = True
         ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
         return True
+
+    def _record(self, entry: dict) -> None:
+        """Add the hooks' diagnostics to a history row, keep it and report it."""
+        for hook in self.hooks:
+            diag = getattr(hook, "diagnostics", None)
+            if diag is not None:
+                entry.update(diag())
+        self.report.history.append(entry)
+        if self._progress is not None:
+            self._progress(entry)
 
     def _accept_state(self) -> None:
         """Tell the hooks that ``self.U`` is an accepted state."""

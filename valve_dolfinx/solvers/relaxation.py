@@ -157,10 +157,10 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         x = mesh.geometry.x
         n_cells = mesh.topology.index_map(mesh.topology.dim).size_local  # owned cells only
         cells = mesh.geometry.dofmaps[0][:n_cells]
-        k = np.zeros(len(mesh.geometry.dofmaps[0]))
+        k = np.zeros(n_cells)
         for tag, value in self.stiffness.items():
-            k[tags.indices[tags.values == tag]] = value
-        k = k[:n_cells]
+            owned = tags.indices[(tags.values == tag) & (tags.indices < n_cells)]
+            k[owned] = value
         p = x[cells]
         area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         acc = dolfinx.fem.Function(self.W)
@@ -175,12 +175,8 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
 
     def _gershgorin(self, X, Xdot, t: float) -> np.ndarray:
         """Owned nodes' largest absolute row sum of ∂R/∂u without the contact hooks."""
-        hooks = self.hooks
-        self.hooks = [h for h in hooks if getattr(h, "stiffness_in_nodal_mass", True)]
-        try:
-            self.ijacobian(None, t, X, Xdot, 0.0, self.J_mat, self.J_mat)
-        finally:
-            self.hooks = hooks
+        hooks = [h for h in self.hooks if getattr(h, "stiffness_in_nodal_mass", True)]
+        self.ijacobian(None, t, X, Xdot, 0.0, self.J_mat, self.J_mat, hooks=hooks)
         indptr, indices, data = self.J_mat.getValuesCSR()
         rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
         displacement_col = (indices % 6) < 3
@@ -219,6 +215,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         whether it is the equilibrium and, if not, where it stopped.
         """
         p, q = self.params, self.relaxation
+        self._progress = progress
         comm = self.model.domain.comm
         t0 = time.perf_counter()
         r = self.report = DynamicsReport()
@@ -277,13 +274,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                 entry = {"step": it + 1, "time": pseudo_time, "dt": r.last_dt,
                          "increment_mm": increment, "max_increment_mm": step,
                          "pressure": self.target_pressure, "residual_mN": fmax}
-                for hook in self.hooks:
-                    diag = getattr(hook, "diagnostics", None)
-                    if diag is not None:
-                        entry.update(diag())
-                r.history.append(entry)
-                if progress is not None:
-                    progress(entry)
+                self._record(entry)
             if done:
                 r.converged = True
                 r.reason = (f"dynamic relaxation: static residual {fmax:.2e} mN < "
