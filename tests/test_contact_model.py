@@ -378,7 +378,7 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
     where it projects outside, within the cut-off, with presence
     ``smoothstep(s·d0/ε)·smoothstep(ρ/ε)``, ρ = √(gap² − d0²) the in-plane distance
     of the projection from the triangle (only nodes on their own side).  The rows of one
-    (node, body) are blended with weights ``p e^{-d/ε}`` (normalised) and the
+    (node, body) are blended with weights ``p e^{p(h-d)/ε}`` (normalised) and the
     group's force is scaled by ``G = 1 - Π(1 - p)``.
     """
     N, M = len(x), len(triangles)
@@ -432,8 +432,11 @@ def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
                     (d, tri, normal, w, presence))
     forces = np.zeros_like(x)
     for (node, _), cands in found.items():
-        dmin = min(c[0] for c in cands)
-        blend = np.array([c[4] * math.exp(-(c[0] - dmin) / eps) for c in cands])
+        # a row of presence p blends at the distance h - p (h - d)
+        h = params.cutoff
+        dmin = min(h - c[4] * (h - c[0]) for c in cands)
+        blend = np.array([c[4] * math.exp(-(h - c[4] * (h - c[0]) - dmin) / eps)
+                          for c in cands])
         blend /= blend.sum()
         group = 1.0 - np.prod([1.0 - c[4] for c in cands])
         for b, (d, tri, normal, w, _) in zip(blend, cands, strict=True):
@@ -592,6 +595,39 @@ def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
               - contact.evaluate(x - step, f_ext).forces) / 2
         np.testing.assert_allclose(J @ step.ravel(), fd.ravel(), rtol=0,
                                    atol=1e-5 * np.abs(fd).max())
+
+
+def test_a_deep_row_fading_out_hands_over_smoothly():
+    """A node 0.05 above sheet T1 and 0.55 behind the plane of T2 (same body), sliding off T2.
+
+    Beyond T2's edge its face row fades out across the band (presence 1 -> 0 over
+    1 mm here).  Over T2 the deep row dominates the blend: the node is pushed with
+    ``F + k·0.55`` = 6.5 mN.  Past the band only T1's row is left:
+    ``F e^{-k·0.05/F}`` = 0.607 mN.  The handover must be gradual.  With the plain
+    softmin ``p e^{-d/ε}`` the deep row kept its whole weight until its presence
+    was ~1e-6 and the force fell by 5 mN within 3e-3 mm (a slope of ~2700 mN/mm
+    at this sampling; at the valve's triple point, 6 mN within 1e-5 mm).
+    """
+    x = np.array([[-5, -5, 0], [5, -5, 0], [0, 5, 0],             # T1, normal +z
+                  [0, -5, 0.6], [10, 0, 0.6], [0, 5, 0.6],         # T2, normal +z, edge x = 0
+                  [0, 0, 0.05]], dtype=float)                       # the node
+    triangles = np.array([[0, 1, 2], [3, 4, 5]])
+    f_ext = np.zeros_like(x)
+    f_ext[6, 2] = -1.0                                              # F = 1 mN into both
+    contact = SurfaceContact(triangles, len(x), ContactParameters(penetration_depth=1.0,
+                                                                  blend_distance=0.05))
+    beyond = np.concatenate([np.geomspace(1e-9, 1e-3, 60), np.linspace(1e-3, 1.0, 400)[1:]])
+    positions = -1.0 + beyond                                       # the band is x in (-1, 0)
+    force = []
+    for px in positions:
+        y = x.copy()
+        y[6, 0] = px
+        force.append(contact.evaluate(y, f_ext, np.array([6])).forces[6])
+    force = np.array(force)
+    np.testing.assert_allclose(force[0], [0, 0, math.exp(-0.5)], atol=1e-9)     # T1 only
+    np.testing.assert_allclose(force[-1], [0, 0, 6.5], atol=1e-3)               # T2 dominates
+    slope = np.linalg.norm(np.diff(force, axis=0), axis=1) / np.diff(positions)
+    assert slope.max() < 200.0                                      # measured 33 mN/mm
 
 
 def test_face_band_beyond_a_free_edge_fades_smoothly_with_exact_jacobian():
