@@ -92,6 +92,7 @@ def measure(cells: int, length: float, repeats: int) -> dict[str, float]:
     x, tris, body, fext = stacked_sheets(cells, length)
     params = ContactParameters()
     contact = SurfaceContact(tris, len(x), params, triangle_body=body)
+    contact.record_cpu_time = True
     contact.update_history(x)
     pad = params.search_distance
     (aabb, _), t_aabb = fastest(lambda: candidate_pairs(x, tris, None, pad), repeats)

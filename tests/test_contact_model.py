@@ -597,6 +597,23 @@ def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
                                    atol=1e-5 * np.abs(fd).max())
 
 
+def test_forces_only_evaluation_gives_the_same_forces_and_diagnostics():
+    """``jacobian=False`` (the explicit relaxation's mode) skips the blocks, nothing else."""
+    x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=3)
+    x_prev = x.copy()
+    x = x + np.random.default_rng(4).normal(scale=0.02, size=x.shape)
+    contact = SurfaceContact(triangles, len(x), ContactParameters(thickness=0.1),
+                             triangle_body=body)
+    contact.update_history(x_prev)
+    full = contact.evaluate(x, f_ext)
+    light = contact.evaluate(x, f_ext, jacobian=False)
+    assert full.n_active > 30 and len(full.jac_blocks) > 0 and len(light.jac_blocks) == 0
+    np.testing.assert_array_equal(light.forces, full.forces)
+    for name in ("n_active", "max_penetration", "total_force", "max_crossing"):
+        assert getattr(light, name) == getattr(full, name)
+    np.testing.assert_array_equal(light.pairs, full.pairs)
+
+
 def test_a_deep_row_fading_out_hands_over_smoothly():
     """A node 0.05 above sheet T1 and 0.55 behind the plane of T2 (same body), sliding off T2.
 

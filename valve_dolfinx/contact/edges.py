@@ -145,9 +145,10 @@ class EdgeContact:
         far |= (s <= 0) | (s >= 1) | (t <= 0) | (t >= 1) | (sin < _PARALLEL)
         self._side = np.where(far, np.where(gap < 0.0, -1.0, 1.0), self._side)
 
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
-                 ) -> ContactResult:
-        """Forces of the pairs whose first segment starts at one of ``nodes`` (default: all)."""
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
+                 jacobian: bool = True) -> ContactResult:
+        """Forces of the pairs whose first segment starts at one of ``nodes`` (default: all;
+        ``jacobian`` is accepted for a uniform interface, the blocks are always computed)."""
         x = np.asarray(x, dtype=float)
         p = self.params
         if not np.any(self._side):

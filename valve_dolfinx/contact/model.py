@@ -178,15 +178,17 @@ class _Clock:
     core; the CPU laps do not (they do include the kernel's page-fault work).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, cpu: bool = False) -> None:
         self.laps: dict[str, float] = {}
         self.cpu_laps: dict[str, float] = {}
+        # process_time() is a system call (~0.1-1 ms here): only when asked for
+        self._cpu = time.process_time if cpu else (lambda: 0.0)
         self._last = time.perf_counter()
-        self._last_cpu = time.process_time()
+        self._last_cpu = self._cpu()
 
     def add(self, name: str) -> None:
         """Add the time since the previous call to lap ``name``."""
-        now, now_cpu = time.perf_counter(), time.process_time()
+        now, now_cpu = time.perf_counter(), self._cpu()
         self.laps[name] = self.laps.get(name, 0.0) + now - self._last
         self.cpu_laps[name] = self.cpu_laps.get(name, 0.0) + now_cpu - self._last_cpu
         self._last, self._last_cpu = now, now_cpu
@@ -363,8 +365,11 @@ class _Contacts:
         G, _ = self._group_presence()
         return w * G * self.f
 
-    def result(self, num_nodes: int, clock: _Clock | None = None) -> ContactResult:
+    def result(self, num_nodes: int, clock: _Clock | None = None, jacobian: bool = True
+               ) -> ContactResult:
         """Nodal forces and their Jacobian blocks (``clock``: laps "forces" and "jacobian").
+
+        ``jacobian=False``: the forces and diagnostics only (no blocks).
 
         Row ``i`` pushes with ``s_i = w_i G f_i``: ``f`` the law's force,
         ``w_i = p_i e^{-d_i/ε}/Σ_k p_k e^{-d_k/ε}`` the blending weight of the
@@ -398,6 +403,9 @@ class _Contacts:
                                        minlength=num_nodes) for i in range(3)], axis=1)
         if clock is not None:
             clock.add("forces")
+        if not jacobian:
+            return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
+                                     np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
         grad_d = B[:, :, None] * self.normal[:, None, :]                           # (A, m, 3)
         grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
             else self.grad_log_presence
@@ -458,6 +466,11 @@ class _Contacts:
             rows[size:], cols[size:], blocks[size:] = outer
         if clock is not None:
             clock.add("jacobian")
+        return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
+
+    def _diagnostics(self, forces: np.ndarray, magnitude: np.ndarray, p: np.ndarray,
+                     rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray) -> ContactResult:
+        """The result: forces, blocks and the counts and depths of the active contacts."""
         active = magnitude > 0.0
         groups = self.group[active] if self.group is not None else None
         # a penetration is measured where the node is over the surface: rows fading out
@@ -732,8 +745,12 @@ class SurfaceContact:
         """Forget the recorded state (sides then follow the pressure direction)."""
         self._history = None
 
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
-                 ) -> ContactResult:
+    #: Record CPU (process) time laps in :attr:`cpu_timings` too (for benchmarks: each
+    #: reading is a system call)
+    record_cpu_time = False
+
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
+                 jacobian: bool = True) -> ContactResult:
         """Contact forces of ``nodes`` (default: all) against the whole surface.
 
         Parameters
@@ -745,13 +762,16 @@ class SurfaceContact:
             Distinct ids of the contacting nodes to process.  Results for
             disjoint sets sum to the result for their union: reactions on
             triangle vertices belong to the result of the contacting node.
+        jacobian
+            False: forces and diagnostics only, no Jacobian blocks (an explicit
+            solver needs no more; about three times cheaper).
         """
         x = _check_positions(x, self.num_nodes, "x")
         f_ext = _check_positions(f_ext, self.num_nodes, "f_ext")
         nodes = _check_nodes(nodes, self.num_nodes)
-        clock = _Clock()
-        contacts = self._find_contacts(x, f_ext, nodes, clock)
-        result = contacts.result(self.num_nodes, clock)
+        clock = _Clock(cpu=self.record_cpu_time)
+        contacts = self._find_contacts(x, f_ext, nodes, clock, jacobian=jacobian)
+        result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
         self.timings, self.cpu_timings = clock.laps, clock.cpu_laps
         log.debug("surface contact: %d active, max penetration %.3g mm, total force %.4g mN",
                   result.n_active, result.max_penetration, result.total_force)
@@ -760,7 +780,7 @@ class SurfaceContact:
     # -- steps of evaluate -------------------------------------------------------------------
 
     def _find_contacts(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray,
-                       clock: _Clock | None = None) -> _Contacts:
+                       clock: _Clock | None = None, jacobian: bool = True) -> _Contacts:
         """Candidates → sides → window ``-penetration_depth < d < h`` → nearest per body → law."""
         p = self.params
         clock = _Clock() if clock is None else clock
@@ -821,6 +841,12 @@ class SurfaceContact:
         node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight = (
             v[a] for v in (node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight))
         clock.add("forces")
+        if not jacobian:
+            return _Contacts(node=node, support=self.triangles[tri], weights=lam, normal=normal,
+                             d=d, f=f, dfdd=dfdd, partner=tri,
+                             group=node * len(self.body_labels) + self.triangle_body[tri],
+                             blend=blend, blend_scale=eps, presence=presence,
+                             surface_offset=p.thickness)
         # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
         # the vertices through the barycentric coordinates of the plane projection
         B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
@@ -1130,9 +1156,10 @@ class PlaneContact:
         self.params = params
         self.mirror = bool(mirror)
 
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
-                 ) -> ContactResult:
-        """Contact forces of ``nodes`` (default: all) against the planes.
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
+                 jacobian: bool = True) -> ContactResult:
+        """Contact forces of ``nodes`` (default: all) against the planes (``jacobian``: the
+        blocks are cheap here and always computed).
 
         Arguments as in :meth:`SurfaceContact.evaluate`.
         """

@@ -64,6 +64,8 @@ class ContactHook:
     #: ``f/d`` where a contact force turns around a triangle edge are unbounded as d -> 0;
     #: see :mod:`valve_dolfinx.solvers.relaxation`)
     stiffness_in_nodal_mass = False
+    #: evaluate forces without Jacobian blocks (set by explicit solvers for their run)
+    forces_only = False
 
     def __init__(self, coupling: NodalCoupling, models: Sequence, pressure_triangles: np.ndarray,
                  pressure: dolfinx.fem.Constant, pressure_side: float, *,
@@ -81,6 +83,7 @@ class ContactHook:
         self.pressure = pressure
         self.side = float(pressure_side)
         self._key: np.ndarray | None = None
+        self._forces_only_key = False
         self._results: list = []
         self.last_positions: np.ndarray | None = None
         self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
@@ -88,14 +91,16 @@ class ContactHook:
     def _evaluate(self, state: dolfinx.fem.Function) -> list:
         x = self.coupling.positions(state)
         p = float(self.pressure.value)
-        if self._key is not None and self._pressure_key == p and np.array_equal(x, self._key):
+        if (self._key is not None and self._pressure_key == p and np.array_equal(x, self._key)
+                and self._forces_only_key <= self.forces_only):
             return self._results
         if self._unit_forces is None or not self.lag_driving_force:
             self._unit_forces = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
         f_ext = p * self._unit_forces
         nodes = self.contact_nodes
-        self._results = [m.evaluate(x, f_ext, nodes) for m in self.models]
-        self._key, self._pressure_key = x, p
+        self._results = [m.evaluate(x, f_ext, nodes, jacobian=not self.forces_only)
+                         for m in self.models]
+        self._key, self._pressure_key, self._forces_only_key = x, p, self.forces_only
         self.last_positions = x
         return self._results
 

@@ -212,8 +212,19 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
 
         The final state is copied into ``model.u`` whatever happened; the report
         (``steps`` = iterations, ``time`` = pseudo-time in stable steps) says
-        whether it is the equilibrium and, if not, where it stopped.
+        whether it is the equilibrium and, if not, where it stopped.  The hooks
+        evaluate forces only (no Jacobian blocks) while it runs.
         """
+        switched = [h for h in self.hooks if getattr(h, "forces_only", True) is False]
+        for hook in switched:
+            hook.forces_only = True
+        try:
+            return self._relax(progress)
+        finally:
+            for hook in switched:
+                hook.forces_only = False
+
+    def _relax(self, progress: Callable[[dict], None] | None) -> DynamicsReport:
         p, q = self.params, self.relaxation
         self._progress = progress
         comm = self.model.domain.comm
