@@ -165,6 +165,12 @@ def test_dynamic_relaxation_lands_on_the_exact_equilibrium():
     assert tight.converged, tight.reason
     assert tight_error < 1e-5
     assert report.history and {"residual_mN", "increment_mm"} <= set(report.history[-1])
+    # with the load ramped over 2000 iterations it may only stop after the ramp
+    ramped, ramped_error = _stretched_sheet(
+        DynamicsParameters(), DynamicRelaxationSolver,
+        relaxation=RelaxationParameters(ramp_iterations=2000))
+    assert ramped.converged and ramped.steps > 2000, ramped.reason
+    assert ramped_error < 5e-4
 
 
 def test_dynamic_relaxation_out_of_iterations_says_where():

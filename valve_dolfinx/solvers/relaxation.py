@@ -92,6 +92,12 @@ class RelaxationParameters:
         (the triple point) then quenches its own leaflet only, and the heavy,
         slowly swinging graft keeps its momentum (docs/closure.md).  False: one
         test for the whole valve.
+    ramp_iterations
+        Iterations over which the pressure rises to its full value (the
+        dynamics' smooth step); 0 applies it in full from the first iteration.
+        Contact makes the equilibrium path-dependent: leaflets slammed shut by
+        the full pressure can settle with a free edge caught on the wrong side
+        of a neighbour (docs/closure.md).
     """
 
     residual_tolerance: float = 5e-3
@@ -101,6 +107,7 @@ class RelaxationParameters:
     max_iterations: int = 200000
     history_interval: int = 50
     quench_per_body: bool = True
+    ramp_iterations: int = 0
 
     def __post_init__(self) -> None:
         check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
@@ -111,6 +118,8 @@ class RelaxationParameters:
         check_range("contact_mass", self.contact_mass, 0.0, 1e9, unit="mN/mm")
         check_range("max_iterations", self.max_iterations, 1, 1e9)
         check_range("history_interval", self.history_interval, 1, 1e9)
+        check_range("ramp_iterations", self.ramp_iterations, 0, 1e9,
+                    hint="0 applies the full pressure from the first iteration")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -242,7 +251,10 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         fmax = step = float("nan")
 
         for it in range(q.max_iterations):
-            self.ifunction(None, t_full, X, Xdot, F)
+            # the dynamics' smooth-step ramp, over ramp_iterations instead of ramp_time
+            ramping = it < q.ramp_iterations
+            t_now = p.ramp_time * it / q.ramp_iterations if ramping else t_full
+            self.ifunction(None, t_now, X, Xdot, F)
             f = -F.array_r.reshape(-1, 6)[:, 3:]
             if it % q.mass_update_interval == 0:
                 masses = self._masses(X, Xdot, t_full, floor)
@@ -271,10 +283,10 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                 step = q.max_step_mm
             x[:, :3] += motion
             pseudo_time += float(fire.dt.min())
-            done = fmax < q.residual_tolerance and step < p.stop_increment_mm
+            done = not ramping and fmax < q.residual_tolerance and step < p.stop_increment_mm
             out_of_time = time.perf_counter() - t0 > p.wall_time_limit_s
             if done or out_of_time or (it + 1) % q.history_interval == 0:
-                self._set_state(t_full, X, Xdot)
+                self._set_state(t_now, X, Xdot)
                 self._accept_state()
                 watched = self.coupling.displacements(self.U)[self.watch_nodes]
                 increment = float(np.max(np.linalg.norm(watched - watch_start, axis=1),
@@ -284,7 +296,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                     float(fire.dt.min()), increment
                 entry = {"step": it + 1, "time": pseudo_time, "dt": r.last_dt,
                          "increment_mm": increment, "max_increment_mm": step,
-                         "pressure": self.target_pressure, "residual_mN": fmax}
+                         "pressure": self._load(t_now), "residual_mN": fmax}
                 self._record(entry)
             if done:
                 r.converged = True
