@@ -124,6 +124,20 @@ def test_relaxation_stops_at_the_dynamics_equilibrium(reference):
     assert relaxed.max_penetration_mm < 0.05
 
 
+def test_dynamics_handing_over_to_relaxation_stops_at_the_same_equilibrium(reference):
+    """``solver="dynamics+relaxation"``: BDF2 closes the leaflet until a step moves the
+    watched nodes less than 1e-2 mm, the explicit relaxation settles it from there; the
+    equilibrium is the BDF2 reference's (default mesh)."""
+    result, _ = reference
+    hybrid = _reference(solver="dynamics+relaxation")
+    assert hybrid.converged, hybrid.solver_message
+    assert "handed over" in hybrid.solver_message and "relaxation" in hybrid.solver_message
+    assert hybrid.central_coaptation_height_mm == pytest.approx(
+        result.central_coaptation_height_mm, abs=0.02)
+    assert hybrid.regurgitant_orifice_area_mm2 == 0.0
+    assert hybrid.max_penetration_mm < 0.05
+
+
 def test_failed_solve_is_reported_and_written(tmp_path):
     """A wall-clock limit that cannot be met: converged false, where it stopped, outputs."""
     config = CaseConfig(symmetric_reference=True,

@@ -264,6 +264,19 @@ def test_overlap_within_threshold_is_sealed(lift):
     assert area == 0.0
 
 
+@pytest.mark.parametrize("z_between, channel_wedges", [(0.4, 0), (-0.4, 1)])
+def test_third_leaflet_touching_both_closes_the_channel(z_between, channel_wedges):
+    """A (z = 0.8, widened to ±70°) overlaps B (z = 0) over the 10° wedge [60°, 70°], 0.8 mm
+    apart; C, a sector covering exactly that wedge, lies 0.4 mm from both (between them)
+    and closes it, or lies below B (0.4 mm from B, 1.2 mm from A) and does not: channel
+    area 0 or the wedge's (α/2)·R², α = 10°."""
+    valve, x = _valve([_sector(0.0, 70.0, 0.8), _sector(120.0, 60.0, 0.0),
+                       _sector(65.0, 5.0, z_between)])
+    _, diag = regurgitant_orifice_area(x, valve, THRESHOLD, PIXEL)
+    wedge = 0.5 * math.radians(10.0) * R_ORIFICE**2
+    assert diag["channel_area_mm2"] == pytest.approx(channel_wedges * wedge, rel=0.02, abs=0.01)
+
+
 # --- input checks --------------------------------------------------------------------------------
 @pytest.mark.parametrize("mutate, match", [
     (lambda x: x[:-1], "positions"),

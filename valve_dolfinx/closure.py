@@ -54,8 +54,10 @@ MMHG_TO_KPA = 0.133322
 #: choices of docs/contact.md: the leaflets' contact surfaces are offset 0.125 mm (half of
 #: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
 #: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
-VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05,
-                                  edge_row_fade_in=False)
+#: Edge rows fade in (``edge_row_fade_in``, the ContactParameters default): with the blend
+#: of fading rows fixed (session 6) it no longer slows the normal valve, and without it a
+#: node whose projection re-enters a triangle loses its edge row with a jump (0.15 mN).
+VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05)
 #: Penetration window (mm) between leaflets, whose contact side is known (ventricular faces)
 BETWEEN_LEAFLETS_DEPTH = 1.0
 #: own-body triangles closer than this many contact reaches (reference state) are not
@@ -70,7 +72,11 @@ FREE_EDGE_BAND = 1.0
 #: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/closure.md)
 BENDING_MODULUS_KPA = 200.0
 #: paths to the loaded equilibrium (CaseConfig.solver)
-SOLVERS = ("dynamics", "relaxation")
+SOLVERS = ("dynamics", "relaxation", "dynamics+relaxation")
+#: "dynamics+relaxation": the damped dynamics close the valve until the watched increment
+#: of a step falls below this (mm, DynamicsParameters.handover_increment_mm), then the
+#: explicit relaxation settles it
+HANDOVER_INCREMENT_MM = 1e-2
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -96,9 +102,12 @@ class CaseConfig:
     SPEC §4: BDF2 damped dynamics with PETSc TS, ``dynamics``) or
     ``"relaxation"`` (explicit dynamic relaxation with stiffness-scaled nodal
     masses, :mod:`valve_dolfinx.solvers.relaxation`, ``relaxation``; the
-    dynamics' wall-clock limit and increment test apply).  Both stop at the
-    same static equilibrium; relaxation reaches the symmetric reference about
-    five times sooner but has not converged the three-leaflet valve
+    dynamics' wall-clock limit and increment test apply) or
+    ``"dynamics+relaxation"`` (BDF2 closes the valve, the relaxation settles it
+    once a step moves the watched nodes less than ``HANDOVER_INCREMENT_MM``).
+    All stop at a static equilibrium; on the three-leaflet valve the closing
+    path picks between two arrangements of the free-edge tips at the triple
+    point, and the relaxation alone settles in an asymmetric one
     (docs/closure.md).
     ``central_band_mm`` (1 mm) reads the coaptation heights outside a band
     around the triple-point tip of the midline and extrapolates the profile to
@@ -134,7 +143,8 @@ class CaseConfig:
                     hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
         if self.solver not in SOLVERS:
             raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
-                                 "'dynamics' (BDF2, the default) or 'relaxation' (explicit)")
+                                 "'dynamics' (BDF2), 'relaxation' (explicit) or "
+                                 "'dynamics+relaxation' (BDF2 closes, relaxation settles)")
         if self.symmetric_reference and self.geometry.has_graft:
             raise ParameterError("symmetric_reference needs the normal valve (no graft)")
 
@@ -378,17 +388,41 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     if config.bending_modulus_kpa > 0:
         K = leaflet_bending_matrix(valve, model, config.bending_modulus_kpa)
         hooks.append(lambda coupling: BendingHook(coupling, K))
-    args = (model, [bc], u0, config.pressure_kpa, stiffness, watch, config.dynamics)
+    dynamics = config.dynamics
+    if config.solver == "dynamics+relaxation":  # the relaxation replaces the static finish
+        dynamics = replace(dynamics, static_finish_increment_mm=0.0,
+                           handover_increment_mm=dynamics.handover_increment_mm
+                           or HANDOVER_INCREMENT_MM)
+    args = (model, [bc], u0, config.pressure_kpa, stiffness, watch, dynamics)
     if config.solver == "relaxation":
         solver = DynamicRelaxationSolver(*args, hooks=hooks, relaxation=config.relaxation)
     else:
         solver = DampedDynamicsSolver(*args, hooks=hooks)
     report = solver.solve(progress=progress)
+    if report.handed_over:
+        solver, report = _settle(model, bc, config, stiffness, watch, hooks, report, progress)
     hook = solver.hooks[0]
     positions = solver.coupling.positions(solver.U)
     forces = hook.contact_forces(solver.U)
     display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
     return CaseState(domain, model, root, positions, forces, report, display=display)
+
+
+def _settle(model, bc, config: CaseConfig, stiffness: dict, watch: list, hooks: list,
+            closing, progress):
+    """The relaxation from the state the closing dynamics handed over (same model, same
+    conditions, the wall-clock time that is left); returns the solver and a report of both."""
+    start = dolfinx.fem.Function(model.V)
+    start.x.array[:] = model.u.x.array
+    remaining = max(config.dynamics.wall_time_limit_s - closing.wall_time_s, 1.0)
+    params = replace(config.dynamics, wall_time_limit_s=remaining, handover_increment_mm=0.0)
+    solver = DynamicRelaxationSolver(model, [bc], start, config.pressure_kpa, stiffness, watch,
+                                     params, hooks=hooks, relaxation=config.relaxation)
+    report = solver.solve(progress=progress)
+    report.reason = f"{closing.reason}; then {report.reason}"
+    report.wall_time_s += closing.wall_time_s
+    report.history = closing.history + report.history
+    return solver, report
 
 
 def analyse_case(state: CaseState, config: CaseConfig):

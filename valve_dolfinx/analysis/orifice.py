@@ -20,7 +20,8 @@ line cannot show up as a leak along the wall.
    sheets are farther apart than the threshold: ``A``'s sheet there is more
    than ``threshold`` from ``B``'s surface *and* ``B``'s sheet there is more
    than ``threshold`` from ``A``'s surface.  They overlap in projection without
-   touching, which leaves a flow path between them.
+   touching, which leaves a flow path between them -- unless a third leaflet
+   covering the pixel touches both (three sheets stacked at the triple point).
 4. ``area = (open + channel pixels) × pixel²``; competent iff the area is 0.
 
 Why step 3 and its limitation are discussed in ``docs/coaptation.md``.
@@ -150,11 +151,17 @@ def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
         open_ = in_disk & (clearance > 0.5 * threshold * (1 + 1e-9))
     else:
         open_ = in_disk.copy()
+    def touching(a: int, b: int) -> np.ndarray:
+        return (near[a, b] <= threshold) | (near[b, a] <= threshold)
+
     channel = np.zeros(n * n, dtype=bool)
     for a in range(nl):
         for b in range(a + 1, nl):
-            apart = (near[a, b] > threshold) & (near[b, a] > threshold)
-            channel |= cover[a] & cover[b] & apart
+            gap = cover[a] & cover[b] & ~touching(a, b)
+            for c in set(range(nl)) - {a, b}:
+                # a third leaflet in the column that touches both fills the gap between them
+                gap &= ~(cover[c] & touching(a, c) & touching(b, c))
+            channel |= gap
     channel = channel.reshape(n, n) & in_disk
     pixel_area = pixel * pixel
     open_area = float(open_.sum() * pixel_area)

@@ -120,9 +120,7 @@ class ContactParameters:
         projection from the triangle (over ``blend_distance``), so that it does
         not appear with a finite weight where the projection leaves the
         triangle (a jump in the force under the cut-off taper; docs/contact.md
-        §3.4).  Closure keeps it off: with it the 0.8 mm three-leaflet valve
-        converges but crosses 0.077 mm at the triple point, and the 1.0 mm
-        valve converges slower and less symmetrically (docs/closure.md).
+        §3.4).  On in closure too since session 6 (docs/closure.md).
     """
 
     stiffness: float = 10.0

@@ -133,6 +133,11 @@ class DynamicsParameters:
         wrinkling switches); the static solve skips it.  0 switches it off.
     static_finish_interval
         Accepted steps between two static-finish attempts.
+    handover_increment_mm
+        Stop the dynamics (``handed_over``, not converged) once the full load is
+        on and the watched increment of a step is below this (mm), so that an
+        explicit relaxation finishes from there (``CaseConfig.solver =
+        "dynamics+relaxation"``).  0 (default) never hands over.
     static_finish_max_motion_mm
         Largest nodal motion a static finish may make (mm): further than this it
         may have jumped through a contact surface, and it is rejected.
@@ -165,6 +170,7 @@ class DynamicsParameters:
     static_finish_interval: int = 10
     static_finish_max_motion_mm: float = 0.3
     static_finish_max_it: int = 20
+    handover_increment_mm: float = 0.0
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -182,6 +188,8 @@ class DynamicsParameters:
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
         check_range("newton_step_tolerance_mm", self.newton_step_tolerance_mm, 0.0,
                     0.1 * self.error_tolerance_mm, unit="mm")
+        check_range("handover_increment_mm", self.handover_increment_mm, 0.0, 1.0, unit="mm",
+                    hint="0 never hands over to the relaxation")
         check_range("static_finish_increment_mm", self.static_finish_increment_mm, 0.0, 1.0,
                     unit="mm")
         check_range("static_finish_interval", self.static_finish_interval, 1, 1e6)
@@ -208,6 +216,7 @@ class DynamicsReport:
     wall_time_s: float = 0.0
     static_finish_attempts: int = 0
     static_finished: bool = False
+    handed_over: bool = False
     history: list[dict] = field(default_factory=list)
 
 
@@ -506,7 +515,13 @@ class DampedDynamicsSolver:
             self._next_finish = r.steps + p.static_finish_interval
             if self._static_finish(ts, t, entry):
                 return
-        if (t >= p.ramp_time and increment < p.stop_increment_mm
+        if (p.handover_increment_mm > 0.0 and t >= p.ramp_time
+                and increment < p.handover_increment_mm):
+            r.handed_over, r.reason = True, (
+                f"closing dynamics handed over at t = {t:.4g} s, step {r.steps} "
+                f"(increment {increment:.2e} mm < {p.handover_increment_mm:g} mm)")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+        elif (t >= p.ramp_time and increment < p.stop_increment_mm
                 and self.equilibrium_residual(t) < p.equilibrium_tolerance):
             r.converged, r.reason = True, (
                 f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and static residual "
