@@ -421,6 +421,9 @@ def _settle(model, bc, config: CaseConfig, stiffness: dict, watch: list, hooks: 
     report = solver.solve(progress=progress)
     report.reason = f"{closing.reason}; then {report.reason}"
     report.wall_time_s += closing.wall_time_s
+    for phase, rows in (("dynamics", closing.history), ("relaxation", report.history)):
+        for row in rows:  # the step counts restart with the relaxation: say which is which
+            row["phase"] = phase
     report.history = closing.history + report.history
     return solver, report
 
