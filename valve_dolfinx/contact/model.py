@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -325,7 +325,7 @@ class _Contacts:
     group: np.ndarray | None = None  # (A,) contact id: blended rows of one contact share it
     blend: np.ndarray | None = None  # (A,) blending weights w (sum to 1 per group)
     blend_scale: float = 1.0         # ε of the softmin (mm)
-    blend_cutoff: float = np.inf     # h: a row of presence p blends at h - p(h - d) (mm)
+    blend_cutoff: float = np.inf     # h (with blend): a row of presence p blends at h - p(h - d)
     presence: np.ndarray | None = None         # (A,) p in (0, 1]
     grad_log_presence: np.ndarray | None = None  # (A, 1+s, 3) ∂log p/∂x over [node, support]
     grad_f: np.ndarray | None = None  # (A, 1+s, 3) ∂f/∂x beyond f'·∇d (the driving force turning)
@@ -410,18 +410,15 @@ class _Contacts:
         grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
             else self.grad_log_presence
         grad_p = p[:, None, None] * grad_logp
-        if np.isfinite(self.blend_cutoff):
-            # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
-            depth = (self.blend_cutoff - self.d) / self.blend_scale
-            grad_L = (grad_logp * (1.0 + p * depth)[:, None, None]
-                      - (p / self.blend_scale)[:, None, None] * grad_d)
-        else:
-            grad_L = grad_logp - grad_d / self.blend_scale
         grad_f = self.dfdd[:, None, None] * grad_d
         if self.grad_f is not None:
             grad_f = grad_f + self.grad_f
         own = (w * G)[:, None, None] * grad_f + (w * f * c)[:, None, None] * grad_p
         if self.blend is not None:
+            # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
+            depth = (self.blend_cutoff - self.d) / self.blend_scale
+            grad_L = (grad_logp * (1.0 + p * depth)[:, None, None]
+                      - (p / self.blend_scale)[:, None, None] * grad_d)
             own += (G * f * w * (1.0 - w))[:, None, None] * grad_L
         m = ids.shape[1]
         Bn = B[:, :, None] * self.normal[:, None, :]                               # (A, m, 3)
@@ -841,12 +838,14 @@ class SurfaceContact:
         node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight = (
             v[a] for v in (node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight))
         clock.add("forces")
-        if not jacobian:
-            return _Contacts(node=node, support=self.triangles[tri], weights=lam, normal=normal,
-                             d=d, f=f, dfdd=dfdd, partner=tri,
-                             group=node * len(self.body_labels) + self.triangle_body[tri],
-                             blend=blend, blend_scale=eps, presence=presence,
+        group = node * len(self.body_labels) + self.triangle_body[tri]
+        support = self.triangles[tri]
+        contacts = _Contacts(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
+                             dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
+                             blend_cutoff=p.cutoff, presence=presence,
                              surface_offset=p.thickness)
+        if not jacobian:
+            return contacts
         # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
         # the vertices through the barycentric coordinates of the plane projection
         B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
@@ -869,8 +868,6 @@ class SurfaceContact:
                            * n_tri[a][on_edge][:, None, :]))
             grad_logp[on_edge] += ((_log_ramp_slope(rho, eps) / np.maximum(rho, 1e-300))
                                    [:, None, None] * grad_rho)
-        group = node * len(self.body_labels) + self.triangle_body[tri]
-        support = self.triangles[tri]
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
         banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
         if len(banded):  # face rows fading out beyond their triangle's boundary
@@ -887,13 +884,8 @@ class SurfaceContact:
                                                  p.stiffness, p.cutoff, p.taper)
                 slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
                 grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
-        contacts = _Contacts(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
-                             dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
-                             blend_cutoff=p.cutoff,
-                             presence=presence, grad_log_presence=grad_logp, grad_f=grad_f,
-                             geometric=geometric, surface_offset=p.thickness)
         clock.add("jacobian")
-        return contacts
+        return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f, geometric=geometric)
 
     def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: _Clock
                     ) -> tuple[np.ndarray, ...]:

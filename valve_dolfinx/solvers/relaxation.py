@@ -224,7 +224,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         whether it is the equilibrium and, if not, where it stopped.  The hooks
         evaluate forces only (no Jacobian blocks) while it runs.
         """
-        switched = [h for h in self.hooks if getattr(h, "forces_only", True) is False]
+        switched = [h for h in self.hooks if hasattr(h, "forces_only") and not h.forces_only]
         for hook in switched:
             hook.forces_only = True
         try:
