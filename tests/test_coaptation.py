@@ -19,6 +19,13 @@ taken from the code:
   an equilateral triangle of inradius ρ - 0.25 and area 3√3(ρ - 0.25)².
 * Overlap: one sector widened by α = 10° on each side and lifted overlaps each
   neighbour in a wedge of angle α: overlap area 2·(α/2)·9.9² = α·9.9².
+* Dead end: two half-disks in z = 0 (their straight edges meet on the y axis)
+  close the whole orifice; a third sector of half-angle 20° lies 0.8 mm above
+  one of them.  In projection it overlaps its floor, apart, over a 40° wedge
+  of area (40°/2)·9.9² = 34.2 mm², but no path leads through the floor: the
+  orifice is 0.  Moving the half-disks apart by a slit of width g opens a path
+  exactly when g exceeds the threshold (up to √3 voxels, see
+  ``valve_dolfinx.analysis.sealing``).
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ from valve_dolfinx.analysis import (
     fraction_below,
     plot_coaptation_map,
     regurgitant_orifice_area,
+    through_flow,
 )
 from valve_dolfinx.contact.geometry import closest_point_on_triangles
 from valve_dolfinx.exceptions import MeshError, ParameterError
@@ -275,6 +283,40 @@ def test_third_leaflet_touching_both_closes_the_channel(z_between, channel_wedge
     _, diag = regurgitant_orifice_area(x, valve, THRESHOLD, PIXEL)
     wedge = 0.5 * math.radians(10.0) * R_ORIFICE**2
     assert diag["channel_area_mm2"] == pytest.approx(channel_wedges * wedge, rel=0.02, abs=0.01)
+
+
+def _half_disks_and_lid(slit: float, lid_z: float = 0.8):
+    """Half-disks moved to ``x > slit/2`` and ``x < -slit/2`` in z = 0; a 40° lid above one."""
+    floor = [_sector(0.0, 90.0, 0.0), _sector(180.0, 90.0, 0.0)]
+    floor[0]["xyz"][:, 0] += slit / 2
+    floor[1]["xyz"][:, 0] -= slit / 2
+    return _valve([*floor, _sector(0.0, 20.0, lid_z)])
+
+
+def test_pocket_above_a_sealed_floor_is_a_dead_end():
+    valve, x = _half_disks_and_lid(slit=0.0)
+    area, diag = regurgitant_orifice_area(x, valve, THRESHOLD, PIXEL)
+    wedge = 0.5 * math.radians(40.0) * R_ORIFICE**2  # 34.2 mm²
+    assert diag["through_flow"] is False
+    assert diag["dead_end_area_mm2"] == pytest.approx(wedge, rel=0.01)
+    assert area == 0.0 and diag["channel_area_mm2"] == 0.0
+    assert analyse_coaptation(x, valve, THRESHOLD, PIXEL).competent
+
+
+def test_slit_in_the_floor_makes_the_pocket_a_leak():
+    """A 1 mm slit: an open strip and the lid's wedge as a channel, all counted."""
+    valve, x = _half_disks_and_lid(slit=1.0)
+    area, diag = regurgitant_orifice_area(x, valve, THRESHOLD, PIXEL)
+    assert diag["through_flow"] is True and diag["dead_end_area_mm2"] == 0.0
+    assert diag["channel_area_mm2"] > 0.9 * 0.5 * math.radians(40.0) * (R_ORIFICE - 0.5) ** 2
+    assert diag["open_area_mm2"] > 0.0
+    assert area == diag["open_area_mm2"] + diag["channel_area_mm2"]
+
+
+@pytest.mark.parametrize("slit, passes", [(0.3, False), (0.48, False), (0.7, True), (1.2, True)])
+def test_three_d_path_opens_at_the_threshold(slit, passes):
+    valve, x = _half_disks_and_lid(slit, lid_z=3.0)
+    assert through_flow(x, valve, THRESHOLD, R_ORIFICE) is passes
 
 
 # --- input checks --------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from valve_dolfinx.analysis.coaptation import (
 )
 from valve_dolfinx.analysis.orifice import orifice_leak_map, rasterise_footprint
 from valve_dolfinx.analysis.plots import leaflet_outline, plot_coaptation_map, plot_orifice_map
+from valve_dolfinx.analysis.sealing import through_flow
 
 __all__ = [
     "DEFAULT_PIXEL_MM",
@@ -33,6 +34,7 @@ __all__ = [
     "plot_coaptation_map",
     "plot_orifice_map",
     "rasterise_footprint",
+    "through_flow",
     "region_area",
     "regurgitant_orifice_area",
 ]

@@ -22,9 +22,15 @@ line cannot show up as a leak along the wall.
    than ``threshold`` from ``A``'s surface.  They overlap in projection without
    touching, which leaves a flow path between them -- unless a third leaflet
    covering the pixel touches both (three sheets stacked at the triple point).
-4. ``area = (open + channel pixels) × pixel²``; competent iff the area is 0.
+4. **Dead ends.**  When steps 2 and 3 find pixels, the 3-D connectivity check
+   of :mod:`valve_dolfinx.analysis.sealing` asks whether any free path joins
+   the aorta to the ventricle.  If none does, those pixels are pockets closed
+   further along (a free-edge tip standing just over the threshold above a
+   sealed coaptation zone, say): they are reported as ``dead_end`` and not
+   counted.
+5. ``area = (open + channel pixels) × pixel²``; competent iff the area is 0.
 
-Why step 3 and its limitation are discussed in ``docs/coaptation.md``.
+Why steps 3 and 4 and their limitations are discussed in ``docs/coaptation.md``.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import math
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from valve_dolfinx.analysis.sealing import DEFAULT_VOXEL_MM, through_flow
 from valve_dolfinx.exceptions import MeshError, ParameterError
 from valve_dolfinx.geometry.valve import ValveMesh
 
@@ -120,15 +127,18 @@ def _orifice_raster(positions: np.ndarray, valve: ValveMesh, pixel: float
 
 def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
                      pair_gaps: dict[tuple[int, int], np.ndarray], threshold: float,
-                     pixel: float) -> tuple[float, dict]:
+                     pixel: float, voxel: float = DEFAULT_VOXEL_MM) -> tuple[float, dict]:
     """Regurgitant orifice area (mm²) and the raster it was counted on.
 
     ``pair_gaps[i, j]`` holds, per local node of leaflet ``i``, its loaded
     distance to leaflet ``j``'s surface (see
     :func:`valve_dolfinx.analysis.coaptation.leaflet_pair_gaps`).  The inputs
-    are assumed checked.  The diagnostics dict holds the masks (``in_disk``,
-    ``open``, ``channel``, ``cover`` per leaflet, all ``n × n``, row = y),
-    ``origin_mm``, ``pixel_mm``, ``radius_mm`` and the open and channel areas.
+    are assumed checked; ``voxel`` is the edge of the 3-D check's voxels.  The
+    diagnostics dict holds the masks (``in_disk``, ``open``, ``channel``,
+    ``dead_end``, ``cover`` per leaflet, all ``n × n``, row = y),
+    ``origin_mm``, ``pixel_mm``, ``radius_mm``, ``through_flow`` (the 3-D
+    check's answer, ``None`` when no pixel needed it) and the open, channel and
+    dead-end areas.
     """
     radius, origin, n = _orifice_raster(positions, valve, pixel)
     centres = origin + (np.arange(n) + 0.5) * pixel
@@ -163,12 +173,24 @@ def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
                 gap &= ~(cover[c] & touching(a, c) & touching(b, c))
             channel |= gap
     channel = channel.reshape(n, n) & in_disk
+    flows = None
+    dead_end = np.zeros((n, n), dtype=bool)
+    if open_.any() or channel.any():
+        flows = through_flow(positions, valve, threshold, radius, voxel)
+        if not flows:
+            dead_end = open_ | channel
+            open_, channel = np.zeros_like(open_), np.zeros_like(channel)
+            log.info("%.4f mm² of projected gap are dead ends: no path through the valve "
+                     "wider than the %.3g mm threshold (3-D check), not counted",
+                     dead_end.sum() * pixel * pixel, threshold)
     pixel_area = pixel * pixel
     open_area = float(open_.sum() * pixel_area)
     channel_area = float(channel.sum() * pixel_area)
     area = open_area + channel_area
+    dead_end_area = float(dead_end.sum() * pixel_area)
     log.debug("orifice raster %d×%d (pixel %.3g mm, radius %.3f mm): open %.4f mm², "
-              "overlap channels %.4f mm²", n, n, pixel, radius, open_area, channel_area)
+              "overlap channels %.4f mm², dead ends %.4f mm²", n, n, pixel, radius, open_area,
+              channel_area, dead_end_area)
     diagnostics = {
         "radius_mm": radius,
         "origin_mm": origin,
@@ -176,9 +198,12 @@ def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
         "in_disk": in_disk,
         "open": open_,
         "channel": channel,
+        "dead_end": dead_end,
+        "through_flow": flows,
         "cover": cover.reshape(nl, n, n),
         "leaflet_names": [p.name for p in valve.leaflets],
         "open_area_mm2": open_area,
         "channel_area_mm2": channel_area,
+        "dead_end_area_mm2": dead_end_area,
     }
     return area, diagnostics

@@ -113,7 +113,7 @@ def plot_coaptation_map(result: CoaptationResult, valve: ValveMesh, path: str | 
 
 
 def plot_orifice_map(area_mm2: float, diagnostics: dict, path: str | Path) -> Path:
-    """The orifice raster seen from the ventricle: footprints, open pixels, leak channels."""
+    """The orifice raster seen from the ventricle: footprints, open pixels, channels, dead ends."""
     plt = _pyplot()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -128,7 +128,9 @@ def plot_orifice_map(area_mm2: float, diagnostics: dict, path: str | Path) -> Pa
     image[(cover.sum(axis=0) > 1) & diagnostics["in_disk"]] = 5
     image[diagnostics["open"]] = 6
     image[diagnostics["channel"]] = 7
-    colours = ["white", "#eeeeee", "#d9a07b", "#c98b8b", "#b5a27a", "#8c7a6b", "red", "magenta"]
+    image[diagnostics["dead_end"]] = 8
+    colours = ["white", "#eeeeee", "#d9a07b", "#c98b8b", "#b5a27a", "#8c7a6b", "red", "magenta",
+               "#1f77b4"]
     lo = diagnostics["origin_mm"]
     hi = lo + n * diagnostics["pixel_mm"]
     fig, ax = plt.subplots(figsize=(8.2, 5.6), constrained_layout=True)
@@ -140,7 +142,8 @@ def plot_orifice_map(area_mm2: float, diagnostics: dict, path: str | Path) -> Pa
     handles += [Patch(color=colours[5], label="overlap, touching"),
                 Patch(color=colours[1], label="gap < threshold (sealed)"),
                 Patch(color="red", label="open"),
-                Patch(color="magenta", label="leak channel (overlap, apart)")]
+                Patch(color="magenta", label="leak channel (overlap, apart)"),
+                Patch(color=colours[8], label="dead end (closed further down)")]
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8,
               frameon=False)
     ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal",

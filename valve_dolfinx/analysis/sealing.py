@@ -1,0 +1,119 @@
+"""Does the closed valve let blood from the aorta reach the ventricle?  (3-D check, SPEC §6)
+
+The projected orifice (:mod:`valve_dolfinx.analysis.orifice`) looks along the
+valve axis one pixel column at a time.  It cannot tell a channel that runs
+through the valve from a *dead end*: a pocket between two leaflets that opens
+to the aorta but is closed further down, for example a free-edge tip that
+stands a little more than the threshold above its neighbour where the leaflets
+below are sealed.  This module answers the connectivity question in 3-D.
+
+The cylinder ``r < radius`` (the orifice disk) between a plane below and a
+plane above every leaflet is cut into cubic voxels of edge ``voxel``.  A voxel
+is *blocked* when its centre lies outside the cylinder or within
+``threshold/2`` of a leaflet (the exact distance to its triangles): the same
+rule as the projected measure, where a gap narrower than the threshold seals.
+The free voxels are labelled with face connectivity; blood can pass when one
+label reaches both planes.
+
+Resolution: a gap ``g`` between two sheets leaves a free layer ``g − threshold``
+thick; one at least ``√3·voxel`` thick always holds a face-connected chain of
+voxel centres.  So gaps below the threshold always seal, gaps above
+``threshold + √3·voxel`` (0.67 mm at the defaults) always pass, and gaps in
+between may do either: a through-channel that narrow can be reported as a
+dead end (it is still drawn on the orifice map, and logged).
+
+Cost: exact distances are computed only where the Euclidean distance
+transform of the voxels a sheet passes through cannot decide (its error is
+about one voxel): about 5 s and 0.7 GB for a closed valve at 0.1 mm voxels.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt, label
+
+from valve_dolfinx.analysis.distance import distance_to_surface
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.geometry.valve import ValveMesh
+
+__all__ = ["DEFAULT_VOXEL_MM", "MAX_VOXELS", "through_flow"]
+
+log = logging.getLogger(__name__)
+
+#: Edge of the voxels of the 3-D connectivity check (mm).
+DEFAULT_VOXEL_MM = 0.1
+#: Largest voxel grid accepted; finer grids are almost surely a typo.
+MAX_VOXELS = 60_000_000
+
+
+def _sheet_samples(vertices: np.ndarray, triangles: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on the triangles, no two neighbours farther apart than ``spacing``."""
+    p = vertices[triangles]
+    longest = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)
+    divisions = np.maximum(np.ceil(longest / spacing).astype(np.int64), 1)
+    samples = []
+    for k in np.unique(divisions):
+        i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+        keep = i + j <= k
+        lam = np.stack([k - i[keep] - j[keep], i[keep], j[keep]], axis=1) / k
+        samples.append(np.einsum("sj,tjd->tsd", lam, p[divisions == k]).reshape(-1, 3))
+    return np.concatenate(samples)
+
+
+def through_flow(positions: np.ndarray, valve: ValveMesh, threshold: float, radius: float,
+                 voxel: float = DEFAULT_VOXEL_MM) -> bool:
+    """Whether a free path joins the planes below and above the leaflets (see the module doc).
+
+    ``positions`` are the loaded node positions; ``radius`` is the orifice
+    disk's (the root wall, less a margin).
+    """
+    if not 0.0 < voxel <= threshold / 4:
+        raise ParameterError(f"voxel_mm = {voxel:g} must lie in (0, threshold/4 = "
+                             f"{threshold / 4:g}] mm, or gaps of the threshold cannot be "
+                             "resolved; 0.1 mm is the default")
+    reach = 0.5 * threshold
+    nodes = np.unique(np.concatenate([p.nodes for p in valve.leaflets]))
+    z = positions[nodes, 2]
+    margin = threshold + 2 * voxel
+    n = int(math.ceil(2 * radius / voxel)) + 2
+    nz = int(math.ceil((float(z.max() - z.min()) + 2 * margin) / voxel))
+    if n * n * nz > MAX_VOXELS:
+        raise ParameterError(f"voxel_mm = {voxel:g} gives a {n}×{n}×{nz} grid; use a coarser "
+                             f"voxel ({DEFAULT_VOXEL_MM:g} mm)")
+    origin = np.array([-0.5 * n * voxel, -0.5 * n * voxel, float(z.min()) - margin])
+    shape = np.array([n, n, nz])
+
+    # The distance transform of the voxels a sheet passes through (sampled every
+    # voxel/4) lies within [d − (√3/2)·voxel, d + (√3/2 + 1/(4√3))·voxel] of the
+    # exact distance d; only voxels it cannot decide get the exact distance.
+    below_err, above_err = 0.87 * voxel, 1.05 * voxel
+    free = np.ones(shape, dtype=bool)
+    exact_count = 0
+    for patch in valve.leaflets:
+        crossed = np.zeros(shape, dtype=bool)
+        pts = _sheet_samples(positions[patch.nodes], patch.triangles, 0.25 * voxel)
+        idx = np.floor((pts - origin) / voxel).astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < shape), axis=1)
+        crossed[tuple(idx[inside].T)] = True
+        approx = distance_transform_edt(~crossed, sampling=voxel)
+        del crossed
+        undecided = free & (approx > reach - below_err) & (approx <= reach + above_err)
+        free &= approx > reach - below_err
+        shell = np.argwhere(undecided)
+        del approx, undecided
+        centres = origin + (shell + 0.5) * voxel
+        free[tuple(shell.T)] = distance_to_surface(centres, positions[patch.nodes],
+                                                   patch.triangles) > reach
+        exact_count += len(shell)
+    c = origin[0] + (np.arange(n) + 0.5) * voxel
+    free &= (c[:, None] ** 2 + c[None, :] ** 2 < radius**2)[:, :, None]
+    labels, _ = label(free)
+    del free
+    below, above = np.unique(labels[:, :, 0]), np.unique(labels[:, :, -1])
+    passing = np.intersect1d(below[below > 0], above[above > 0])
+    log.debug("3-D sealing check: %d×%d×%d voxels of %.3g mm, %d exact distances, %s",
+              n, n, nz, voxel, exact_count, "flow passes" if passing.size else "sealed")
+    return bool(passing.size)
