@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     parser.add_argument("--mesh-sizes", type=float, nargs="+", default=[1.0, 0.8, 0.6])
     parser.add_argument("--full", action="store_true", help="also run the three-leaflet valve")
     parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--solver", choices=SOLVERS, default="dynamics")
+    parser.add_argument("--solver", choices=SOLVERS, default=CaseConfig.solver)
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
     print(f"{'case':<10} {'mesh':>5} {'conv':>5} {'central':>8} {'min':>8} {'RO mm2':>7} "

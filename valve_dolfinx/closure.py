@@ -77,6 +77,9 @@ SOLVERS = ("dynamics", "relaxation", "dynamics+relaxation")
 #: of a step falls below this (mm, DynamicsParameters.handover_increment_mm), then the
 #: explicit relaxation settles it
 HANDOVER_INCREMENT_MM = 1e-2
+#: ... or at the latest at this simulated time (s; DynamicsParameters.handover_time_s):
+#: ten relaxation times, long after the leaflets are shut (docs/closure.md, "Session 7")
+HANDOVER_TIME_S = 10.0
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -98,17 +101,17 @@ class CaseConfig:
     (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by default:
     with it and the bending stiffness the three-leaflet valve crossed earlier
     than without it (docs/closure.md).
-    ``solver`` picks the path to the equilibrium: ``"dynamics"`` (the default,
-    SPEC §4: BDF2 damped dynamics with PETSc TS, ``dynamics``) or
-    ``"relaxation"`` (explicit dynamic relaxation with stiffness-scaled nodal
-    masses, :mod:`valve_dolfinx.solvers.relaxation`, ``relaxation``; the
-    dynamics' wall-clock limit and increment test apply) or
-    ``"dynamics+relaxation"`` (BDF2 closes the valve, the relaxation settles it
-    once a step moves the watched nodes less than ``HANDOVER_INCREMENT_MM``).
-    All stop at a static equilibrium; on the three-leaflet valve the closing
-    path picks between two arrangements of the free-edge tips at the triple
-    point, and the relaxation alone settles in an asymmetric one
-    (docs/closure.md).
+    ``solver`` picks the path to the equilibrium: ``"dynamics+relaxation"``
+    (the default: BDF2 closes the valve, the relaxation settles it once a step
+    moves the watched nodes less than ``HANDOVER_INCREMENT_MM``), ``"dynamics"``
+    (SPEC §4: BDF2 damped dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`,
+    to the end) or ``"relaxation"`` (explicit dynamic relaxation with
+    stiffness-scaled nodal masses, :mod:`valve_dolfinx.solvers.relaxation`; the
+    dynamics' wall-clock limit and increment test apply).  All stop at a static
+    equilibrium; on the three-leaflet valve the closing path picks between
+    arrangements of the free-edge tips at the triple point: the relaxation
+    alone settles in an asymmetric one, and BDF2 alone is slow to settle the
+    last contacts at the default mesh (docs/closure.md).
     ``central_band_mm`` (1 mm) reads the coaptation heights outside a band
     around the triple-point tip of the midline and extrapolates the profile to
     the midline (:mod:`valve_dolfinx.analysis.coaptation`); 0 reads ``h(0)``.
@@ -123,7 +126,7 @@ class CaseConfig:
     edge_contact: bool = False
     lag_contact_driving_force: bool = False
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
-    solver: str = "dynamics"
+    solver: str = "dynamics+relaxation"
     relaxation: RelaxationParameters = field(default_factory=RelaxationParameters)
     coaptation_threshold_mm: float = 0.5
     orifice_pixel_mm: float = 0.05
@@ -392,7 +395,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     if config.solver == "dynamics+relaxation":  # the relaxation replaces the static finish
         dynamics = replace(dynamics, static_finish_increment_mm=0.0,
                            handover_increment_mm=dynamics.handover_increment_mm
-                           or HANDOVER_INCREMENT_MM)
+                           or HANDOVER_INCREMENT_MM,
+                           handover_time_s=dynamics.handover_time_s or HANDOVER_TIME_S)
     args = (model, [bc], u0, config.pressure_kpa, stiffness, watch, dynamics)
     if config.solver == "relaxation":
         solver = DynamicRelaxationSolver(*args, hooks=hooks, relaxation=config.relaxation)
