@@ -692,6 +692,7 @@ class DampedDynamicsSolver:
         self.report.wall_time_s = time.perf_counter() - self._t0
         log.info("damped dynamics: %s; %d steps (%d rejected), %d Newton its, t = %.4g s, "
                  "|R_static|_inf = %.3g mN, %.1f s", "converged" if self.report.converged
+                 else "handed over to the relaxation" if self.report.handed_over
                  else "NOT converged", self.report.steps, self.report.rejected_steps,
                  self.report.newton_iterations, self.report.time,
                  self.report.equilibrium_residual, self.report.wall_time_s)
