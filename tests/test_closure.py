@@ -124,7 +124,7 @@ def test_relaxation_stops_at_the_dynamics_equilibrium(reference):
     assert relaxed.max_penetration_mm < 0.05
 
 
-@pytest.mark.parametrize("handover_time_s, why", [(0.0, ""), (1.0, "t ≥ 1 s")])
+@pytest.mark.parametrize("handover_time_s, why", [(0.0, None), (1.0, "(t ≥ 1 s")])
 def test_dynamics_handing_over_to_relaxation_stops_at_the_same_equilibrium(
         reference, handover_time_s, why):
     """``solver="dynamics+relaxation"``: BDF2 closes the leaflet until a step moves the
@@ -135,7 +135,8 @@ def test_dynamics_handing_over_to_relaxation_stops_at_the_same_equilibrium(
     hybrid = _reference(solver="dynamics+relaxation", handover_time_s=handover_time_s)
     assert hybrid.converged, hybrid.solver_message
     assert "handed over" in hybrid.solver_message and "relaxation" in hybrid.solver_message
-    assert f"({why}" in hybrid.solver_message
+    if why is not None:  # the default hands over on the increment or at t = 10 s
+        assert why in hybrid.solver_message
     assert hybrid.central_coaptation_height_mm == pytest.approx(
         result.central_coaptation_height_mm, abs=0.02)
     assert hybrid.regurgitant_orifice_area_mm2 == 0.0
