@@ -106,3 +106,48 @@ def test_bad_rigidity_and_degenerate_triangles_are_refused():
         bending_stiffness_matrix(cells, squashed[cells], len(flat), boundary, D)
     with pytest.raises(ParameterError, match="bending_modulus_kpa"):
         flexural_rigidity(-5.0, 0.5)
+
+
+@pytest.mark.mpi
+def test_hook_adds_K_to_the_momentum_rows_of_a_state_matrix():
+    """BendingHook puts K_ij·I into (momentum row of i, displacement column of j) of a
+    (u, v) state matrix, once per call, on every rank's rows (serial and mpirun -n 2)."""
+    import basix.ufl
+
+    from valve_dolfinx._compat import MPI, PETSc, dolfinx
+    from valve_dolfinx.bending import BendingHook
+    from valve_dolfinx.solvers.dynamics import STATE_LAYOUT
+    from valve_dolfinx.solvers.nodal import NodalCoupling
+
+    comm = MPI.COMM_WORLD
+    flat, cells, boundary = sheet(6)
+    x = np.column_stack([flat, 0.1 * flat[:, 0] * flat[:, 1]])
+    element = basix.ufl.element("Lagrange", "triangle", 1, shape=(3,))
+    mesh = dolfinx.mesh.create_mesh(comm, cells if comm.rank == 0 else np.empty((0, 3), np.int64),
+                                    element, x if comm.rank == 0 else np.empty((0, 3)))
+    W = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (6,)))
+    coupling = NodalCoupling(W, STATE_LAYOUT)
+    K = bending_stiffness_matrix(cells, flat[cells], len(flat), boundary, D)
+    hook = BendingHook(coupling, K)
+
+    n_local = 6 * W.dofmap.index_map.size_local
+    A = PETSc.Mat().createAIJ(((n_local, None), (n_local, None)), comm=comm)
+    A.setUp()
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    for _ in range(2):  # the second call adds K again
+        hook.add_jacobian(None, A)
+    A.assemble()
+    dense = np.zeros((A.getSize()[0],) * 2)
+    r0, r1 = A.getOwnershipRange()
+    for row in range(r0, r1):
+        cols, vals = A.getRow(row)
+        dense[row, cols] = vals
+    dense = comm.allreduce(dense)
+    expected = np.zeros_like(dense)
+    rows = coupling.row_indices(np.arange(len(flat)))
+    cols = coupling.col_indices(np.arange(len(flat)))
+    Kd = K.toarray()
+    for c in range(3):
+        expected[np.ix_(rows[:, c], cols[:, c])] = 2.0 * Kd
+    assert np.abs(Kd).max() > 0.0
+    np.testing.assert_allclose(dense, expected, atol=1e-12 * np.abs(Kd).max())

@@ -102,7 +102,7 @@ class NodalCoupling:
         nodes = np.flatnonzero(np.any(forces != 0.0, axis=1))
         if len(nodes) == 0:
             return
-        rows = self._rows(nodes)
+        rows = self.row_indices(nodes)
         b.setValues(rows.ravel(), (scale * forces[nodes]).ravel(), addv=PETSc.InsertMode.ADD)
 
     def add_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
@@ -110,16 +110,16 @@ class NodalCoupling:
         """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block."""
         if len(row_nodes) == 0:
             return
-        rows = self._rows(row_nodes)
-        cols = self._cols(col_nodes)
+        rows = self.row_indices(row_nodes)
+        cols = self.col_indices(col_nodes)
         values = np.ascontiguousarray(scale * np.asarray(blocks, dtype=PETSc.ScalarType))
         A.setValuesRCV(rows, cols, values, addv=PETSc.InsertMode.ADD)
 
-    def _rows(self, nodes: np.ndarray) -> np.ndarray:
+    def row_indices(self, nodes: np.ndarray) -> np.ndarray:
         base = self.block_of_node[nodes] * self.layout.block_size + self.layout.row_offset
         return (base[:, None] + np.arange(3)).astype(PETSc.IntType)
 
-    def _cols(self, nodes: np.ndarray) -> np.ndarray:
+    def col_indices(self, nodes: np.ndarray) -> np.ndarray:
         base = self.block_of_node[nodes] * self.layout.block_size + self.layout.col_offset
         return (base[:, None] + np.arange(3)).astype(PETSc.IntType)
 
