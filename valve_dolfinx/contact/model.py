@@ -77,6 +77,11 @@ PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
 #: Safety margin (mm) of the lower bound on a node's distance to a triangle used to skip
 #: the exact closest-point computation; far above the bound's rounding error.
 _BOUND_MARGIN = 1e-6
+#: Verlet skin of the candidate pairs (mm): the search widens every distance test by
+#: this much, and the pairs found are reused while no node can have crossed the widened
+#: tests (:class:`_CandidatePairs`).  An explicit relaxation moves nodes by micrometres
+#: per iteration at the end, so the search, two thirds of an evaluation, runs rarely.
+CANDIDATE_SKIN = 0.2
 #: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
 #: tell the side of a node; the pressure direction decides instead.
 SIDE_TOLERANCE = 1e-12
@@ -219,6 +224,55 @@ class _TriangleFrames:
                    grad1=np.ascontiguousarray(grad[:, 1].T),
                    grad2=np.ascontiguousarray(grad[:, 2].T),
                    altitudes=np.ascontiguousarray((1.0 / np.linalg.norm(grad, axis=2)).T))
+
+
+class _CandidatePairs:
+    """(node, triangle) pairs found with every test widened by ``margin``, and when they
+    may be reused (a Verlet list).
+
+    The tests of :meth:`SurfaceContact._near` compare distances of a node to a
+    triangle's plane and to the lines of its sides, ``(x_p − v)·e`` with ``e`` the unit
+    normal or an in-plane side normal and ``v`` a vertex.  If no node moved more than δ
+    and triangle t's ``e`` turned by at most θ_t, each such distance changed by at most
+    ``2δ + R_t·θ_t``, R_t bounding the distance from t's vertices of a node that passes
+    the tests (t's diameter plus its reach, fade band and the margin, grown by 2δ), and
+    the fade band, measured in barycentric units, by ``b_t·|Δaltitude|``.  While that sum
+    stays below the margin for every triangle, every pair that passes the exact tests
+    now passed the widened ones then: the exact tests, repeated on these pairs at every
+    evaluation, give the rows of a full search.
+    """
+
+    def __init__(self, x: np.ndarray, nodes: np.ndarray, frames: _TriangleFrames,
+                 node: np.ndarray, tri: np.ndarray, triangles: np.ndarray, band: np.ndarray,
+                 extent: np.ndarray, margin: float):
+        self.x, self.nodes, self.margin = x.copy(), nodes.copy(), margin
+        self.node, self.tri = node, tri
+        self.band = band  # (M,) widest fade band of each triangle (barycentric)
+        self.directions, self.altitudes = self._frame(frames)
+        p = x[triangles]
+        diameter = np.max(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2), axis=1)
+        self.radius = diameter + extent + margin  # (M,)
+
+    @staticmethod
+    def _frame(frames: _TriangleFrames) -> tuple[np.ndarray, np.ndarray]:
+        """Unit normal and in-plane side normals ``(4, 3, M)``, altitudes ``(3, M)``."""
+        alt = np.asarray(frames.altitudes)
+        g1, g2 = frames.grad1 * alt[1], frames.grad2 * alt[2]
+        g0 = -(frames.grad1 + frames.grad2) * alt[0]
+        return np.stack([frames.normal, g0, g1, g2]), alt.copy()
+
+    def hold(self, x: np.ndarray, nodes: np.ndarray, frames: _TriangleFrames) -> bool:
+        """True while every pair that passes the exact tests at ``x`` is among these."""
+        if x.shape != self.x.shape or not np.array_equal(nodes, self.nodes):
+            return False
+        delta = float(np.sqrt(np.max(np.sum((x - self.x) ** 2, axis=1), initial=0.0)))
+        if 2.0 * delta >= self.margin:
+            return False
+        directions, altitudes = self._frame(frames)
+        turn = np.sqrt(np.max(np.sum((directions - self.directions) ** 2, axis=1), axis=0))
+        band = self.band * np.abs(altitudes - self.altitudes).max(axis=0)
+        return bool(np.all(2.0 * delta + (self.radius + 2.0 * delta) * turn + band
+                           < self.margin))
 
 
 def triangle_halo(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
@@ -661,7 +715,8 @@ class SurfaceContact:
                  between_bodies_depth: float | None = None,
                  attached_reference: np.ndarray | None = None,
                  attached_exclusion_radius: float = 0.0,
-                 boundary_band: float = FACE_BAND) -> None:
+                 boundary_band: float = FACE_BAND,
+                 candidate_skin: float = CANDIDATE_SKIN) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
             raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
@@ -720,6 +775,11 @@ class SurfaceContact:
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
+        if not candidate_skin >= 0.0:
+            raise ParameterError(f"candidate_skin = {candidate_skin!r} mm: use >= 0 (0 searches "
+                                 "at every evaluation)")
+        self.candidate_skin = float(candidate_skin)
+        self._pairs: _CandidatePairs | None = None
         self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
         #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
@@ -889,14 +949,31 @@ class SurfaceContact:
 
     def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: _Clock
                     ) -> tuple[np.ndarray, ...]:
-        """All (node, triangle) pairs passing the geometric tests, block by block of triangles.
+        """All (node, triangle) pairs passing the geometric tests, in (node, triangle) order.
 
-        Returns ``node, tri``, the unsided distance ``d0``, the barycentric
-        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.
+        The pairs to test come from the last search while they may be reused
+        (:class:`_CandidatePairs`), else from a new one.  Returns ``node, tri``,
+        the unsided distance ``d0``, the barycentric coordinates ``(K, 3)`` and
+        the triangle normals ``(K, 3)``.
         """
         xt = np.ascontiguousarray(x.T)
         frames = _TriangleFrames.at(xt, self.triangles)
-        lo, hi = padded_bounds(xt, self.triangles, self.search_distance, frames.normal,
+        if self._pairs is not None and self._pairs.hold(x, nodes, frames):
+            clock.add("broad")
+            near = self._near(xt, frames, self._pairs.node, self._pairs.tri)
+        else:
+            near = self._search(x, xt, frames, nodes, clock)
+        node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
+        clock.add("narrow")
+        return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+
+    def _search(self, x: np.ndarray, xt: np.ndarray, frames: _TriangleFrames,
+                nodes: np.ndarray, clock: _Clock) -> tuple[np.ndarray, ...]:
+        """Box test, then :meth:`_near`, block by block of triangles, with every distance
+        widened by the skin; keeps the pairs for reuse and returns those of the exact tests
+        (:meth:`_near`'s arrays)."""
+        skin = self.candidate_skin
+        lo, hi = padded_bounds(xt, self.triangles, self.search_distance + skin, frames.normal,
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
@@ -904,27 +981,85 @@ class SurfaceContact:
         # wide beyond a free edge): widen by that too, or a large triangle's band is cut
         # off by the box and its row appears with a jump
         extent = self.side_band * np.asarray(frames.altitudes).T
-        width = np.maximum(self.params.reach, extent.max(axis=1))
+        width = np.maximum(self.params.reach, extent.max(axis=1)) + skin
         lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
-        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 2
-                 + (np.empty((0, 3)),) * 3]
+        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 5]
         for first in range(0, len(self.triangles), BLOCK_SIZE):
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
-            found.append(self._narrow(xt, frames, node, tri + first))
+            found.append(self._near(xt, frames, node, tri + first, skin))
             clock.add("narrow")
-        node, tri, d0, gap, lam, offset, plane_lam = (np.concatenate(parts)
-                                           for parts in zip(*found, strict=True))
-        return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+        near = [np.concatenate(parts) for parts in zip(*found, strict=True)]
+        order = np.lexsort((near[1], near[0]))  # one order, whatever the blocks
+        near = [v[order] for v in near]
+        self._pairs = None
+        if skin > 0.0:
+            band = np.maximum(self.side_band.max(axis=1), FACE_BAND)
+            reach = np.maximum(width - skin, self.params.reach) + self.search_distance
+            self._pairs = _CandidatePairs(x, nodes, frames, near[0], near[1], self.triangles,
+                                          band, reach, skin)
+            exact = self._within(*near)[0]
+            near = [v[exact] for v in near]
+        return tuple(near)
+
+    def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
+              tri: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, ...]:
+        """The cheap tests of :meth:`_narrow`, each distance widened by ``margin`` (mm):
+        near the plane, within reach of the triangle or in its fade band, and not in its
+        neighbourhood.  Returns ``node, tri``, the plane distance ``d0``, the barycentric
+        coordinates ``lam0, lam1, lam2`` of the projection and ``beyond``, a lower bound on
+        its in-plane distance from the triangle."""
+        o, g1, g2 = frames.origin, frames.grad1, frames.grad2
+        r = [xt[i][node] - o[i][tri] for i in range(3)]
+        n = frames.normal
+        d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
+        near = np.flatnonzero(np.abs(d0) < self.search_distance + margin)
+        node, tri, d0 = node[near], tri[near], d0[near]
+        r = [ri[near] for ri in r]
+        lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
+        lam2 = r[0] * g2[0][tri] + r[1] * g2[1][tri] + r[2] * g2[2][tri]
+        lam0 = 1.0 - lam1 - lam2
+        # in the plane, the projection lies at least -λ_j/|∇λ_j| from the line of the edge
+        # opposite vertex j: a cheap lower bound on the distance to the triangle that
+        # discards most outside pairs before the exact closest-point computation
+        alt = frames.altitudes
+        beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
+                            -lam2 * alt[2][tri])
+        arrays = (node, tri, d0, lam0, lam1, lam2, beyond)
+        reach = np.flatnonzero(self._within(*arrays, margin=margin, altitudes=alt)[0])
+        node, tri = node[reach], tri[reach]
+        keep = ~self._in_neighbourhood(node, tri)
+        return tuple(v[reach][keep] for v in arrays)
+
+    def _within(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray,
+                lam1: np.ndarray, lam2: np.ndarray, beyond: np.ndarray, margin: float = 0.0,
+                altitudes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(within, in_band): near the plane and in the fade band or within reach of the
+        triangle, with each distance widened by ``margin`` (mm; the band's through the
+        ``altitudes``, ``(3, M)``)."""
+        h = self.params.reach
+        band = self._row_bands(node, tri)
+        lam = (lam0, lam1, lam2)
+        if margin > 0.0:
+            widen = [margin / altitudes[j][tri] for j in range(3)]
+        else:
+            widen = [0.0] * 3
+        in_band = (lam[0] > -band[:, 0] - widen[0]) & (lam[1] > -band[:, 1] - widen[1]) \
+            & (lam[2] > -band[:, 2] - widen[2])
+        close = np.abs(d0) < h + margin
+        within = (np.abs(d0) < self.search_distance + margin) \
+            & (in_band | ((beyond < h + margin) & close))
+        return within, in_band
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-                tri: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pairs within reach of the triangle and outside its neighbourhood, closest feature.
+                tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray, lam1: np.ndarray,
+                lam2: np.ndarray, beyond: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
 
         A node whose projection falls inside the triangle meets its face: the
         closest point is the projection, at plane distance ``d0``.  A node
@@ -941,33 +1076,11 @@ class SurfaceContact:
         the barycentric coordinates ``(K, 3)`` of the closest point and the
         offset ``x_p - q`` ``(K, 3)``.
         """
-        o, g1, g2 = frames.origin, frames.grad1, frames.grad2
-        r = [xt[i][node] - o[i][tri] for i in range(3)]
-        n = frames.normal
-        d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
-        near = np.flatnonzero(np.abs(d0) < self.search_distance)
-        node, tri, d0 = node[near], tri[near], d0[near]
-        r = [ri[near] for ri in r]
-        lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
-        lam2 = r[0] * g2[0][tri] + r[1] * g2[1][tri] + r[2] * g2[2][tri]
-        lam0 = 1.0 - lam1 - lam2
-        # in the plane, the projection lies at least -λ_j/|∇λ_j| from the line of the edge
-        # opposite vertex j: a cheap lower bound on the distance to the triangle that
-        # discards most outside pairs before the exact closest-point computation
-        alt = frames.altitudes
-        beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
-                            -lam2 * alt[2][tri])
-        h = self.params.reach
-        lam_min = np.minimum(np.minimum(lam0, lam1), lam2)
-        band = self._row_bands(node, tri)
-        in_band = (lam0 > -band[:, 0]) & (lam1 > -band[:, 1]) & (lam2 > -band[:, 2])
-        reach = np.flatnonzero(in_band | ((beyond < h) & (np.abs(d0) < h)))
-        node, tri, d0, lam0, lam1, lam2 = (v[reach] for v in (node, tri, d0, lam0, lam1, lam2))
-        keep = ~self._in_neighbourhood(node, tri)
-        node, tri, d0, lam0, lam1, lam2 = (v[keep] for v in (node, tri, d0, lam0, lam1, lam2))
+        in_band = self._within(node, tri, d0, lam0, lam1, lam2, beyond)[1]
         lam = np.stack([lam0, lam1, lam2], axis=1)
-        lam_min, beyond = lam_min[reach][keep], beyond[reach][keep]
-        in_band = in_band[reach][keep]
+        lam_min = lam.min(axis=1)
+        n = frames.normal
+        h = self.params.reach
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
