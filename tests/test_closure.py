@@ -204,7 +204,7 @@ def test_relaxation_in_parallel_matches_the_parallel_dynamics(parallel_reference
 
 #: Cases of the issue at the default mesh, and the rank (under ``mpirun -n 2``) that solves
 #: each alone: about 4 and 7 minutes (docs/closure.md, "Session 7").  W21/H27 is not here:
-#: with the session-7 defaults its relaxation has not converged within 20 minutes.
+#: it converges in some runs and not in others (docs/closure.md, "Session 8").
 #: A case that stalls stops at 20 minutes (converged: false) instead of holding up CI.
 _CAPPED = DynamicsParameters(wall_time_limit_s=1200.0)
 DEFAULT_MESH_CASES = {

@@ -727,8 +727,8 @@ def test_reused_candidate_pairs_give_the_full_search_results():
     every evaluation, and it does reuse them, and searches again once nodes moved far."""
     x, triangles, body, f_ext = stacked_sheets(cells=8, spacing=0.3, seed=5)
     params = ContactParameters(taper=0.5, pairing="two_pass")
-    reusing = SurfaceContact(triangles, len(x), params, triangle_body=body)
-    searching = SurfaceContact(triangles, len(x), params, triangle_body=body, candidate_skin=0.0)
+    reusing = SurfaceContact(triangles, len(x), params, triangle_body=body, candidate_skin=0.2)
+    searching = SurfaceContact(triangles, len(x), params, triangle_body=body)  # the default
     for contact in (reusing, searching):
         contact.update_history(x)
     searches = []
