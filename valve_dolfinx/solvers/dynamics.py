@@ -446,6 +446,11 @@ class DampedDynamicsSolver:
             "snes_lag_preconditioner": 10,
             "snes_lag_preconditioner_persists": True,
             "ksp_type": "gmres",
+            # modified Gram-Schmidt: with PETSc's default (classical, VecMDot/VecMAXPY) two
+            # runs of the same case differed in the last bits from the ~17th step on, and
+            # the graft valves' relaxation amplified that into different results
+            # (docs/closure.md, "Session 8"); with it runs are bit-reproducible
+            "ksp_gmres_modifiedgramschmidt": True,
             "ksp_rtol": 1e-8,
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
