@@ -128,26 +128,12 @@ class BendingHook:
         self.coupling.add_forces(b, self.K_owned @ x, scale=1.0)
 
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
-        """``A += K``, inserted row by row from a CSR copy of K's 3×3 blocks (one call per
-        matrix row; inserting block by block took ~50 ms per Jacobian, most of its
-        assembly on the valve).  The blocks are K_ij·I, but their zero off-diagonal
-        entries are inserted too: the matrix keeps the sparsity pattern, hence the LU
-        ordering and round-off, of block-by-block insertion (docs/closure.md, "Session 8")."""
+        """``A += K``, row by row from a CSR copy of K's 3×3 blocks made once
+        (:meth:`NodalCoupling.block_csr`).  The blocks are K_ij·I, but their zero
+        off-diagonal entries are inserted too: the matrix keeps the sparsity pattern, hence
+        the LU ordering and round-off, of block-by-block insertion (docs/closure.md,
+        "Session 8")."""
         if self._csr is None:
-            self._csr = self._global_csr()
-        indptr, indices, values, rows = self._csr
-        A.setValuesIJV(indptr, indices, values, addv=PETSc.InsertMode.ADD, rowmap=rows)
-
-    def _global_csr(self) -> tuple[np.ndarray, ...]:
-        """K's blocks by global row: (row pointer, global columns, values, global rows)."""
-        block_rows = self.coupling.row_indices(self._rows)  # (n, 3) global indices
-        block_cols = self.coupling.col_indices(self._cols)
-        rows = np.repeat(block_rows, 3, axis=1).ravel()     # (n·9): row i, columns 0..2
-        cols = np.tile(block_cols, (1, 3)).ravel()
-        values = (self._values[:, None, None] * np.eye(3)).ravel()
-        order = np.lexsort((cols, rows))
-        rows, cols, values = rows[order], cols[order], values[order]
-        unique_rows, counts = np.unique(rows, return_counts=True)
-        indptr = np.concatenate([[0], np.cumsum(counts)])
-        return (indptr.astype(PETSc.IntType), cols.astype(PETSc.IntType),
-                values.astype(PETSc.ScalarType), unique_rows.astype(PETSc.IntType))
+            blocks = self._values[:, None, None] * np.eye(3)
+            self._csr = self.coupling.block_csr(self._rows, self._cols, blocks)
+        self.coupling.add_csr(A, self._csr)

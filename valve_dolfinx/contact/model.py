@@ -990,7 +990,8 @@ class SurfaceContact:
         hi += lateral
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
-        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 5]
+        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 5
+                 + (np.empty(0, dtype=bool),)]
         for first in range(0, len(self.triangles), BLOCK_SIZE):
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
@@ -1007,8 +1008,8 @@ class SurfaceContact:
             reach = np.maximum(width - skin, self.params.reach) + self.search_distance
             self._pairs = _CandidatePairs(x, nodes, frames, near[0], near[1], self.triangles,
                                           band, reach, skin)
-            exact = self._within(*near)[0]
-            near = [v[exact] for v in near]
+            exact, in_band = self._within(*near[:7])  # the tests without the skin
+            near = [v[exact] for v in near[:7]] + [in_band[exact]]
         return tuple(near)
 
     def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
@@ -1016,8 +1017,9 @@ class SurfaceContact:
         """The cheap tests of :meth:`_narrow`, each distance widened by ``margin`` (mm):
         near the plane, within reach of the triangle or in its fade band, and not in its
         neighbourhood.  Returns ``node, tri``, the plane distance ``d0``, the barycentric
-        coordinates ``lam0, lam1, lam2`` of the projection and ``beyond``, a lower bound on
-        its in-plane distance from the triangle."""
+        coordinates ``lam0, lam1, lam2`` of the projection, ``beyond``, a lower bound on
+        its in-plane distance from the triangle, and ``in_band`` (projection in the
+        triangle or its fade band, widened by ``margin``)."""
         o, g1, g2 = frames.origin, frames.grad1, frames.grad2
         r = [xt[i][node] - o[i][tri] for i in range(3)]
         n = frames.normal
@@ -1034,11 +1036,10 @@ class SurfaceContact:
         alt = frames.altitudes
         beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
                             -lam2 * alt[2][tri])
-        arrays = (node, tri, d0, lam0, lam1, lam2, beyond)
-        reach = np.flatnonzero(self._within(*arrays, margin=margin, altitudes=alt)[0])
-        node, tri = node[reach], tri[reach]
-        keep = ~self._in_neighbourhood(node, tri)
-        return tuple(v[reach][keep] for v in arrays)
+        within, in_band = self._within(node, tri, d0, lam0, lam1, lam2, beyond, margin, alt)
+        reach = np.flatnonzero(within)
+        keep = ~self._in_neighbourhood(node[reach], tri[reach])
+        return tuple(v[reach][keep] for v in (node, tri, d0, lam0, lam1, lam2, beyond, in_band))
 
     def _within(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray,
                 lam1: np.ndarray, lam2: np.ndarray, beyond: np.ndarray, margin: float = 0.0,
@@ -1062,7 +1063,8 @@ class SurfaceContact:
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
                 tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray, lam1: np.ndarray,
-                lam2: np.ndarray, beyond: np.ndarray) -> tuple[np.ndarray, ...]:
+                lam2: np.ndarray, beyond: np.ndarray, in_band: np.ndarray
+                ) -> tuple[np.ndarray, ...]:
         """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
 
         A node whose projection falls inside the triangle meets its face: the
@@ -1080,7 +1082,6 @@ class SurfaceContact:
         the barycentric coordinates ``(K, 3)`` of the closest point and the
         offset ``x_p - q`` ``(K, 3)``.
         """
-        in_band = self._within(node, tri, d0, lam0, lam1, lam2, beyond)[1]
         lam = np.stack([lam0, lam1, lam2], axis=1)
         lam_min = lam.min(axis=1)
         n = frames.normal
