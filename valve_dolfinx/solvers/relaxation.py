@@ -43,8 +43,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from valve_dolfinx._compat import MPI, dolfinx
-from valve_dolfinx.exceptions import check_range
+from valve_dolfinx._compat import MPI, PETSc, dolfinx
+from valve_dolfinx.exceptions import MeshError, check_range
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver, DynamicsReport
 
@@ -98,6 +98,30 @@ class RelaxationParameters:
         Contact makes the equilibrium path-dependent: leaflets slammed shut by
         the full pressure can settle with a free edge caught on the wrong side
         of a neighbour (docs/closure.md).
+    finish_start, finish_interval
+        From iteration ``finish_start`` on, every ``finish_interval`` iterations,
+        try to finish with Newton's method (below); 0 never tries.  The explicit
+        iteration is slow where the valve has a soft mode: a slack, oversized
+        pericardial free edge held by bending and contact alone is ~1e6 times
+        softer than the graft's in-plane stiffness that sets its nodes' masses,
+        and it creeps for tens of thousands of iterations (docs/closure.md,
+        "Session 9").  Cases the relaxation settles before ``finish_start`` never
+        meet it.
+    finish_residual_mN
+        Try a finish only when the relaxation's residual (max-norm) is below this:
+        far from the equilibrium the contact arrangement still changes.
+    finish_max_steps, finish_shift, finish_step_mm, finish_max_motion_mm
+        The finish is pseudo-transient continuation: steps
+        ``(K + μ·M) Δu = −R`` with the consistent tangent K (membrane, bending,
+        contact) and the relaxation's diagonal masses M, μ starting at
+        ``finish_shift`` and following the residual (switched evolution
+        relaxation, ``μ ← μ·|R_new|/|R_old|``), at most ``finish_step_mm`` of
+        nodal motion per step, at most ``finish_max_steps`` steps.  It is
+        accepted only if the residual falls below ``residual_tolerance``, no node
+        moved further than ``finish_max_motion_mm`` from where the relaxation
+        stood and the mid-surfaces do not cross more than there; otherwise the
+        relaxation goes on from where it was.  An accepted finish is an
+        equilibrium by construction.
     """
 
     residual_tolerance: float = 5e-3
@@ -108,6 +132,13 @@ class RelaxationParameters:
     history_interval: int = 50
     quench_per_body: bool = True
     ramp_iterations: int = 0
+    finish_start: int = 5000
+    finish_interval: int = 1000
+    finish_residual_mN: float = 1.0
+    finish_max_steps: int = 100
+    finish_shift: float = 1e-6
+    finish_step_mm: float = 0.05
+    finish_max_motion_mm: float = 0.5
 
     def __post_init__(self) -> None:
         check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
@@ -120,6 +151,17 @@ class RelaxationParameters:
         check_range("history_interval", self.history_interval, 1, 1e9)
         check_range("ramp_iterations", self.ramp_iterations, 0, 1e9,
                     hint="0 applies the full pressure from the first iteration")
+        check_range("finish_start", self.finish_start, 0, 1e9, hint="0 never tries a finish")
+        check_range("finish_interval", self.finish_interval, 1, 1e9)
+        check_range("finish_residual_mN", self.finish_residual_mN, 0.0, 1e6, low_open=True,
+                    unit="mN")
+        check_range("finish_max_steps", self.finish_max_steps, 1, 1e6)
+        check_range("finish_shift", self.finish_shift, 0.0, 1e3, low_open=True,
+                    hint="the first step's mass shift: 1e-6 is nearly Newton on the valve")
+        check_range("finish_step_mm", self.finish_step_mm, 0.0, 1.0, low_open=True, unit="mm",
+                    hint="keep it below the contact penetration depth")
+        check_range("finish_max_motion_mm", self.finish_max_motion_mm, 0.0, 100.0,
+                    low_open=True, unit="mm")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -215,6 +257,89 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         """Sum of nodal ``values`` per body over all ranks."""
         return comm.allreduce(np.bincount(body, weights=values, minlength=n_bodies), op=MPI.SUM)
 
+    # --- the Newton (pseudo-transient continuation) finish ----------------------------
+    def _finish_due(self, it: int, fmax: float, ramping: bool) -> bool:
+        q = self.relaxation
+        return (q.finish_start > 0 and not ramping and it >= q.finish_start
+                and (it - q.finish_start) % q.finish_interval == 0
+                and fmax < q.finish_residual_mN)
+
+    def _mass_shift(self, X: PETSc.Vec, masses: np.ndarray) -> tuple[np.ndarray, ...]:
+        """CSR of the shift ``M`` (each owned node's mass on its momentum rows' displacement
+        columns; fixed dofs left out): (row pointer, columns, values, rows)."""
+        rows = (X.getOwnershipRange()[0] + 6 * np.arange(len(masses))[:, None]
+                + np.arange(3, 6)).ravel()
+        values = np.repeat(masses, 3)
+        free = ~np.isin(rows, self._bc_rows)
+        rows, values = rows[free].astype(PETSc.IntType), values[free]
+        indptr = np.arange(len(rows) + 1, dtype=PETSc.IntType)
+        return indptr, (rows - 3).astype(PETSc.IntType), values, rows
+
+    def _newton_finish(self, X: PETSc.Vec, Xdot: PETSc.Vec, t: float, masses: np.ndarray,
+                       deadline: float) -> tuple[bool, str, float]:
+        """Pseudo-transient continuation from the relaxation's state ``X`` (positions, zero
+        velocities); see :class:`RelaxationParameters`.  On success ``X`` is the equilibrium;
+        otherwise ``X`` is restored.  Returns (accepted, what happened, last residual)."""
+        q, comm = self.relaxation, self.model.domain.comm
+        start = X.copy()
+        F, dX = X.duplicate(), X.duplicate()
+        ksp = self._static_ksp()
+        indptr, cols, shift, rows = self._mass_shift(X, masses)
+        mu, mu_min = q.finish_shift, 1e-3 * q.finish_shift
+        switched = [h for h in self.hooks if getattr(h, "forces_only", False)]
+        for hook in switched:  # Newton needs the contact Jacobian
+            hook.forces_only = False
+        ok, why, fmax, steps = False, "", float("nan"), 0
+        try:
+            self.ifunction(None, t, X, Xdot, F)
+            crossing0 = self._crossing()
+            norm, fmax = F.norm(), F.norm(PETSc.NormType.INFINITY)
+            while fmax >= q.residual_tolerance:
+                if steps == q.finish_max_steps:
+                    why = f"{steps} steps did not converge (residual {fmax:.3g} mN)"
+                    break
+                if comm.allreduce(time.perf_counter() > deadline, op=MPI.LOR):
+                    why = "out of wall-clock time"
+                    break
+                self.ijacobian(None, t, X, Xdot, 0.0, self.J_mat, self.J_mat)
+                self.J_mat.setValuesIJV(indptr, cols, mu * shift, addv=PETSc.InsertMode.ADD,
+                                        rowmap=rows)
+                self.J_mat.assemble()
+                ksp.setOperators(self.J_mat)
+                ksp.solve(F, dX)
+                if ksp.getConvergedReason() < 0:
+                    why = f"the linear solve failed ({ksp.getConvergedReason()})"
+                    break
+                step = self._largest_node_motion(dX.array_r.reshape(-1, 6)[:, :3])
+                X.axpy(-min(1.0, q.finish_step_mm / max(step, 1e-300)), dX)
+                steps += 1
+                self.ifunction(None, t, X, Xdot, F)
+                new, fmax = F.norm(), F.norm(PETSc.NormType.INFINITY)
+                if not np.isfinite(new):
+                    why = "the residual became non-finite"
+                    break
+                mu = min(max(mu * new / norm, mu_min), 1e3)  # switched evolution relaxation
+                norm = new
+            if not why:
+                motion = self._largest_node_motion(
+                    (X.array_r - start.array_r).reshape(-1, 6)[:, :3])
+                crossing = self._crossing()
+                if motion > q.finish_max_motion_mm:
+                    why = f"it moved a node {motion:.3g} mm"
+                elif crossing > max(crossing0, 0.0) + 1e-3:
+                    why = f"it crossed surfaces by {crossing:.3g} mm"
+                else:
+                    ok, why = True, (f"{steps} Newton steps to residual {fmax:.2e} mN, "
+                                     f"largest motion {motion:.3g} mm")
+        except (PETSc.Error, MeshError) as err:  # MeshError: non-finite positions
+            why = f"{type(err).__name__}: {err}"
+        finally:
+            for hook in switched:
+                hook.forces_only = True
+        if not ok:
+            X.array[:] = start.array_r
+        return ok, why, fmax
+
     # --- the run ------------------------------------------------------------------------
     def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
         """Relax until converged or out of iterations/time; never raises on divergence.
@@ -250,6 +375,20 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
         watch_start = self.coupling.displacements(self.U)[self.watch_nodes]
         fmax = step = float("nan")
 
+        def record(iteration: int, t_now: float, step: float, fmax: float) -> None:
+            """Accept the state in X and add a history row."""
+            nonlocal watch_start
+            self._set_state(t_now, X, Xdot)
+            self._accept_state()
+            watched = self.coupling.displacements(self.U)[self.watch_nodes]
+            increment = float(np.max(np.linalg.norm(watched - watch_start, axis=1), initial=0.0))
+            watch_start = watched
+            r.steps, r.time, r.last_dt, r.last_increment_mm = iteration, pseudo_time, \
+                float(fire.dt.min()), increment
+            self._record({"step": iteration, "time": pseudo_time, "dt": r.last_dt,
+                          "increment_mm": increment, "max_increment_mm": step,
+                          "pressure": self._load(t_now), "residual_mN": fmax})
+
         for it in range(q.max_iterations):
             # the dynamics' smooth-step ramp, over ramp_iterations instead of ramp_time
             ramping = it < q.ramp_iterations
@@ -262,6 +401,17 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
             if not np.isfinite(fmax):
                 r.reason = f"the residual became non-finite at iteration {it}"
                 break
+            if self._finish_due(it, fmax, ramping):
+                r.static_finish_attempts += 1
+                finished, how, residual = self._newton_finish(X, Xdot, t_full, masses,
+                                                    t0 + p.wall_time_limit_s)
+                log.info("Newton finish at iteration %d %s: %s", it,
+                         "accepted" if finished else "refused", how)
+                if finished:
+                    r.static_finished = r.converged = True
+                    r.reason = f"dynamic relaxation, Newton finish at iteration {it}: {how}"
+                    record(it, t_now, 0.0, residual)
+                    break
             quenched = fire.update(self._per_body(comm, body, np.sum(f * v, axis=1), fire.n))
             dt = fire.dt[body][:, None]
             x[:, :3] -= np.where(quenched[body][:, None], 0.5 * dt * v, 0.0)
@@ -286,18 +436,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
             done = not ramping and fmax < q.residual_tolerance and step < p.stop_increment_mm
             out_of_time = time.perf_counter() - t0 > p.wall_time_limit_s
             if done or out_of_time or (it + 1) % q.history_interval == 0:
-                self._set_state(t_now, X, Xdot)
-                self._accept_state()
-                watched = self.coupling.displacements(self.U)[self.watch_nodes]
-                increment = float(np.max(np.linalg.norm(watched - watch_start, axis=1),
-                                         initial=0.0))
-                watch_start = watched
-                r.steps, r.time, r.last_dt, r.last_increment_mm = it + 1, pseudo_time, \
-                    float(fire.dt.min()), increment
-                entry = {"step": it + 1, "time": pseudo_time, "dt": r.last_dt,
-                         "increment_mm": increment, "max_increment_mm": step,
-                         "pressure": self._load(t_now), "residual_mN": fmax}
-                self._record(entry)
+                record(it + 1, t_now, step, fmax)
             if done:
                 r.converged = True
                 r.reason = (f"dynamic relaxation: static residual {fmax:.2e} mN < "
