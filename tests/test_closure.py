@@ -217,7 +217,7 @@ def test_relaxation_in_parallel_matches_the_parallel_dynamics(parallel_reference
 
 
 #: Cases of the issue at the default mesh, and the rank (under ``mpirun -n 2``) that solves
-#: each alone: about 4, 1, 7 and 8 minutes (docs/closure.md, "Session 7" and "Session 9";
+#: each alone: about 4, 1, 5 and 7 minutes (docs/closure.md, "Session 7" and "Session 9";
 #: W21/H27 converges through the relaxation's Newton finish).  A case that stalls stops at
 #: 20 minutes (converged: false) instead of holding up CI.
 _CAPPED = DynamicsParameters(wall_time_limit_s=1200.0)
