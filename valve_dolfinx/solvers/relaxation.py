@@ -405,8 +405,8 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                 break
             if self._finish_due(it, fmax, ramping):
                 r.static_finish_attempts += 1
-                finished, how, residual = self._newton_finish(X, Xdot, t_full, masses,
-                                                    t0 + p.wall_time_limit_s)
+                deadline = t0 + p.wall_time_limit_s
+                finished, how, residual = self._newton_finish(X, Xdot, t_full, masses, deadline)
                 log.info("Newton finish at iteration %d %s: %s", it,
                          "accepted" if finished else "refused", how)
                 if finished:
@@ -424,6 +424,7 @@ class DynamicRelaxationSolver(DampedDynamicsSolver):
                     log.info("the finished state has residual %.3g mN with its own contact "
                              "sides: the relaxation goes on from it", resided)
                     v[:] = 0.0
+                    continue  # the forces of this iteration belong to the state before it
             quenched = fire.update(self._per_body(comm, body, np.sum(f * v, axis=1), fire.n))
             dt = fire.dt[body][:, None]
             x[:, :3] -= np.where(quenched[body][:, None], 0.5 * dt * v, 0.0)
