@@ -116,9 +116,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.closure import CaseConfig, run_case
     from valve_dolfinx.geometry.valve import ValveParameters
+    from valve_dolfinx.root import RootParameters
     from valve_dolfinx.solvers.dynamics import DynamicsParameters
 
     config = CaseConfig(geometry=ValveParameters(mesh_size=args.mesh_size),
+                        root=RootParameters(loaded_diameter=args.root_diameter),
                         symmetric_reference=args.symmetric_reference, solver=args.solver)
     if graft is not None:
         config = config.with_graft(*graft)
@@ -176,6 +178,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="stop (converged: false, results written) after this wall time")
     p.add_argument("--dt-min", type=float, default=None, metavar="SECONDS",
                    help="time-step floor below which the run counts as stalled")
+    p.add_argument("--root-diameter", type=float, default=None, metavar="D",
+                   help="prescribe the root diameter at 80 mmHg in mm (a patient's measured "
+                   "root, 10-40 mm) instead of distending the root with its wall law")
     p.add_argument("--force", action="store_true",
                    help="recompute even if --out already holds this case's result.json")
     _add_geometry_args(p)

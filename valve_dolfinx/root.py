@@ -11,23 +11,63 @@ leaflets attached to it, written as a one-degree-of-freedom energy balance:
 
     dΠ/dR = 0:  p·R = E·t·(R − R₀)/R₀ + Π_leaf'(R)/(2πL).
 
-E and t are the wall's Young's modulus and thickness, L the height of the
-root segment carrying the leaflets (nadir to commissure top).  The leaflets are
-unpressurised in this step (the valve is open, the leaflets lie against the
-wall): Π_leaf(R) is their membrane energy when wrapped on the cylinder of
-radius R, computed with the finite element model; it is zero while R is below
-the wrap radius d/2 (the leaflets are then circumferentially slack, and the
-tension-field relaxation gives them no stiffness), and resists distension
-beyond it.  The root nodes (the leaflets' attachment) are then held at radius
-R for step 2.
+E and t are the wall's secant Young's modulus over 0-80 mmHg and its
+thickness, L the height of the root segment carrying the leaflets (nadir to
+commissure top).  The leaflets are unpressurised in this step (the valve is
+open, the leaflets lie against the wall): Π_leaf(R) is their membrane energy
+when wrapped on the cylinder of radius R, computed with the finite element
+model; it is zero while R is below the wrap radius d/2 (the leaflets are then
+circumferentially slack, and the tension-field relaxation gives them no
+stiffness), and resists distension beyond it.  The root nodes (the leaflets'
+attachment) are then held at radius R for step 2.
 
-Default wall data (see docs/closure.md):
-* Young's modulus 2.0 MPa: the isotropic aortic-wall modulus that best matched
-  measured root wall displacements in "Large-displacement 3D structural
-  analysis of an aortic valve model with nonlinear material properties",
-  J Med Eng Technol (doi:10.1080/0309190042000193847);
-* wall thickness 1.6 mm: sinus of Valsalva, PLoS ONE 6(8):e23106 (2011),
-  Table 1 (doi:10.1371/journal.pone.0023106).
+A measured (patient) loaded diameter can be prescribed instead
+(``RootParameters.loaded_diameter``): the wall law is then not used, and the
+leaflets' line load is still reported at that radius.
+
+Default wall data
+-----------------
+Only the product E·t enters the balance.  It is taken from the in vivo
+stiffness of the human ascending aorta, the thickness from MRI, and E = E·t/t:
+
+* **Pressure-strain modulus** E_p = Δp/(ΔD/D) = 68.4 ± 30.5 kPa, measured from
+  end-diastole to peak systole on multiphase CT in 45 men (the "young" group,
+  42.6 ± 5.2 years; 162.0 ± 93.5 kPa in the group aged 69.0 ± 5.2 years):
+  Martin C, Sun W, Primiano C, McKay R, Elefteriades J. Age-dependent ascending
+  aorta mechanics assessed through multiphase CT. Ann Biomed Eng
+  2013;41(12):2565-2574. doi:10.1007/s10439-013-0856-9.
+* **Wall thickness** t = 1.5 mm: median MRI wall thickness of the ascending
+  aorta in a general population (753 subjects aged 21-81 years), 1.46 mm in
+  women (5th-95th percentile 1.15-1.88 mm) and 1.56 mm in men (1.22-1.99 mm):
+  Mensel B, et al. MRI-based determination of reference values of thoracic
+  aortic wall thickness in a general population. Eur Radiol
+  2014;24(9):2038-2044. doi:10.1007/s00330-014-3188-8.
+
+Conversion to the secant modulus of this tube.  The tube's law
+p·R·R₀ = E·t·(R − R₀) is linear in the hoop strain, so its secant modulus over
+0-80 mmHg is also its incremental one, and its pressure-strain modulus at the
+diastolic pressure p is
+
+    E_p = R·dp/dR = E·t/R₀ − p   ⇒   E·t = R₀·(E_p + p)
+        = 8.696 mm × (68.4 + 10.67) kPa = 687.5 kPa·mm,
+    E = 687.5 kPa·mm / 1.5 mm = 458 kPa   (:func:`wall_modulus_from_pressure_strain`).
+
+E_p (equivalently the distensibility, ΔA/(A·Δp) ≈ 2/E_p = 2.9·10⁻² kPa⁻¹) is a
+relative measure, independent of the vessel's size; transferring it from the
+30 mm ascending aorta to the model's 20 mm root keeps E·t/R, the wall's
+stiffness relative to its radius.  The real wall stiffens with pressure, so its
+secant modulus from 0 mmHg is, if anything, lower than this diastolic-systolic
+figure: the data err on the stiff side.
+
+Result (default geometry, 80 mmHg): the free tube (no leaflets) would reach
+20.10 mm; with the leaflets, stretched beyond the 20 mm wrap diameter and
+pulling inwards with about 0.6 mN/mm, the root settles at 20.08-20.09 mm
+(mesh sizes 0.6-1.2 mm).  The published method's own 15 % (d₀ = 17.39 mm loaded to
+exactly 20 mm by a free tube) would need E·t = p·R·R₀/(R − R₀) = 711 kPa·mm,
+within 4 % of the data above.  Across the young group's ±1 SD of E_p
+(37.9-98.9 kPa) the loaded root spans about 21.45 mm (the leaflets then pull
+15.7 mN/mm; the free tube would reach 22.29 mm) to 19.27 mm (leaflets slack),
+which is why a measured diameter can be prescribed for a patient.
 """
 
 from __future__ import annotations
@@ -41,9 +81,29 @@ from scipy.optimize import brentq
 
 from valve_dolfinx.exceptions import SolverError, check_range
 
-__all__ = ["RootParameters", "RootState", "distend_root"]
+__all__ = ["RootParameters", "RootState", "distend_root", "wall_modulus_from_pressure_strain",
+           "ASCENDING_AORTA_PRESSURE_STRAIN_MODULUS_KPA", "ASCENDING_AORTA_WALL_THICKNESS_MM"]
 
 log = logging.getLogger(__name__)
+
+#: Martin et al. 2013 (module docstring): in vivo pressure-strain modulus of the human
+#: ascending aorta, men aged 42.6 ± 5.2 years, kPa
+ASCENDING_AORTA_PRESSURE_STRAIN_MODULUS_KPA = 68.4
+#: Mensel et al. 2014 (module docstring): median MRI wall thickness of the ascending aorta,
+#: between the women's 1.46 mm and the men's 1.56 mm
+ASCENDING_AORTA_WALL_THICKNESS_MM = 1.5
+#: range accepted for a prescribed loaded root diameter, mm
+LOADED_DIAMETER_RANGE_MM = (10.0, 40.0)
+
+
+def wall_modulus_from_pressure_strain(pressure_strain_modulus: float, pressure: float,
+                                      zero_pressure_radius: float, thickness: float) -> float:
+    """Secant modulus E (kPa) of the linear thin tube with a given pressure-strain modulus.
+
+    The tube p·R = E·t·(R − R₀)/R₀ has, at pressure p, E_p = R·dp/dR = E·t/R₀ − p, so
+    E = R₀·(E_p + p)/t.  Pressures and moduli in kPa, lengths in mm.
+    """
+    return zero_pressure_radius * (pressure_strain_modulus + pressure) / thickness
 
 
 @dataclass(frozen=True)
@@ -51,14 +111,19 @@ class RootParameters:
     """Aortic root wall (mm, kPa).
 
     ``free_edge_excess`` fixes the unpressurised root: d₀ = d/(1 + excess).
+    ``youngs_modulus`` is the wall's secant modulus over 0-80 mmHg and
+    ``wall_thickness`` its thickness (defaults and sources: module docstring).
     ``height`` is the root segment carrying the leaflets; ``None`` = the leaflet
-    height (nadir to commissure top).
+    height (nadir to commissure top).  ``loaded_diameter`` (mm), when set, is the
+    root diameter at the loading pressure (a patient's measured root): the wall law
+    is then not used.
     """
 
     free_edge_excess: float = 0.15
-    youngs_modulus: float = 2000.0
-    wall_thickness: float = 1.6
+    youngs_modulus: float = 458.0
+    wall_thickness: float = ASCENDING_AORTA_WALL_THICKNESS_MM
     height: float | None = None
+    loaded_diameter: float | None = None
 
     def __post_init__(self) -> None:
         check_range("root.free_edge_excess", self.free_edge_excess, -0.2, 1.0)
@@ -67,6 +132,10 @@ class RootParameters:
         check_range("root.wall_thickness", self.wall_thickness, 0.05, 10.0, unit="mm")
         if self.height is not None:
             check_range("root.height", self.height, 0.5, 100.0, unit="mm")
+        if self.loaded_diameter is not None:
+            check_range("root.loaded_diameter", self.loaded_diameter, *LOADED_DIAMETER_RANGE_MM,
+                        unit="mm", hint="the measured diameter of the pressurised root base; "
+                        "None distends the root with the wall law")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -81,6 +150,7 @@ class RootState:
     hoop_strain: float
     leaflet_line_load: float  # mN/mm: inward pull of the leaflets per unit root height
     pressure: float
+    prescribed: bool = False  # the diameter was RootParameters.loaded_diameter
 
     @property
     def radius(self) -> float:
@@ -96,7 +166,9 @@ def distend_root(params: RootParameters, wrap_diameter: float, leaflet_height: f
     """Solve the root balance for the radius at ``pressure`` (kPa).
 
     ``leaflet_energy(R)`` returns the leaflets' membrane energy (mN·mm) when they
-    lie on the cylinder of radius R; ``None`` ignores the leaflets.
+    lie on the cylinder of radius R; ``None`` ignores the leaflets.  With
+    ``params.loaded_diameter`` set, that diameter is returned and the leaflets'
+    line load is evaluated there.
     """
     R0 = 0.5 * wrap_diameter / (1.0 + params.free_edge_excess)
     L = params.height or leaflet_height
@@ -111,20 +183,23 @@ def distend_root(params: RootParameters, wrap_diameter: float, leaflet_height: f
     def balance(R: float) -> float:
         return pressure * R - Et * (R - R0) / R0 - leaflet_pull(R)
 
-    if pressure * R0 >= Et:
+    if params.loaded_diameter is not None:
+        R = 0.5 * params.loaded_diameter
+    elif pressure * R0 >= Et:
         raise SolverError(f"the root wall (E·t = {Et:g} kPa·mm) cannot hold {pressure:g} kPa: "
-                          "increase root.youngs_modulus or root.wall_thickness")
-    # the leaflets can only pull inwards, so the free tube's radius bounds the solution
-    R_free = R0 / (1.0 - pressure * R0 / Et)
-    if pressure == 0:
+                          "increase root.youngs_modulus or root.wall_thickness, or prescribe "
+                          "root.loaded_diameter")
+    elif pressure == 0:
         R = R0
-    elif balance(R_free) >= 0.0:
-        R = R_free
     else:
-        R = brentq(balance, R0, R_free, xtol=1e-10)
+        # the leaflets can only pull inwards, so the free tube's radius bounds the solution
+        R_free = R0 / (1.0 - pressure * R0 / Et)
+        R = R_free if balance(R_free) >= 0.0 else brentq(balance, R0, R_free, xtol=1e-10)
     state = RootState(zero_pressure_diameter=2 * R0, diameter=2 * R, hoop_strain=R / R0 - 1,
-                      leaflet_line_load=leaflet_pull(R), pressure=pressure)
-    log.info("root: d0 = %.3f mm -> d = %.3f mm at %.3f kPa (hoop strain %.3f, leaflet pull "
-             "%.3g mN/mm)", state.zero_pressure_diameter, state.diameter, pressure,
-             state.hoop_strain, state.leaflet_line_load)
+                      leaflet_line_load=leaflet_pull(R), pressure=pressure,
+                      prescribed=params.loaded_diameter is not None)
+    log.info("root: d0 = %.3f mm -> d = %.3f mm%s at %.3f kPa (hoop strain %.3f, leaflet pull "
+             "%.3g mN/mm)", state.zero_pressure_diameter, state.diameter,
+             " (prescribed)" if state.prescribed else "", pressure, state.hoop_strain,
+             state.leaflet_line_load)
     return state
