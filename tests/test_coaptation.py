@@ -11,6 +11,14 @@ taken from the code:
   every triangle, so the P1 region is exactly y ∈ [8, 12]: height 4 mm at
   every x, flat area 20·4 = 80 mm², and with the 3-D map stretched by 1.1
   across, loaded area 22·4 = 88 mm² (the fold is an isometry in y).
+* Dip: the fold line raised by d over a strip |x - c| <= w/2 of the flat
+  sheet (grid lines at c ± w/2 and at c ± (w/2 + 0.05), where the fold comes
+  back down to 8.2, and at y = 8 + d, 8.2 + d).  Every node column of the
+  strip is then at distance 0.3 + max(8.2 + d - y, 0) from B, so the region
+  there is y ∈ [8 + d, 12], height 4 - d; beside the 0.05 mm ramps it is 4,
+  and on a ramp the gap lies between the two, so the height does too.  The
+  minimum on a side of the midline is 4 - d if the strip reaches into that
+  side (outside the nodulus length l, centred on the midline), else 4.
 * Orifice: three 120° sectors of radius 10 mm in z = 0.  The orifice disk is
   the attachment circle less two pixels: radius 10 - 2·0.05 = 9.9 mm.
   Truncating each sector by the chord at distance ρ from the centre leaves an
@@ -137,11 +145,24 @@ def _valve(sheets: list[dict]) -> tuple[ValveMesh, np.ndarray]:
     return valve, valve.points.copy()
 
 
-def _band_valve(b_x_from: float = -15.0) -> tuple[ValveMesh, np.ndarray]:
-    """Sheet A folded under sheet B (see the module docstring); B spans x >= b_x_from."""
-    a = _grid(np.linspace(-10.0, 10.0, 21), np.union1d(np.arange(13.0), [8.2]))
+def _band_valve(b_x_from: float = -15.0, dip_at: float | None = None, depth: float = 0.0,
+                width: float = 0.5, ramp: float = 0.05) -> tuple[ValveMesh, np.ndarray]:
+    """Sheet A folded under sheet B (see the module docstring); B spans x >= b_x_from.
+
+    With ``dip_at = c`` the fold line is raised by ``depth`` over the node columns
+    ``|x - c| <= width/2`` (and comes back to 8.2 at ``|x - c| = width/2 + ramp``).
+    """
+    xs, ys = np.linspace(-10.0, 10.0, 21), np.union1d(np.arange(13.0), [8.2])
+    if dip_at is not None:
+        half = 0.5 * width
+        xs = np.union1d(xs, [dip_at + s * d for s in (-1, 1) for d in (half, half + ramp)])
+        ys = np.union1d(ys, [8.0 + depth, 8.2 + depth])
+    a = _grid(xs, ys)
     x, y = a["flat"].T
-    a["xyz"] = np.stack([1.1 * x, np.maximum(y, 8.2), np.minimum(y - 8.2, 0.0)], 1)
+    fold = np.full_like(x, 8.2)
+    if dip_at is not None:
+        fold[np.abs(x - dip_at) <= 0.5 * width + 1e-12] += depth
+    a["xyz"] = np.stack([1.1 * x, np.maximum(y, fold), np.minimum(y - fold, 0.0)], 1)
     b = _grid(np.linspace(b_x_from, 15.0, int(round(15.0 - b_x_from)) + 1),
               np.linspace(-2.0, 16.0, 19))
     b["xyz"] = np.column_stack([b["flat"], np.full(len(b["flat"]), 0.3)])
@@ -198,25 +219,84 @@ def test_parallel_band_height_and_area_exact():
         88.0 + res.leaflets["right_coronary"].area_mm2)
 
 
-def test_band_missing_on_one_side_gives_zero_min_height():
+def test_band_missing_on_one_side_shows_on_that_side_only():
     # B now covers 3-D x >= 0 only: A's columns x >= 0 keep the 4 mm band; A's nodes at
     # flat x <= -1 (3-D x <= -1.1) are >= sqrt(0.3² + 1.1²) > 0.5 from B, so h = 0 there.
     valve, x = _band_valve(b_x_from=0.0)
-    a = analyse_coaptation(x, valve, THRESHOLD, orifice=False,
-                           central_band_mm=0.0).leaflets["left_coronary"]
+    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False)
+    a = res.leaflets["left_coronary"]
     assert np.allclose(a.height_mm[a.x_mm >= -1e-9], 4.0, atol=1e-9)
-    assert np.all(a.height_mm[a.x_mm <= -1.05] == 0.0)
+    assert np.all(a.height_mm[a.x_mm <= -1.0] == 0.0)
+    assert a.min_height_left_mm == 0.0
+    assert a.min_height_right_mm == pytest.approx(4.0, abs=1e-9)
+    assert a.min_height_mm == 0.0 and a.min_height_raw_mm == 0.0
+    assert a.min_height_x_mm <= -1.0
     assert a.central_height_mm == pytest.approx(4.0, abs=1e-9)
     assert a.midline_height_mm == pytest.approx(4.0, abs=1e-9)
-    assert a.min_height_mm == 0.0
-    # default band b = 1 mm: the central height is c0 of the line c0 + c1|x| fitted over
-    # 1 <= |x| <= 2.  Flat x <= -1 (3-D x <= -1.1) is >= 1.14 mm from B, so h = 0 there and
-    # h = 4 at x >= 0: a symmetric sample set of zeros and fours has c1 = 0, c0 = 2
+    assert res.min_native_height_mm == 0.0 and res.min_native_height_raw_mm == 0.0
+
+
+# --- a narrow dip in the coaptation region ---------------------------------------------------
+DIP_DEPTH = 1.5  # h = 4 - 1.5 = 2.5 mm over the dip (module docstring)
+DIP_WIDTH = 0.5
+
+
+@pytest.mark.parametrize("dip_at, low_sides", [(0.0, {"left", "right"}), (3.0, {"right"}),
+                                                (-3.0, {"left"})])
+def test_narrow_dip_is_found_on_its_own_side(dip_at, low_sides):
+    """A 0.5 mm wide dip at the midline or 3 mm off it, with no nodulus (the default)."""
+    valve, x = _band_valve(dip_at=dip_at, depth=DIP_DEPTH, width=DIP_WIDTH)
+    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False)
+    a = res.leaflets["left_coronary"]
+    low = 4.0 - DIP_DEPTH
+    for side in ("left", "right"):
+        expected = low if side in low_sides else 4.0
+        assert getattr(a, f"min_height_{side}_mm") == pytest.approx(expected, abs=0.05)
+    assert a.min_height_raw_mm == pytest.approx(low, abs=0.05)
+    assert a.min_height_mm == pytest.approx(low, abs=0.05)
+    assert abs(a.min_height_x_mm - dip_at) <= 0.5 * DIP_WIDTH + 1e-9
+    central = low if dip_at == 0.0 else 4.0
+    assert a.central_height_mm == pytest.approx(central, abs=0.05)
+    assert a.midline_height_mm == pytest.approx(central, abs=0.05)
+    fields = res.result_fields()
+    assert fields["min_coaptation_height_mm"] == pytest.approx(low, abs=0.05)
+    assert fields["min_coaptation_height_raw_mm"] == fields["min_coaptation_height_mm"]
+    assert fields["central_coaptation_height_mm"] == pytest.approx(central, abs=0.05)
+
+
+@pytest.mark.parametrize("nodulus", [0.3, 1.0])
+@pytest.mark.parametrize("dip_at", [0.0, 3.0])
+def test_nodulus_hides_only_a_dip_narrower_than_itself(nodulus, dip_at):
+    """The main minimum finds the dip when it is wider than the nodulus, the raw one always."""
+    valve, x = _band_valve(dip_at=dip_at, depth=DIP_DEPTH, width=DIP_WIDTH)
+    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False, nodulus_length_mm=nodulus)
+    a = res.leaflets["left_coronary"]
+    low = 4.0 - DIP_DEPTH
+    # the dip is seen outside the nodulus if it is off the midline or wider than the nodulus
+    seen = dip_at != 0.0 or DIP_WIDTH > nodulus
+    assert a.min_height_raw_mm == pytest.approx(low, abs=0.05)
+    assert a.min_height_mm == pytest.approx(low if seen else 4.0, abs=0.05)
+    assert res.min_native_height_raw_mm == pytest.approx(low, abs=0.05)
+    assert res.min_native_height_mm == pytest.approx(low if seen else 4.0, abs=0.05)
+    assert res.result_fields()["min_coaptation_height_raw_mm"] == pytest.approx(low, abs=0.05)
+    # the central height is read at the edge of the nodulus, x = ±l/2
+    central = low if dip_at == 0.0 and seen else 4.0
+    assert a.central_height_mm == pytest.approx(central, abs=0.05)
+    assert a.midline_height_mm == pytest.approx(low if dip_at == 0.0 else 4.0, abs=0.05)
+    assert a.to_dict()["nodulus_length_mm"] == nodulus
+
+
+def test_dip_between_profile_samples_is_found_exactly():
+    # a V-shaped dip: one node column at x = 3.03 raised by d, back to the band 0.05 mm either
+    # side.  The evenly spaced samples (every 0.1 mm) fall at 3.0 and 3.1, on its flanks, but
+    # the profile is also evaluated at every vertex abscissa, where h = 4 - d exactly.
+    valve, x = _band_valve(dip_at=3.03, depth=DIP_DEPTH, width=0.0)
     a = analyse_coaptation(x, valve, THRESHOLD, orifice=False).leaflets["left_coronary"]
-    assert a.central_height_mm == pytest.approx(2.0, abs=1e-9)
-    assert a.midline_height_mm == pytest.approx(4.0, abs=1e-9)
-    assert a.min_height_mm == 0.0
-    assert a.min_height_x_mm <= -1.0
+    assert a.min_height_right_mm == pytest.approx(4.0 - DIP_DEPTH, abs=1e-9)
+    assert a.min_height_x("right") == pytest.approx(3.03, abs=1e-12)
+    assert a.min_height_left_mm == pytest.approx(4.0, abs=1e-9)
+    flank = a.height_mm[np.isclose(a.x_mm, 3.0)][0]
+    assert flank > 4.0 - DIP_DEPTH + 0.5  # what a sampled minimum would have reported
 
 
 def test_coaptation_height_profile_counts_vertical_edges_once():
@@ -339,6 +419,8 @@ def test_bad_positions_raise(mutate, match):
     ({"threshold_mm": float("nan")}, "threshold_mm"),
     ({"pixel_mm": 0.0}, "pixel_mm"),
     ({"pixel_mm": 0.4}, "pixel_mm"),
+    ({"nodulus_length_mm": -0.5}, "nodulus_length_mm"),
+    ({"nodulus_length_mm": float("nan")}, "nodulus_length_mm"),
 ])
 def test_bad_parameters_raise(kwargs, match):
     valve, x = _three_sectors(rho=1.0)
@@ -383,10 +465,12 @@ def test_folded_real_valve_smoke(tmp_path):
     assert np.ptp(heights) < 1e-6  # the fold is three-fold symmetric, so is the mesh
     assert math.isfinite(res.regurgitant_orifice_area_mm2) and res.regurgitant_orifice_area_mm2 >= 0
     assert 0.0 < res.min_native_height_mm <= res.central_native_height_mm
+    assert res.min_native_height_raw_mm == res.min_native_height_mm  # no nodulus by default
     for lc in res.leaflets.values():
         assert 0.0 < lc.area_mm2 and np.all(np.isfinite(lc.node_gap_mm))
     json.dumps(res.to_dict())
     assert set(res.result_fields()) >= {"min_coaptation_height_mm", "competent",
+                                        "min_coaptation_height_raw_mm",
                                         "central_coaptation_height_mm", "coaptation_area_mm2",
                                         "regurgitant_orifice_area_mm2"}
     png = plot_coaptation_map(res, valve, tmp_path / "coaptation_map.png")

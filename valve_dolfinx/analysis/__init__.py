@@ -12,6 +12,7 @@ from valve_dolfinx.analysis.coaptation import (
     distance_to_surface,
     fraction_below,
     leaflet_pair_gaps,
+    profile_break_points,
     region_area,
     regurgitant_orifice_area,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "orifice_leak_map",
     "plot_coaptation_map",
     "plot_orifice_map",
+    "profile_break_points",
     "rasterise_footprint",
     "through_flow",
     "region_area",

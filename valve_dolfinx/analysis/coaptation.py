@@ -12,19 +12,21 @@ Definitions (the reasoning is in ``docs/coaptation.md``):
 * **Coaptation height profile** ``h(x)``: on the *flat reference* leaflet, the
   length of the part of the line perpendicular to the free edge (the vertical
   line at abscissa ``x``) that lies in the region.  Computed exactly for the
-  P1 gap by clipping the line against every triangle.  ``min_height`` is the
-  minimum of ``h`` over the free-edge span and ``central_height`` the height at
-  the midline, both read outside a central band ``|x| < b`` (``b`` = 1 mm):
-  ``central_height`` is ``c0`` of the least-squares line ``h ≈ c0 + c1·|x|``
-  over ``b <= |x| <= 2b`` (the V-shaped profile beside the midline,
-  extrapolated to it), ``min_height = min(central_height, min_{|x|>=b} h)``.
-  The midline ends at the triple point where the three free edges meet and
-  the profile is a steep V there; its tip ``h(0)`` depends on how the slack
-  free edge folds into the triple point: without bending stiffness it jumped
-  by ±0.5 mm between meshes, with it (the closure default) it still changes
-  by 0.45 mm from the 1.0 to the 0.8 mm mesh, while ``c0`` changes by
-  0.15 mm and then 0.02 mm (docs/closure.md).  Real leaflets fill this spot
-  with the nodulus of Arantius.  ``h(0)`` is reported as ``midline_height``.
+  P1 gap by clipping the line against every triangle.  ``h`` is piecewise
+  linear in ``x``, with breaks only at the abscissae of mesh vertices and of
+  the points where the level line ``gap = threshold`` crosses a mesh edge; the
+  profile is evaluated at all of them, so its minima are exact, not sampled.
+* **Minimum coaptation height**, each side of the midline ``x = m`` on its
+  own: ``min_height_left = min h`` over ``x <= m - l/2`` and
+  ``min_height_right = min h`` over ``x >= m + l/2``; ``min_height`` is the
+  smaller of the two.  ``l`` (``nodulus_length_mm``, default 0) is the length
+  along the free edge of the nodulus of Arantius, the thickened tip of a real
+  cusp at the triple point, which a membrane model does not have; with
+  ``l = 0`` nothing is left out.  ``min_height_raw = min h`` over the whole
+  free edge, tip included, is reported beside it.  No fit, no extrapolation.
+* **Central coaptation height**: ``h(m)``; with a nodulus length ``l > 0``,
+  the smaller of ``h(m - l/2)`` and ``h(m + l/2)`` (the edge of the tip, on
+  the lower side).  ``h(m)`` itself is always reported as ``midline_height``.
 * **Coaptation area**: the region's area on the loaded triangles (and, for
   reference, on the flat triangles), exact for the P1 level set.
 * **Regurgitant orifice area**: see :mod:`valve_dolfinx.analysis.orifice`.
@@ -46,7 +48,7 @@ from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh
 __all__ = [
     "DEFAULT_THRESHOLD_MM",
     "DEFAULT_PIXEL_MM",
-    "DEFAULT_CENTRAL_BAND_MM",
+    "DEFAULT_NODULUS_LENGTH_MM",
     "PROFILE_SAMPLES",
     "LeafletCoaptation",
     "CoaptationResult",
@@ -57,6 +59,7 @@ __all__ = [
     "fraction_below",
     "region_area",
     "coaptation_height_profile",
+    "profile_break_points",
 ]
 
 log = logging.getLogger(__name__)
@@ -65,10 +68,15 @@ log = logging.getLogger(__name__)
 DEFAULT_THRESHOLD_MM = 0.5
 #: Pixel edge of the cross-section raster for the regurgitant orifice (mm).
 DEFAULT_PIXEL_MM = 0.05
-#: Abscissae of the coaptation height profile along the flat free edge.
+#: Evenly spaced abscissae of the height profile along the flat free edge (for the map);
+#: the profile's break points are added to them, so the minima do not depend on this.
 PROFILE_SAMPLES = 201
-#: Half-width (mm, flat) of the central band left out of the heights (triple-point tip)
-DEFAULT_CENTRAL_BAND_MM = 1.0
+#: Length (mm, flat, centred on the midline) of the free-edge tip treated as the nodulus
+#: of Arantius.  0: the membrane model has no nodulus, so nothing is left out
+#: (docs/coaptation.md §2).
+DEFAULT_NODULUS_LENGTH_MM = 0.0
+#: Round-off allowance (mm) when a sample is tested against the edge of the nodulus.
+_ON_POINT_MM = 1e-9
 
 
 # --- results -------------------------------------------------------------------------------
@@ -76,9 +84,13 @@ DEFAULT_CENTRAL_BAND_MM = 1.0
 class LeafletCoaptation:
     """Coaptation of one leaflet (lengths in mm, areas in mm²).
 
-    ``x_mm``/``height_mm`` are the height profile ``h(x)`` on the flat leaflet;
-    ``node_gap_mm`` holds, per local node, the loaded distance to the nearest
-    other leaflet's surface.
+    ``x_mm``/``height_mm`` are the height profile ``h(x)`` on the flat leaflet
+    (sorted abscissae, the profile's break points included); ``node_gap_mm``
+    holds, per local node, the loaded distance to the nearest other leaflet's
+    surface.  ``min_height_left_mm``/``min_height_right_mm`` are the minima of
+    ``h`` on either side of the midline outside the nodulus (``nodulus_length_mm``
+    centred on the midline), ``min_height_mm`` the smaller of the two, and
+    ``min_height_raw_mm`` the minimum over the whole free edge.
     """
 
     name: str
@@ -90,19 +102,31 @@ class LeafletCoaptation:
     x_mm: np.ndarray = field(repr=False)
     height_mm: np.ndarray = field(repr=False)
     node_gap_mm: np.ndarray = field(repr=False)
+    min_height_left_mm: float = math.nan
+    min_height_right_mm: float = math.nan
+    min_height_raw_mm: float = math.nan
     midline_height_mm: float = math.nan
-    central_band_mm: float = 0.0
+    nodulus_length_mm: float = 0.0
+
+    @property
+    def midline_mm(self) -> float:
+        """Flat abscissa of the midline (the middle of the free edge)."""
+        return 0.5 * float(self.x_mm[0] + self.x_mm[-1])
+
+    def side_mask(self, side: str) -> np.ndarray:
+        """Samples of one side (``"left"``/``"right"``) of the midline, outside the nodulus."""
+        return _side_mask(self.x_mm, self.midline_mm, self.nodulus_length_mm, side)
+
+    def min_height_x(self, side: str) -> float:
+        """Flat abscissa of the minimum of ``h`` on one side of the midline."""
+        inside = self.side_mask(side)
+        return float(self.x_mm[inside][int(np.argmin(self.height_mm[inside]))])
 
     @property
     def min_height_x_mm(self) -> float:
-        """Flat abscissa where ``h(x)`` is smallest outside the central band."""
-        outside = np.abs(self.x_mm - self._midline) >= self.central_band_mm
-        h = np.where(outside, self.height_mm, np.inf)
-        return float(self.x_mm[int(np.argmin(h))])
-
-    @property
-    def _midline(self) -> float:
-        return 0.5 * float(self.x_mm[0] + self.x_mm[-1])
+        """Flat abscissa of ``min_height_mm`` (the lower side's minimum)."""
+        side = "left" if self.min_height_left_mm <= self.min_height_right_mm else "right"
+        return self.min_height_x(side)
 
     def to_dict(self) -> dict:
         return {
@@ -110,9 +134,14 @@ class LeafletCoaptation:
             "is_graft": bool(self.is_graft),
             "min_height_mm": _json_float(self.min_height_mm),
             "min_height_x_mm": _json_float(self.min_height_x_mm),
+            "min_height_left_mm": _json_float(self.min_height_left_mm),
+            "min_height_left_x_mm": _json_float(self.min_height_x("left")),
+            "min_height_right_mm": _json_float(self.min_height_right_mm),
+            "min_height_right_x_mm": _json_float(self.min_height_x("right")),
+            "min_height_raw_mm": _json_float(self.min_height_raw_mm),
             "central_height_mm": _json_float(self.central_height_mm),
             "midline_height_mm": _json_float(self.midline_height_mm),
-            "central_band_mm": _json_float(self.central_band_mm),
+            "nodulus_length_mm": _json_float(self.nodulus_length_mm),
             "area_mm2": _json_float(self.area_mm2),
             "reference_area_mm2": _json_float(self.reference_area_mm2),
         }
@@ -123,7 +152,9 @@ class CoaptationResult:
     """Coaptation of the whole valve (SPEC §6).
 
     ``min_native_height_mm`` -- the minimum over native (non-graft) leaflets of
-    their minimum coaptation height -- is the study's figure of merit.
+    their minimum coaptation height -- is the study's figure of merit;
+    ``min_native_height_raw_mm`` is the same with the nodulus tip included
+    (equal to it when ``nodulus_length_mm`` is 0).
     """
 
     leaflets: dict[str, LeafletCoaptation]
@@ -133,6 +164,8 @@ class CoaptationResult:
     min_native_height_mm: float
     central_native_height_mm: float
     coaptation_area_mm2: float
+    min_native_height_raw_mm: float = math.nan
+    nodulus_length_mm: float = 0.0
 
     def to_dict(self) -> dict:
         """JSON-ready scalars (no arrays); NaN becomes ``None``."""
@@ -141,6 +174,8 @@ class CoaptationResult:
             "regurgitant_orifice_area_mm2": _json_float(self.regurgitant_orifice_area_mm2),
             "competent": bool(self.competent),
             "min_native_height_mm": _json_float(self.min_native_height_mm),
+            "min_native_height_raw_mm": _json_float(self.min_native_height_raw_mm),
+            "nodulus_length_mm": _json_float(self.nodulus_length_mm),
             "central_native_height_mm": _json_float(self.central_native_height_mm),
             "coaptation_area_mm2": _json_float(self.coaptation_area_mm2),
             "leaflets": {name: lc.to_dict() for name, lc in self.leaflets.items()},
@@ -150,9 +185,19 @@ class CoaptationResult:
         """The coaptation fields of a case result under their SPEC §7 names."""
         d = self.to_dict()
         return {"min_coaptation_height_mm": d["min_native_height_mm"],
+                "min_coaptation_height_raw_mm": d["min_native_height_raw_mm"],
                 "central_coaptation_height_mm": d["central_native_height_mm"],
                 **{k: d[k] for k in ("coaptation_area_mm2", "regurgitant_orifice_area_mm2",
                                      "competent")}}
+
+
+def _side_mask(x: np.ndarray, midline: float, nodulus: float, side: str) -> np.ndarray:
+    offset = x - midline
+    if side == "left":
+        return offset <= -0.5 * nodulus + _ON_POINT_MM
+    if side == "right":
+        return offset >= 0.5 * nodulus - _ON_POINT_MM
+    raise ParameterError(f"side = {side!r}; use 'left' or 'right'")
 
 
 def _json_float(value: float) -> float | None:
@@ -310,37 +355,55 @@ def coaptation_height_profile(flat: np.ndarray, triangles: np.ndarray, gap: np.n
     return h
 
 
+def profile_break_points(flat: np.ndarray, triangles: np.ndarray, gap: np.ndarray,
+                         threshold: float) -> np.ndarray:
+    """Abscissae where the height profile ``h(x)`` can change slope (sorted, unique).
+
+    Between two consecutive mesh-vertex abscissae each vertical line cuts the
+    same triangles through the same edges, so the cut segments' end points
+    move linearly in ``x``; inside a triangle the region's boundary is a
+    straight piece of the level line ``gap = threshold``.  ``h`` is therefore
+    piecewise linear, with breaks at the vertex abscissae and where the level
+    line crosses an edge, and its minimum over an interval is attained at one
+    of these points or at the interval's ends.
+    """
+    edges = np.unique(np.sort(np.concatenate(
+        [triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1), axis=0)
+    fa, fb = gap[edges[:, 0]] - threshold, gap[edges[:, 1]] - threshold
+    cross = fa * fb < 0.0
+    t = fa[cross] / (fa[cross] - fb[cross])
+    xa, xb = flat[edges[cross, 0], 0], flat[edges[cross, 1], 0]
+    return np.unique(np.concatenate([flat[:, 0], xa + t * (xb - xa)]))
+
+
 def _leaflet_coaptation(patch: LeafletPatch, loaded: np.ndarray, gap: np.ndarray,
-                        threshold: float, samples: int, band: float) -> LeafletCoaptation:
+                        threshold: float, samples: int, nodulus: float) -> LeafletCoaptation:
     fx = patch.flat[patch.free_edge, 0]
     x_left, x_right = float(fx.min()), float(fx.max())
     midline = 0.5 * (x_left + x_right)  # x = 0 for the symmetric leaflet outlines
-    x = np.linspace(x_left, x_right, samples)
-    # the band's edges are sampled exactly
-    x = np.union1d(x, [midline - 2 * band, midline - band, midline, midline + band,
-                       midline + 2 * band])
+    tip = [midline - 0.5 * nodulus, midline, midline + 0.5 * nodulus]
+    breaks = profile_break_points(patch.flat, patch.triangles, gap, threshold)
+    x = np.union1d(np.linspace(x_left, x_right, samples), np.concatenate([breaks, tip]))
+    x = x[(x >= x_left) & (x <= x_right)]
     h = coaptation_height_profile(patch.flat, patch.triangles, gap, threshold, x)
-    midline_height = float(h[int(np.argmin(np.abs(x - midline)))])
-    offset = np.abs(x - midline)
-    outside = offset >= band - 1e-12
-    if band > 0.0:  # h ≈ c0 + c1·|x| beside the tip: extrapolate to the midline
-        fit = outside & (offset <= 2 * band + 1e-12)
-        design = np.stack([np.ones(int(fit.sum())), offset[fit]], axis=1)
-        central = float(np.linalg.lstsq(design, h[fit], rcond=None)[0][0])
-    else:
-        central = midline_height
+    left, right = (float(h[_side_mask(x, midline, nodulus, side)].min())
+                   for side in ("left", "right"))
+    h_at = [float(h[int(np.argmin(np.abs(x - xt)))]) for xt in tip]
     return LeafletCoaptation(
         name=patch.name,
         is_graft=bool(patch.is_graft),
-        min_height_mm=float(min(h[outside].min(), central)),
-        central_height_mm=central,
+        min_height_mm=min(left, right),
+        central_height_mm=min(h_at[0], h_at[2]),  # the edge of the tip, on the lower side
         area_mm2=region_area(loaded, patch.triangles, gap, threshold),
         reference_area_mm2=region_area(patch.flat, patch.triangles, gap, threshold),
         x_mm=x,
         height_mm=h,
         node_gap_mm=gap,
-        midline_height_mm=midline_height,
-        central_band_mm=band,
+        min_height_left_mm=left,
+        min_height_right_mm=right,
+        min_height_raw_mm=float(h.min()),
+        midline_height_mm=h_at[1],
+        nodulus_length_mm=nodulus,
     )
 
 
@@ -367,7 +430,8 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
                        pixel_mm: float = DEFAULT_PIXEL_MM, *,
                        profile_samples: int = PROFILE_SAMPLES,
                        orifice: bool = True,
-                       central_band_mm: float = DEFAULT_CENTRAL_BAND_MM) -> CoaptationResult:
+                       nodulus_length_mm: float = DEFAULT_NODULUS_LENGTH_MM
+                       ) -> CoaptationResult:
     """Coaptation region, heights, area and competence of a loaded valve (SPEC §6).
 
     Parameters
@@ -383,16 +447,18 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         Pixel edge of the cross-section raster used for the regurgitant
         orifice area; at most ``threshold_mm / 2``.
     profile_samples
-        Number of abscissae of the height profile along the flat free edge.
+        Number of evenly spaced abscissae of the height profile along the flat
+        free edge (for the map); the profile's break points are always added.
     orifice
         Compute the regurgitant orifice area (the default).  ``False`` skips it
         -- for constructed surfaces that have no orifice around the z axis --
         and reports it as NaN (``competent`` is then ``False``).
-    central_band_mm
-        Half-width ``b`` (flat mm) of the band around the midline that the
-        heights leave out: the central height is extrapolated to the midline
-        from ``b <= |x| <= 2b`` and the minimum is taken over ``|x| >= b`` (see
-        the module docstring).  0 reads ``h`` at the midline itself.
+    nodulus_length_mm
+        Length ``l`` (flat mm along the free edge, centred on the midline) of
+        the triple-point tip treated as the nodulus of Arantius: the side
+        minima are taken over ``|x - m| >= l/2`` and the central height at
+        ``x = m ± l/2`` (the lower of the two).  0 (the default) leaves nothing
+        out; ``min_native_height_raw_mm`` always includes the tip.
 
     Returns
     -------
@@ -405,13 +471,15 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         raise ParameterError(f"profile_samples = {profile_samples!r}; use at least 3 "
                              "(201 by default)")
     threshold = float(threshold_mm)
-    band = check_range("central_band_mm", central_band_mm, 0.0, 5.0, unit="mm")
+    nodulus = check_range("nodulus_length_mm", nodulus_length_mm, 0.0, 5.0, unit="mm",
+                          hint="the nodulus of Arantius is a small thickening at the middle "
+                          "of the free edge; 0 (the default) treats no tip")
     pair_gaps = leaflet_pair_gaps(x, valve)
     leaflets = {}
     for i, patch in enumerate(valve.leaflets):
         gap = np.min([g for (a, _), g in pair_gaps.items() if a == i], axis=0)
         leaflets[patch.name] = _leaflet_coaptation(patch, x[patch.nodes], gap, threshold,
-                                                   int(profile_samples), band)
+                                                   int(profile_samples), nodulus)
     ro_area = (orifice_leak_map(x, valve, pair_gaps, threshold, float(pixel_mm))[0]
                if orifice else math.nan)
     native = [lc for lc in leaflets.values() if not lc.is_graft]
@@ -423,12 +491,16 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         regurgitant_orifice_area_mm2=ro_area,
         competent=ro_area == 0.0,
         min_native_height_mm=min((lc.min_height_mm for lc in native), default=math.nan),
+        min_native_height_raw_mm=min((lc.min_height_raw_mm for lc in native),
+                                     default=math.nan),
+        nodulus_length_mm=nodulus,
         central_native_height_mm=min((lc.central_height_mm for lc in native),
                                      default=math.nan),
         coaptation_area_mm2=float(sum(lc.area_mm2 for lc in leaflets.values())),
     )
-    log.info("coaptation: min native height %.3f mm, central %.3f mm, area %.2f mm², "
-             "regurgitant orifice %.3f mm² (%s)", result.min_native_height_mm,
-             result.central_native_height_mm, result.coaptation_area_mm2, ro_area,
+    log.info("coaptation: min native height %.3f mm (raw %.3f mm), central %.3f mm, "
+             "area %.2f mm², regurgitant orifice %.3f mm² (%s)", result.min_native_height_mm,
+             result.min_native_height_raw_mm, result.central_native_height_mm,
+             result.coaptation_area_mm2, ro_area,
              "competent" if result.competent else "incompetent")
     return result

@@ -59,9 +59,9 @@ def plot_coaptation_map(result: CoaptationResult, valve: ValveMesh, path: str | 
 
     Top row: each leaflet's flat (reference) outline -- attachment edge thin,
     free edge thick -- with the region ``gap <= threshold`` filled.  Bottom
-    row: the coaptation height profile ``h(x)`` along the free edge, its
-    minimum and its central value, with the central band that both leave out
-    (the free-edge tip at the triple point, see :mod:`.coaptation`) shaded.
+    row: the coaptation height profile ``h(x)`` along the free edge, the
+    minimum on each side of the midline and the central value, with the
+    nodulus tip (if ``nodulus_length_mm > 0``, see :mod:`.coaptation`) shaded.
     All panels share one length scale; the graft is drawn in blue and labelled.
     """
     plt = _pyplot()
@@ -87,15 +87,16 @@ def plot_coaptation_map(result: CoaptationResult, valve: ValveMesh, path: str | 
             ax.set_ylabel("y above nadir (mm)")
         bx = axes[1, k]
         bx.plot(lc.x_mm, lc.height_mm, color=_GRAFT_COLOUR if patch.is_graft else "k", lw=1.3)
-        band = lc.central_band_mm
-        if band > 0.0:
-            bx.axvspan(-band, band, color="0.85", zorder=0,
-                       label=f"free-edge tip, |x| < {band:g} mm: left out")
-        bx.axhline(lc.min_height_mm, color=_REGION_COLOUR, ls="--", lw=1.0,
-                   label=f"min {lc.min_height_mm:.2f} mm")
-        bx.plot([0.0], [lc.central_height_mm], "o", color=_REGION_COLOUR,
-                label=f"central {lc.central_height_mm:.2f} mm"
-                      + (" (extrapolated)" if band > 0.0 else ""))
+        tip = 0.5 * lc.nodulus_length_mm
+        if tip > 0.0:
+            bx.axvspan(lc.midline_mm - tip, lc.midline_mm + tip, color="0.85", zorder=0,
+                       label=f"nodulus {lc.nodulus_length_mm:g} mm "
+                             f"(raw min {lc.min_height_raw_mm:.2f} mm)")
+        for side, value in (("left", lc.min_height_left_mm), ("right", lc.min_height_right_mm)):
+            bx.plot([lc.min_height_x(side)], [value], "v", color=_REGION_COLOUR, ms=5,
+                    label=f"min {side} {value:.2f} mm")
+        bx.plot([lc.midline_mm], [lc.central_height_mm], "o", color=_REGION_COLOUR,
+                label=f"central {lc.central_height_mm:.2f} mm")
         bx.set(xlim=(-xlim, xlim), ylim=(0, hmax), xlabel="x along free edge (mm)")
         if k == 0:
             bx.set_ylabel("coaptation height h(x) (mm)")
