@@ -5,6 +5,9 @@ Commands
 mesh    write the default valve meshes (normal and graft) for ParaView and reuse
 run     close one valve (normal, or with a graft) under 80 mmHg and write
         result.json, ParaView fields and figures to --out
+sweep   the graft sizing study: the normal valve and every graft of a width x height
+        grid (resumable, spread over MPI ranks; --list / --case-index for job arrays)
+report  rebuild a study folder's tables, figures, recommendation and report.md
 """
 
 from __future__ import annotations
@@ -150,6 +153,139 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0 if result.converged else 3
 
 
+def _study_settings(args: argparse.Namespace):
+    """Study settings: defaults < the [study] section of --config < command-line flags."""
+    from valve_dolfinx.study.grid import StudySettings, load_study_toml, parse_percentages
+
+    settings = load_study_toml(args.config) if args.config else StudySettings()
+    changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
+               "target_coaptation_mm": args.target_coaptation,
+               "wall_time_limit_s": args.wall_time_limit}
+    if args.widths is not None:
+        changes["widths_pct"] = parse_percentages("--widths", args.widths, "width")
+    if args.heights is not None:
+        changes["heights_pct"] = parse_percentages("--heights", args.heights, "height")
+    return settings.replace(**changes)
+
+
+def _quiet_library(comm, verbose: bool) -> None:
+    """Rank 0 alone prints; the study's one line per case, not every solver's log."""
+    library = logging.getLogger("valve_dolfinx")
+    if comm.rank != 0:
+        library.setLevel(logging.ERROR)
+    elif not verbose:
+        library.setLevel(logging.WARNING)
+        logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
+
+
+def _sweep_bar(comm, enabled: bool):
+    """(progress callback, close) drawing one tqdm bar of cases done/total on rank 0."""
+    if comm.rank != 0 or not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+
+    state: dict = {}
+
+    def progress(event: dict) -> None:
+        if event["event"] == "start":
+            state["bar"] = tqdm(total=event["total"], initial=event["done"], unit="case",
+                                desc="sweep", dynamic_ncols=True)
+        elif event["event"] == "end":
+            close()
+        elif "bar" in state:
+            state["bar"].update(event["done"] - state["bar"].n)
+            state["bar"].set_postfix_str(f"last {event['case']}")
+
+    def close() -> None:
+        if "bar" in state:
+            state.pop("bar").close()
+
+    return progress, close
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    settings = _study_settings(args)  # a bad grid stops here, before DOLFINx is imported
+    import contextlib
+
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study, study_status, terminate_on_sigterm
+
+    comm = MPI.COMM_WORLD
+    _quiet_library(comm, args.verbose)
+    if args.list:
+        rows = study_status(settings, args.out)
+        if comm.rank == 0:
+            print(f"{'index':>5}  {'case':<10} {'W %':>6} {'H %':>6}  status in {args.out}")
+            for case, state in rows:
+                w = "" if case.is_normal else f"{case.width_pct:g}"
+                h = "" if case.is_normal else f"{case.height_pct:g}"
+                print(f"{case.index:>5}  {case.name:<10} {w:>6} {h:>6}  {state}")
+        return 0
+    terminate_on_sigterm()
+    indices = None if args.case_index is None else [args.case_index]
+    progress, close = _sweep_bar(comm, not args.no_progress and indices is None)
+    redirect = contextlib.nullcontext()
+    if progress is not None:
+        from tqdm.contrib.logging import logging_redirect_tqdm
+
+        redirect = logging_redirect_tqdm(loggers=[logging.getLogger()])
+    try:
+        with redirect:
+            outcome = run_study(settings, args.out, comm, case_indices=indices,
+                                progress=progress, report=indices is None)
+    finally:
+        close()
+    if comm.rank == 0:
+        print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
+              f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
+        if outcome.report is not None:
+            print(outcome.report.recommendation.text)
+            print(f"report: {args.out / 'report.md'}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from valve_dolfinx.exceptions import check_range
+    from valve_dolfinx.study.report import build_report
+
+    target = args.target_coaptation
+    if target is not None:
+        check_range("--target-coaptation", target, 0.0, 20.0, low_open=True, unit="mm")
+    report = build_report(args.dir, target_mm=target)
+    print(f"{len(report.rows)} case(s)"
+          + (f"; not run yet: {', '.join(report.missing)}" if report.missing else ""))
+    print(report.recommendation.text)
+    print(f"report: {args.dir / 'report.md'}")
+    return 0
+
+
+def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--widths", nargs="*", default=None, metavar="W",
+                   help="graft width enlargements in per cent (default 0 7 14 21 27)")
+    p.add_argument("--heights", nargs="*", default=None, metavar="H",
+                   help="graft height enlargements in per cent (default 0 13 27 40)")
+    p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
+                   help="target triangle edge length in mm (default: the case default)")
+    p.add_argument("--out", type=Path, default=Path("results/graft_sweep"),
+                   help="study folder (default %(default)s)")
+    p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
+                   help="configuration file; its [study] section sets the grid and the "
+                   "case settings (flags given here override it)")
+    p.add_argument("--ranks-per-case", type=int, default=None, metavar="K",
+                   help="MPI ranks per case: mpirun -n N runs N/K cases at a time (default 1)")
+    p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
+                   help="minimum coaptation height a graft must reach (default: the normal "
+                   "valve's)")
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="wall-clock limit of each case (default: the case default)")
+    p.add_argument("--list", action="store_true",
+                   help="print the cases with their index and state, and exit")
+    p.add_argument("--case-index", type=int, default=None, metavar="I",
+                   help="run case I only (see --list; for job arrays), no report")
+    p.add_argument("--no-progress", action="store_true",
+                   help="plain log lines, no progress bar (batch jobs)")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="valve-dolfinx", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -185,6 +321,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="recompute even if --out already holds this case's result.json")
     _add_geometry_args(p)
     p.set_defaults(func=_cmd_run, parser=p)
+
+    p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
+    _add_sweep_args(p)
+    p.set_defaults(func=_cmd_sweep, parser=p)
+
+    p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report")
+    p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`")
+    p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
+                   help="minimum coaptation height a graft must reach (default: the normal "
+                   "valve's, or the study's)")
+    p.set_defaults(func=_cmd_report, parser=p)
 
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,

@@ -1,0 +1,483 @@
+"""The graft sizing study (issue 19): grid validation, resumable sweeps, MPI, job arrays, report.
+
+Most tests run a fast stand-in for the case function (:func:`stand_in_case`, a
+deterministic function of the graft size that sleeps a little and writes
+stand-in pictures), so that killing, resuming and spreading a sweep over ranks
+take seconds; ``test_real_case_through_the_sweep`` runs ``run_case`` itself
+on one coarse case.  Run as a script, this file is the ``valve-dolfinx`` CLI
+with the stand-in case function (the subprocess tests use it that way).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+THIS = Path(__file__).resolve()
+BIN = Path(sys.executable).parent
+#: fields that may differ between two computations of the same case
+VOLATILE = ("wall_time_s", "n_ranks", "started_at", "finished_at", "elapsed_s", "pid", "host")
+SMALL_GRID = ["--widths", "0", "7", "--heights", "0"]
+
+
+# --- the stand-in case function --------------------------------------------------------------
+def _picture(path: Path, seed: float) -> None:
+    import matplotlib.image
+    import numpy as np
+
+    y, x = np.mgrid[0:60, 0:90] / 60.0
+    matplotlib.image.imsave(path, np.sin(6 * x + seed) * np.cos(4 * y), cmap="viridis")
+
+
+def stand_in_case(config, out_dir: Path, comm) -> dict:
+    """A case result that depends on the graft size only, written like ``run_case`` writes."""
+    g = config.geometry
+    w, h = g.graft_width_pct, g.graft_height_pct
+    assert comm.allreduce(1) == comm.size  # the case's own communicator works
+    log = os.environ.get("STUDY_RUN_LOG")
+    if log and comm.rank == 0:  # a case that starts
+        with open(log, "a") as fh:
+            fh.write(f"{'normal' if w is None else f'W{w:g}_H{h:g}'} {os.getpid()}\n")
+    time.sleep(float(os.environ.get("STUDY_STAND_IN_SLEEP", "0.05")))
+    if comm.rank == 0:
+        for name in ("closed_valve_ventricular.png", "cut_planes.png", "coaptation_map.png"):
+            _picture(Path(out_dir) / name, 0.0 if w is None else w + h)
+    if w is not None and w >= 90:
+        raise RuntimeError("stand-in failure for huge grafts")
+    area = 1.0 if w is None else (1 + w / 100) * (1 + h / 100)
+    return {"graft_width_pct": w, "graft_height_pct": h, "converged": w != 14.0,
+            "min_coaptation_height_mm": 3.0 if w is None else 2.6 + 0.04 * w + 0.01 * h,
+            "central_coaptation_height_mm": 4.0 * area, "coaptation_area_mm2": 330.0 * area,
+            "regurgitant_orifice_area_mm2": 0.0 if w is None or w > 0 else 0.25,
+            "competent": w is None or w > 0, "root_diameter_mm": 20.0,
+            "max_penetration_mm": 0.01, "n_dofs": 300, "n_ranks": comm.size,
+            "wall_time_s": 0.05, "future_field_mm": 1.5, "leaflets": {"a": {"h": 1.0}},
+            "parameters": config.to_dict(), "versions": {"stand_in": "1"}}
+
+
+def _main_with_stand_in(argv: list[str]) -> int:
+    from valve_dolfinx import cli
+    from valve_dolfinx.study import runner
+
+    runner.run_closure_case = lambda config, out, comm, **_: stand_in_case(config, out, comm)
+    return cli.main(argv)
+
+
+# --- helpers ----------------------------------------------------------------------------------
+@pytest.fixture
+def quiet_cli():
+    """Undo what the CLI does to logging levels and SIGTERM in this process."""
+    saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}
+    handler = signal.getsignal(signal.SIGTERM)
+    yield
+    for name, level in saved.items():
+        logging.getLogger(name).setLevel(level)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def _sweep_cmd(*args: str, mpi: int = 0) -> list[str]:
+    cmd = [sys.executable, str(THIS), "sweep", *args]
+    return [str(BIN / "mpirun"), "-n", str(mpi), *cmd] if mpi else cmd
+
+
+def _run(cmd: list[str], run_log: Path, sleep: float = 0.05, timeout: float = 240):
+    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": str(sleep)}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return proc
+
+
+def _runs(run_log: Path) -> list[str]:
+    return [line.split()[0] for line in run_log.read_text().splitlines()] if run_log.exists() \
+        else []
+
+
+def _stable_csv(path: Path) -> list[dict]:
+    from valve_dolfinx.study.table import read_csv_rows
+
+    return [{k: v for k, v in row.items() if k not in VOLATILE} for row in read_csv_rows(path)]
+
+
+def _stable_json(value):
+    if isinstance(value, dict):
+        return {k: _stable_json(v) for k, v in value.items() if k not in VOLATILE}
+    if isinstance(value, list):
+        return [_stable_json(v) for v in value]
+    return value
+
+
+def _reference_sweep(out: Path) -> Path:
+    """The small grid swept serially, in this process (what the subprocess sweeps must give)."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+
+    run_study(_settings(mesh_size_mm=None), out, MPI.COMM_SELF, case_function=stand_in_case)
+    return out
+
+
+def _settings(**kw):
+    from valve_dolfinx.study.grid import StudySettings
+
+    kw.setdefault("widths_pct", (0, 7))
+    kw.setdefault("heights_pct", (0,))
+    kw.setdefault("mesh_size_mm", 2.0)
+    return StudySettings(**kw)
+
+
+# --- grid and settings ------------------------------------------------------------------------
+@pytest.mark.parametrize("option,values,expect", [
+    ("--widths", ["-5"], ["'-5'", "[0, 100] %"]),
+    ("--widths", ["0", "7", "7.0"], ["'7.0'", "twice", "[0, 100] %"]),
+    ("--heights", ["13", "abc"], ["'abc'", "not a number", "[0, 100] %"]),
+    ("--heights", ["1e6"], ["'1e6'", "[0, 100] %"]),
+    ("--widths", ["nan"], ["'nan'", "[0, 100] %"]),
+    ("--widths", [], ["--widths is empty", "[0, 100] %"]),
+    ("--mesh-size", ["40"], ["mesh_size = 40.0", "[0.05, 2.5] mm"]),
+    ("--ranks-per-case", ["0"], ["ranks_per_case = 0", ">= 1"]),
+])
+def test_invalid_grid_stops_before_computing(tmp_path, caplog, quiet_cli, monkeypatch, option,
+                                             values, expect):
+    """A bad value stops the sweep at once with one line naming it and its range; nothing is
+    computed and the output folder is not even created."""
+    from valve_dolfinx import cli
+    from valve_dolfinx.study import runner
+
+    def must_not_run(*args, **kw):
+        raise AssertionError("a case ran")
+
+    monkeypatch.setattr(runner, "run_closure_case", must_not_run)
+    out = tmp_path / "study"
+    argv = ["sweep", "--widths", "0", "7", "--heights", "0", "--out", str(out), option, *values]
+    assert cli.main(argv) == 2
+    err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(err) == 1 and err[0].startswith("error: ") and "\n" not in err[0], err
+    for text in expect:
+        assert text in err[0]
+    assert not out.exists()
+
+
+def test_settings_from_toml(tmp_path):
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.grid import load_study_toml
+    from valve_dolfinx.study.runner import case_configs
+
+    path = tmp_path / "study.toml"
+    path.write_text('[study]\nwidths = [14, 0]\nheights = "0, 27"\nmesh_size = 1.5\n'
+                    'panel_cases = ["W14_H27"]\n[study.case.dynamics]\nmax_steps = 77\n'
+                    '[other]\nignored = 1\n')
+    settings = load_study_toml(path)
+    assert settings.widths_pct == (0.0, 14.0) and settings.heights_pct == (0.0, 27.0)
+    assert [c.name for c in settings.cases()] == ["normal", "W0_H0", "W0_H27", "W14_H0",
+                                                  "W14_H27"]
+    configs = case_configs(settings, settings.cases())
+    assert configs["W14_H27"].geometry.graft_height_pct == 27.0
+    assert configs["normal"].geometry.mesh_size == 1.5
+    assert configs["normal"].dynamics.max_steps == 77
+    path.write_text("[study]\nwidth = [0]\n")
+    with pytest.raises(ParameterError, match="unknown key 'width'"):
+        load_study_toml(path)
+    path.write_text("[study.case]\nno_such_setting = 1\n")
+    with pytest.raises(ParameterError, match="unknown key 'no_such_setting'"):
+        case_configs(load_study_toml(path), [])
+
+
+def test_unwritable_output_fails_before_computing(tmp_path):
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.runner import run_study
+
+    calls = []
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    targets = [blocker / "study"]
+    if os.geteuid() != 0:  # root writes through permissions
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        targets.append(locked / "study")
+    for out in targets:
+        with pytest.raises(ParameterError, match="not writable.*choose another --out"):
+            run_study(_settings(), out, MPI.COMM_SELF,
+                      case_function=lambda *a: calls.append(a) or {})
+    assert calls == []
+
+
+# --- the sweep path ---------------------------------------------------------------------------
+def test_small_grid_writes_every_file(tmp_path, caplog):
+    """2 × 1 grafts + normal: case folders, tables (SPEC §7 schema, agreeing with the case
+    folders), both plots, the panels and report.md; one log line per finished case."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+    from valve_dolfinx.study.table import SPEC_COLUMNS, flatten, read_csv_rows
+
+    out = tmp_path / "study"
+    settings = _settings(panel_cases=("W0_H0", "W7_H0", "W21_H27"))
+    with caplog.at_level(logging.INFO, logger="valve_dolfinx.study"):
+        outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case,
+                            poll_s=0.05)
+    assert outcome.computed == ["W0_H0", "W7_H0", "normal"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "valve_dolfinx.study.runner"]
+    assert sum("min coaptation" in line for line in lines) == 3
+    for name in ("normal", "W0_H0", "W7_H0"):
+        for f in ("result.json", "case.json", "closed_valve_ventricular.png"):
+            assert (out / "cases" / name / f).is_file(), (name, f)
+    for f in ("results.csv", "results.json", "coaptation_vs_width.png", "sizing_map.png",
+              "report.md", "summary.json", "panels/normal.png", "panels/W0_H0.png",
+              "panels/W7_H0.png"):
+        assert (out / f).stat().st_size > 100, f
+    assert not (out / "panels" / "W21_H27.png").exists()  # not on this grid
+
+    csv_rows = read_csv_rows(out / "results.csv")
+    header = list(csv_rows[0])
+    assert header[:len(SPEC_COLUMNS)] == list(SPEC_COLUMNS)
+    assert {"case", "status", "reason", "config_hash", "future_field_mm",
+            "leaflets.a.h", "parameters.geometry.mesh_size", "versions.stand_in"} <= set(header)
+    json_rows = json.loads((out / "results.json").read_text())
+    assert [r["case"] for r in json_rows] == [r["case"] for r in csv_rows] == [
+        "normal", "W0_H0", "W7_H0"]
+    for row_csv, row_json in zip(csv_rows, json_rows, strict=True):
+        case = json.loads((out / "cases" / row_json["case"] / "result.json").read_text())
+        assert set(SPEC_COLUMNS) <= set(row_json)
+        for key, value in flatten(case).items():  # every field of the case, unchanged
+            assert flatten(row_json)[key] == value, key
+            text = row_csv[key]
+            if isinstance(value, bool):
+                assert text == str(value).lower()
+            elif isinstance(value, float):
+                assert float(text) == value
+            elif value is None:
+                assert text == ""
+    normal, w0, w7 = json_rows
+    assert normal["graft_width_pct"] is None and w0["graft_width_pct"] == 0.0
+    assert w0["competent"] is False and w0["regurgitant_orifice_area_mm2"] == 0.25
+    report = (out / "report.md").read_text()
+    for text in ("## Recommendation", "W7/H0", "coaptation_vs_width.png", "sizing_map.png",
+                 "panels/W0_H0.png", "| W0_H0 |"):
+        assert text in report
+
+
+def test_failed_and_unconverged_cases_are_recorded(tmp_path):
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    outcome = run_study(_settings(widths_pct=(14, 95)), out, MPI.COMM_SELF,
+                        case_function=stand_in_case)
+    rows = {r["case"]: r for r in outcome.report.rows}
+    assert rows["W95_H0"]["status"] == "failed" and rows["W95_H0"]["converged"] is False
+    assert "stand-in failure" in rows["W95_H0"]["reason"]
+    assert rows["W14_H0"]["status"] == "finished" and rows["W14_H0"]["converged"] is False
+    assert rows["normal"]["converged"] is True and rows["normal"]["reason"] == ""
+
+
+def test_changed_configuration_is_recomputed(tmp_path):
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+
+    out, ran = tmp_path / "study", []
+
+    def counting(config, folder, comm):
+        ran.append(config.geometry.mesh_size)
+        return stand_in_case(config, folder, comm)
+
+    run_study(_settings(), out, MPI.COMM_SELF, case_function=counting, report=False)
+    run_study(_settings(), out, MPI.COMM_SELF, case_function=counting, report=False)
+    assert ran == [2.0] * 3  # second sweep: nothing to do
+    run_study(_settings(mesh_size_mm=1.9), out, MPI.COMM_SELF, case_function=counting)
+    assert ran == [2.0] * 3 + [1.9] * 3
+    assert not any((out / "cases" / ".staging").iterdir())
+
+
+def test_claims_are_exclusive_and_stale_ones_are_taken_over(tmp_path):
+    from valve_dolfinx.study.store import CaseClaim, prepare_output
+
+    prepare_output(tmp_path)
+    first, second = CaseClaim.for_case(tmp_path, "W7_H0"), CaseClaim.for_case(tmp_path, "W7_H0")
+    assert first.acquire() and not second.acquire()
+    first.release()
+    assert second.acquire()
+    second.release()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    first.path.write_text(json.dumps({"host": os.uname().nodename, "pid": dead.pid,
+                                      "start": None}))
+    assert second.acquire()  # the process that held it is gone
+    second.release()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
+    """A real signal to a sweep after its first case; the rerun finishes the others without
+    recomputing the first and gives the same tables as an uninterrupted sweep."""
+    out, run_log = tmp_path / "study", tmp_path / "runs.log"
+    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "1.0"}
+    proc = subprocess.Popen(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"),
+                            env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = out / "cases" / "normal" / "case.json"
+    deadline = time.time() + 120
+    while len(_runs(run_log)) < 2 and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.02)  # until the first case is done and the second one in flight
+    assert first.exists(), proc.communicate()[1][-2000:]
+    proc.send_signal(sig)
+    proc.communicate(timeout=60)
+    assert proc.returncode != 0
+    assert not (out / "cases" / "W0_H0").exists() and not (out / "cases" / "W7_H0").exists()
+    assert _runs(run_log) == ["normal", "W0_H0"]  # the second case was in flight
+    claims = list((out / "cases" / ".claims").iterdir())
+    # SIGTERM releases the claim on the way out; SIGKILL leaves it, stale, to the rerun
+    assert [c.name for c in claims] == ([] if sig == signal.SIGTERM else ["W0_H0.claim"])
+    record = first.read_text()
+
+    _run(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"), run_log)
+    assert _runs(run_log) == ["normal", "W0_H0", "W0_H0", "W7_H0"]
+    assert first.read_text() == record  # untouched
+    assert not list((out / "cases" / ".claims").iterdir())
+    assert not list((out / "cases" / ".staging").iterdir())
+    fresh = _reference_sweep(tmp_path / "fresh")
+    assert _stable_csv(out / "results.csv") == _stable_csv(fresh / "results.csv")
+    assert (_stable_json(json.loads((out / "results.json").read_text()))
+            == _stable_json(json.loads((fresh / "results.json").read_text())))
+
+
+def test_serial_and_mpi_sweeps_agree(tmp_path):
+    """`mpirun -n 2` spreads the cases over two groups, runs each exactly once and gives the
+    serial sweep's tables; --ranks-per-case 2 runs every case on both ranks."""
+    serial = _reference_sweep(tmp_path / "serial")
+    for k in (1, 2):
+        out, log = tmp_path / f"mpi{k}", tmp_path / f"mpi{k}.log"
+        proc = _run(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--ranks-per-case", str(k),
+                               mpi=2), log, sleep=0.3)
+        runs = [line.split() for line in log.read_text().splitlines()]
+        assert sorted(r[0] for r in runs) == ["W0_H0", "W7_H0", "normal"]
+        assert len({r[1] for r in runs}) == (2 if k == 1 else 1)  # both groups took cases
+        assert proc.stdout.count("case(s) computed") == 1  # rank 0 alone prints
+        assert _stable_csv(out / "results.csv") == _stable_csv(serial / "results.csv")
+        rows = json.loads((out / "results.json").read_text())
+        assert {r["n_ranks"] for r in rows} == {k}
+
+
+def test_case_index_runs_and_report_equal_one_sweep(tmp_path, capsys, caplog, quiet_cli):
+    whole, array = tmp_path / "whole", tmp_path / "array"
+    assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(whole), "--no-progress"]) == 0
+    assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array), "--list"]) == 0
+    listing = capsys.readouterr().out
+    assert "0  normal" in listing and "2  W7_H0" in listing and "pending" in listing
+    for i in (2, 0, 1):
+        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array),
+                                    "--case-index", str(i)]) == 0
+    assert not (array / "results.csv").exists()  # the array's tasks leave the report
+    assert _main_with_stand_in(["report", str(array)]) == 0
+    assert _stable_csv(array / "results.csv") == _stable_csv(whole / "results.csv")
+    assert (array / "sizing_map.png").is_file() and (array / "report.md").is_file()
+    _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array), "--list"])
+    assert capsys.readouterr().out.count("finished") == 3
+    assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array),
+                                "--case-index", "3"]) == 2
+    assert "case index 3 is outside the allowed range [0, 2]" in caplog.text
+
+
+@pytest.mark.mpi
+def test_every_case_once_over_the_ranks(tmp_path_factory):
+    """In process, on COMM_WORLD (1 or 2 ranks): each case exactly once, the same table on
+    every rank count."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+
+    comm = MPI.COMM_WORLD
+    out = Path(comm.bcast(str(tmp_path_factory.mktemp("study")) if comm.rank == 0 else None))
+    ran = []
+
+    def counting(config, folder, group):
+        ran.append(config.geometry.graft_width_pct)
+        return stand_in_case(config, folder, group)
+
+    outcome = run_study(_settings(widths_pct=(0, 7, 14)), out, comm, case_function=counting)
+    everything = sum(comm.allgather(ran), [])
+    assert sorted(everything, key=lambda w: -1 if w is None else w) == [None, 0.0, 7.0, 14.0]
+    assert outcome.computed == ["W0_H0", "W14_H0", "W7_H0", "normal"]
+    if comm.rank == 0:
+        rows = outcome.report.rows
+        assert [r["case"] for r in rows] == ["normal", "W0_H0", "W7_H0", "W14_H0"]
+
+
+# --- the recommendation -----------------------------------------------------------------------
+def _row(w, h, height, converged=True, competent=True):
+    return {"graft_width_pct": w, "graft_height_pct": h, "converged": converged,
+            "competent": competent, "min_coaptation_height_mm": height}
+
+
+def test_recommendation_smallest_qualifying_graft():
+    from valve_dolfinx.study.recommend import recommend
+
+    rows = [_row(None, None, 3.0),
+            _row(0, 0, 2.0), _row(7, 0, 2.6), _row(14, 0, 3.1),
+            _row(0, 13, 2.4), _row(7, 13, 3.2), _row(14, 13, 3.5),
+            _row(0, 27, 3.4, competent=False), _row(7, 27, 3.6, converged=False),
+            _row(14, 27, 3.9)]
+    rec = recommend(rows)
+    assert rec.target_mm == 3.0 and "normal valve" in rec.target_source
+    # W14/H0 (1.14) is smaller than W7/H13 (1.209); W0/H27 leaks, W7/H27 did not converge
+    assert rec.recommended == "W14/H0" and rec.recommended_height_mm == 3.1
+    assert rec.qualifying == ["W14/H0", "W7/H13", "W14/H13", "W14/H27"]
+    assert rec.neighbours == pytest.approx({"W7/H0": -0.5, "W14/H13": 0.4})
+    assert rec.max_neighbour_step_mm == pytest.approx(1.0)  # W0/H13 -> W0/H27
+    assert rec.shortfall_mm is None and "W14/H0" in rec.text and "0.50" in rec.text
+    assert recommend(rows, target_mm=3.3).recommended == "W14/H13"
+
+
+def test_recommendation_when_none_qualifies():
+    from valve_dolfinx.study.recommend import recommend
+
+    rows = [_row(None, None, 3.5), _row(0, 0, 2.0), _row(7, 0, 2.9),
+            _row(14, 0, 3.8, competent=False), _row(21, 0, 4.0, converged=False)]
+    rec = recommend(rows)
+    assert rec.recommended is None and rec.best == "W7/H0" and rec.best_is_sound
+    assert rec.shortfall_mm == pytest.approx(0.6)
+    assert "0.60 mm short" in rec.text and "W7/H0" in rec.text
+    assert rec.neighbours == pytest.approx({"W0/H0": -0.9, "W14/H0": 0.9})
+    no_normal = recommend(rows[1:])
+    assert no_normal.target_mm is None and "--target-coaptation" in no_normal.target_source
+    assert no_normal.best == "W7/H0"
+    unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]])
+    assert unconverged.target_mm is None and "did not converge" in unconverged.text
+
+
+# --- run_case itself --------------------------------------------------------------------------
+@pytest.mark.timeout(300)
+def test_real_case_through_the_sweep(tmp_path):
+    """One real closure through the sweep path: the normal valve's cheap symmetric reference on
+    a 2 mm mesh (a minute or less); it may end converged: false, and is recorded either way."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.runner import run_study
+    from valve_dolfinx.study.table import SPEC_COLUMNS
+
+    out = tmp_path / "study"
+    settings = _settings(widths_pct=(0,), wall_time_limit_s=90.0,
+                         case={"symmetric_reference": True})
+    outcome = run_study(settings, out, MPI.COMM_SELF, case_indices=[0])
+    assert outcome.computed == ["normal"]
+    folder = out / "cases" / "normal"
+    record = json.loads((folder / "case.json").read_text())
+    row = outcome.report.rows[0]
+    assert record["status"] == "finished", record["reason"]
+    for name in ("result.json", "config.json", "fields.xdmf", "closed_valve_ventricular.png",
+                 "cut_planes.png"):
+        assert (folder / name).is_file(), name
+    assert set(SPEC_COLUMNS) <= set(row) and isinstance(row["converged"], bool)
+    assert row["parameters"]["geometry"]["mesh_size"] == 2.0 and row["n_dofs"] > 0
+    assert (out / "panels" / "normal.png").is_file()
+    if row["converged"]:
+        assert 2.0 < row["min_coaptation_height_mm"] < 6.0
+
+
+if __name__ == "__main__":  # the CLI with the stand-in case function (subprocess tests)
+    sys.exit(_main_with_stand_in(sys.argv[1:]))

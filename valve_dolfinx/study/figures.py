@@ -1,0 +1,184 @@
+"""Figures of a sizing study (matplotlib, off-screen), drawn from the study table alone.
+
+* :func:`plot_coaptation_vs_width`: minimum native coaptation height against graft
+  width, one curve per graft height, the normal valve as a reference line;
+  unconverged or incompetent cases hollow.
+* :func:`plot_sizing_map`: the W × H grid as a heat map of the same figure, with
+  the regurgitant orifice area written where it is not 0.
+* :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
+  two axial cuts, coaptation region on the flat outline), assembled from the
+  pictures ``run`` wrote into the case folder.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_case_panel", "PANEL_IMAGES"]
+
+log = logging.getLogger(__name__)
+
+FIGURE = "min_coaptation_height_mm"
+#: the pictures of a case folder that make its panel, with their captions
+PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve, ventricular view"),
+                ("cut_planes.png", "cuts through the axis"),
+                ("coaptation_map.png", "coaptation region on the flat leaflets"))
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _num(value) -> float:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else math.nan
+
+
+def _sound(row: dict) -> bool:
+    return bool(row.get("converged")) and bool(row.get("competent"))
+
+
+def plot_coaptation_vs_width(rows: list[dict], path: Path, *, target_mm: float | None = None,
+                             title: str = "") -> Path:
+    """Minimum coaptation height against graft width, one curve per graft height."""
+    plt = _pyplot()
+    grafts = [r for r in rows if r.get("graft_width_pct") is not None]
+    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+    heights = sorted({r["graft_height_pct"] for r in grafts})
+    colours = plt.cm.viridis(np.linspace(0.0, 0.85, max(len(heights), 1)))
+    fig, ax = plt.subplots(figsize=(7.5, 5.0), constrained_layout=True)
+    for colour, h in zip(colours, heights, strict=False):
+        curve = sorted((r for r in grafts if r["graft_height_pct"] == h),
+                       key=lambda r: r["graft_width_pct"])
+        w = np.array([r["graft_width_pct"] for r in curve], dtype=float)
+        y = np.array([_num(r.get(FIGURE)) for r in curve])
+        sound = np.array([_sound(r) for r in curve], dtype=bool)
+        ax.plot(w, y, "-", color=colour, lw=1.5, label=f"H +{h:g} %")
+        ax.plot(w[sound], y[sound], "o", color=colour, ms=7)
+        ax.plot(w[~sound], y[~sound], "o", mfc="white", mec=colour, mew=1.8, ms=7)
+    if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
+        style = "-" if _sound(normal) else ":"
+        ax.axhline(_num(normal[FIGURE]), color="k", ls=style, lw=1.2,
+                   label=f"normal valve {_num(normal[FIGURE]):.2f} mm"
+                   + ("" if _sound(normal) else " (not converged/sealed)"))
+    if target_mm is not None:
+        ax.axhline(target_mm, color="tab:red", ls="--", lw=1.0,
+                   label=f"target {target_mm:.2f} mm")
+    ax.plot([], [], "o", mfc="white", mec="0.3", label="not converged or leaking")
+    ax.set_xlabel("graft width enlargement W (%)")
+    ax.set_ylabel("minimum native coaptation height (mm)")
+    widths = sorted({r["graft_width_pct"] for r in grafts})
+    if widths:
+        ax.set_xticks(widths)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    ax.set_title(title or "Minimum coaptation height of the native leaflets")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path
+
+
+def plot_sizing_map(rows: list[dict], path: Path, *, recommended: str | None = None,
+                    title: str = "") -> Path:
+    """The W × H grid coloured by minimum coaptation height; leaks and failures marked."""
+    plt = _pyplot()
+    grafts = [r for r in rows if r.get("graft_width_pct") is not None]
+    widths = sorted({r["graft_width_pct"] for r in grafts})
+    heights = sorted({r["graft_height_pct"] for r in grafts})
+    if not grafts:
+        fig, ax = plt.subplots(figsize=(5, 3))
+        ax.text(0.5, 0.5, "no graft case finished yet", ha="center", va="center")
+        ax.set_axis_off()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        return path
+    grid = np.full((len(heights), len(widths)), np.nan)
+    by_cell = {}
+    for r in grafts:
+        j, i = widths.index(r["graft_width_pct"]), heights.index(r["graft_height_pct"])
+        grid[i, j] = _num(r.get(FIGURE))
+        by_cell[(i, j)] = r
+    fig, ax = plt.subplots(figsize=(1.4 * len(widths) + 3.2, 1.1 * len(heights) + 2.2),
+                           constrained_layout=True)
+    cmap = plt.cm.viridis.with_extremes(bad="0.85")
+    image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto")
+    bar = fig.colorbar(image, ax=ax)
+    bar.set_label("minimum coaptation height (mm)")
+    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+    if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
+        bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2)
+        bar.ax.text(1.05, _num(normal[FIGURE]), " normal", transform=bar.ax.get_yaxis_transform(),
+                    va="center", fontsize=8)
+    finite = grid[np.isfinite(grid)]
+    middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
+    for (i, j), r in by_cell.items():
+        value = grid[i, j]
+        lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
+        roa = _num(r.get("regurgitant_orifice_area_mm2"))
+        if math.isfinite(roa) and roa > 0:
+            lines.append(f"ROA {roa:.2g} mm²")
+        if not r.get("converged"):
+            lines.append("not converged")
+        colour = "white" if math.isfinite(value) and value < middle else "black"
+        ax.text(j, i, "\n".join(lines), ha="center", va="center", fontsize=8, color=colour,
+                fontweight="bold" if math.isfinite(roa) and roa > 0 else "normal")
+        if math.isfinite(roa) and roa > 0:
+            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="tab:red",
+                                       lw=2.5, hatch="//", alpha=0.8))
+        label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"
+        if label == recommended:
+            ax.add_patch(plt.Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False,
+                                       ec="gold", lw=3.0))
+    ax.set_xticks(range(len(widths)), [f"+{w:g}" for w in widths])
+    ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
+    ax.set_xlabel("graft width enlargement W (%)")
+    ax.set_ylabel("graft height enlargement H (%)")
+    note = "red hatched: leaks (regurgitant orifice area > 0)"
+    if recommended:
+        note += f"; gold: recommended {recommended}"
+    ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path
+
+
+def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path | None:
+    """One case's ventricular view, axial cuts and coaptation map side by side.
+
+    Returns None (and draws nothing) if the case folder holds none of the pictures.
+    """
+    images = [(case_folder / name, caption) for name, caption in PANEL_IMAGES
+              if (case_folder / name).is_file()]
+    if not images:
+        log.debug("no pictures in %s: no panel drawn", case_folder)
+        return None
+    plt = _pyplot()
+    import matplotlib.image as mpimg
+
+    pictures = [(mpimg.imread(p), caption) for p, caption in images]
+    ratios = [img.shape[1] / img.shape[0] for img, _ in pictures]
+    height = 4.0
+    fig, axes = plt.subplots(1, len(pictures), figsize=(height * sum(ratios), height + 0.6),
+                             gridspec_kw={"width_ratios": ratios}, constrained_layout=True)
+    for ax, (img, caption) in zip(np.atleast_1d(axes), pictures, strict=True):
+        ax.imshow(img)
+        ax.set_axis_off()
+        ax.set_title(caption, fontsize=10)
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path

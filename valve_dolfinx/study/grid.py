@@ -1,0 +1,279 @@
+"""The graft sizing grid and the study settings (SPEC §7), validated before anything runs.
+
+A study is the normal valve plus every graft of a width × height grid of
+enlargements (per cent of the native leaflet).  This module turns what a user
+typed (command-line values, a ``[study]`` section of a TOML file) into a
+validated :class:`StudySettings` and enumerates its cases in a fixed order:
+the normal valve first, then the grafts width by width, heights ascending
+within each width.  The case index (``--case-index I``) is the position in
+that order, so a job array indexes the same case in every task.
+
+Nothing here imports DOLFINx: a bad grid is reported in a fraction of a
+second, before any mesh is built.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import tomllib
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.geometry.outline import MAX_GRAFT_PCT
+
+__all__ = [
+    "STUDY_WIDTHS_PCT",
+    "STUDY_HEIGHTS_PCT",
+    "DEFAULT_PANEL_CASES",
+    "NORMAL_CASE",
+    "StudyCase",
+    "StudySettings",
+    "case_name",
+    "parse_percentages",
+    "load_study_toml",
+]
+
+log = logging.getLogger(__name__)
+
+#: The published study grid (SPEC §1, §7): graft width and height enlargements in per cent
+STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
+STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
+#: Cases drawn as figure panels besides the normal valve (issue 19)
+DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
+#: Name of the normal valve's case folder
+NORMAL_CASE = "normal"
+
+
+def case_name(width_pct: float | None, height_pct: float | None) -> str:
+    """Folder name of a case: ``normal`` or ``W<width>_H<height>`` (as in closure.case_name)."""
+    if width_pct is None:
+        return NORMAL_CASE
+    return f"W{width_pct:g}_H{height_pct:g}"
+
+
+@dataclass(frozen=True)
+class StudyCase:
+    """One case of the study: the normal valve (``width_pct is None``) or a graft size."""
+
+    index: int
+    width_pct: float | None
+    height_pct: float | None
+
+    @property
+    def name(self) -> str:
+        return case_name(self.width_pct, self.height_pct)
+
+    @property
+    def is_normal(self) -> bool:
+        return self.width_pct is None
+
+    @property
+    def flat_area_ratio(self) -> float:
+        """Flat graft area over the native leaflet's: the outline is scaled by (1+W)(1+H)."""
+        if self.is_normal:
+            return 1.0
+        return (1.0 + self.width_pct / 100.0) * (1.0 + self.height_pct / 100.0)
+
+
+def _split_values(values: Iterable[Any]) -> list[Any]:
+    """Flatten ``["0,7", "14"]`` into ``["0", "7", "14"]`` (commas or spaces separate)."""
+    out: list[Any] = []
+    for value in values:
+        if isinstance(value, str):
+            out += [part for part in value.replace(",", " ").split() if part]
+        else:
+            out.append(value)
+    return out
+
+
+def parse_percentages(option: str, values: Iterable[Any] | None, what: str) -> tuple[float, ...]:
+    """Validated, sorted graft enlargements (per cent) from what the user gave.
+
+    Parameters
+    ----------
+    option
+        How the user spelled the parameter (``--widths``, ``study.heights``), for messages.
+    values
+        Numbers or strings; strings may hold several values separated by commas.
+    what
+        ``"width"`` or ``"height"``, for messages.
+
+    Raises
+    ------
+    ParameterError
+        On an empty list, a non-number, a value outside ``[0, MAX_GRAFT_PCT]`` or a
+        duplicate; the message names the value and the allowed range.
+    """
+    allowed = f"[0, {MAX_GRAFT_PCT:g}] %"
+    numbers = "0 7 14 21 27" if what == "width" else "0 13 27 40"
+    example = (f"e.g. {option} {numbers}" if option.startswith("-")
+               else f"e.g. {option} = [{numbers.replace(' ', ', ')}]")
+    if isinstance(values, str | int | float):
+        values = [values]
+    raw = _split_values(values or [])
+    if not raw:
+        raise ParameterError(f"{option} is empty: give at least one graft {what} enlargement "
+                             f"in per cent within {allowed}, {example}")
+    seen: dict[float, Any] = {}
+    for item in raw:
+        if isinstance(item, bool):  # TOML true/false would pass float()
+            item = str(item).lower()
+        try:
+            value = float(item)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{option}: {item!r} is not a number; give graft {what} "
+                                 f"enlargements in per cent within {allowed}, {example}") from None
+        if not math.isfinite(value) or not 0.0 <= value <= MAX_GRAFT_PCT:
+            raise ParameterError(
+                f"{option}: {item!r} is outside the allowed range {allowed} (graft {what} "
+                "enlargement in per cent of the native leaflet; a graft smaller than the "
+                "native one cannot be sewn onto its annulus, and more than doubling it is "
+                "taken for a typing error)")
+        if value in seen:
+            raise ParameterError(f"{option}: {item!r} is given twice (also as {seen[value]!r}); "
+                                 f"list each graft {what} once, within {allowed}")
+        seen[value] = item
+    return tuple(sorted(seen))
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """What a sizing study runs (the ``[study]`` section of a configuration file).
+
+    Attributes
+    ----------
+    widths_pct, heights_pct
+        Graft width and height enlargements (per cent); every combination is a case.
+    include_normal
+        Also run the normal valve (the reference of the recommendation and the plots).
+    mesh_size_mm
+        Target triangle edge length (mm); ``None`` keeps the case default.
+    wall_time_limit_s
+        Wall-clock limit of each case (s); ``None`` keeps the case default.  It is a
+        numerical setting of the case, so it enters the configuration hash.
+    target_coaptation_mm
+        Minimum coaptation height a graft must reach; ``None`` takes the normal valve's.
+    panel_cases
+        Cases drawn as figure panels besides the normal valve.
+    ranks_per_case
+        MPI ranks that share one case (``mpirun -n N`` runs ``N / ranks_per_case``
+        cases at a time).
+    case
+        Overrides of the case configuration (``CaseConfig.to_dict()`` layout, nested
+        tables for nested parameters), applied to every case.
+    """
+
+    widths_pct: tuple[float, ...] = STUDY_WIDTHS_PCT
+    heights_pct: tuple[float, ...] = STUDY_HEIGHTS_PCT
+    include_normal: bool = True
+    mesh_size_mm: float | None = None
+    wall_time_limit_s: float | None = None
+    target_coaptation_mm: float | None = None
+    panel_cases: tuple[str, ...] = DEFAULT_PANEL_CASES
+    ranks_per_case: int = 1
+    case: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__  # frozen: normalise in place once
+        set_(self, "widths_pct", parse_percentages("widths", self.widths_pct, "width"))
+        set_(self, "heights_pct", parse_percentages("heights", self.heights_pct, "height"))
+        if self.mesh_size_mm is not None:
+            set_(self, "mesh_size_mm", check_range(
+                "mesh_size", self.mesh_size_mm, 0.05, 2.5, unit="mm",
+                hint="target triangle edge length; 0.8 mm is the default, 1.6-2.0 mm a "
+                "quick coarse study"))
+        if self.wall_time_limit_s is not None:
+            set_(self, "wall_time_limit_s", check_range(
+                "wall_time_limit", self.wall_time_limit_s, 0.0, 30 * 24 * 3600.0,
+                low_open=True, unit="s", hint="the wall-clock limit of each case in seconds"))
+        if self.target_coaptation_mm is not None:
+            set_(self, "target_coaptation_mm", check_range(
+                "target_coaptation", self.target_coaptation_mm, 0.0, 20.0, low_open=True,
+                unit="mm", hint="a minimum coaptation height in mm; a normal valve coapts "
+                "3-4 mm (omit it to use the normal valve's)"))
+        ranks = self.ranks_per_case
+        if isinstance(ranks, bool) or not isinstance(ranks, int) or ranks < 1:
+            raise ParameterError(f"ranks_per_case = {ranks!r} must be a whole number >= 1 "
+                                 "(MPI ranks that share one case)")
+        panels = (self.panel_cases,) if isinstance(self.panel_cases, str) else self.panel_cases
+        set_(self, "panel_cases", tuple(str(p) for p in panels))
+        if not isinstance(self.case, dict):
+            raise ParameterError("study.case must be a table of case-configuration overrides")
+
+    # --- the cases ---------------------------------------------------------------------
+    def cases(self) -> list[StudyCase]:
+        """Every case, in the fixed order that ``--case-index`` counts."""
+        sizes: list[tuple[float | None, float | None]] = []
+        if self.include_normal:
+            sizes.append((None, None))
+        sizes += [(w, h) for w in self.widths_pct for h in self.heights_pct]
+        return [StudyCase(i, w, h) for i, (w, h) in enumerate(sizes)]
+
+    def select(self, indices: Sequence[int] | None) -> list[StudyCase]:
+        """The cases with the given indices (all if ``None``); bad indices name the range."""
+        cases = self.cases()
+        if indices is None:
+            return cases
+        for i in indices:
+            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(cases):
+                raise ParameterError(f"case index {i!r} is outside the allowed range "
+                                     f"[0, {len(cases) - 1}]: this grid has {len(cases)} cases "
+                                     "(`valve-dolfinx sweep --list` prints them)")
+        return [cases[i] for i in dict.fromkeys(indices)]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "study") -> StudySettings:
+        """Settings from a mapping (a TOML ``[study]`` table); unknown keys are rejected."""
+        aliases = {"widths": "widths_pct", "heights": "heights_pct",
+                   "mesh_size": "mesh_size_mm", "target_coaptation": "target_coaptation_mm",
+                   "wall_time_limit": "wall_time_limit_s"}
+        known = {f.name for f in fields(cls)}
+        kw = {}
+        for key, value in data.items():
+            name = aliases.get(key, key)
+            if name not in known:
+                allowed = sorted(set(aliases) | known - set(aliases.values()))
+                raise ParameterError(f"{source}: unknown key {key!r}; allowed keys are "
+                                     f"{', '.join(allowed)}")
+            kw[name] = value
+        return cls(**kw)
+
+    def replace(self, **changes: Any) -> StudySettings:
+        """A copy with the given fields changed (``None`` values leave a field as it is)."""
+        data = self.to_dict()
+        data.update({k: v for k, v in changes.items() if v is not None})
+        return StudySettings(**data)
+
+
+def load_study_toml(path: str | Path) -> StudySettings:
+    """The ``[study]`` section of a TOML configuration file (other sections are ignored).
+
+    Example::
+
+        [study]
+        widths = [0, 7, 14, 21, 27]     # per cent
+        heights = [0, 13, 27, 40]
+        mesh_size = 0.8                 # mm
+        panel_cases = ["W0_H0", "W7_H0", "W21_H27"]
+
+        [study.case.dynamics]           # overrides of every case's configuration
+        wall_time_limit_s = 1800
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such configuration file (--config)")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ParameterError(f"{path} is not valid TOML ({err})") from None
+    if "study" not in data or not isinstance(data["study"], dict):
+        raise ParameterError(f"{path} has no [study] section; put the sweep settings under "
+                             "[study] (widths, heights, mesh_size, ...)")
+    return StudySettings.from_dict(data["study"], source=f"{path} [study]")

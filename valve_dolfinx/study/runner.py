@@ -1,0 +1,414 @@
+"""Running a sizing study: every case once, spread over MPI ranks, resumable (issue 19).
+
+Parallel layout
+---------------
+``mpirun -n N`` with ``ranks_per_case = k`` splits ``COMM_WORLD`` into ``N / k``
+groups (``comm.Split``); each group runs one case at a time on its own
+communicator.  Load balancing is dynamic: a group that finishes a case takes
+the next case nobody has claimed yet (the claim is an ``O_EXCL`` file,
+:class:`~valve_dolfinx.study.store.CaseClaim`), so a slow graft case does not
+hold up the cheap ones behind it, and two sweeps (or job-array tasks) on the
+same folder share the work instead of repeating it.  Each case is computed on
+its own communicator exactly as a single run would be, so at one rank per case
+the results equal a serial sweep's bit for bit.
+
+Resuming
+--------
+A finished case carries the hash of its configuration (``case.json``); a
+rerun skips it if the hash is unchanged and recomputes it otherwise.  A case
+is written atomically when it finishes (staging folder renamed into place),
+so killing a sweep loses only the cases in flight.  A case that raises or
+does not converge is recorded with its reason and the sweep goes on.
+
+Progress
+--------
+World rank 0 watches the case folders (a background thread; no MPI calls)
+and logs one line per finished case, whichever group computed it; an
+optional ``progress`` callback receives the same events (the CLI draws its
+bar from them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import shutil
+import signal
+import socket
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx._compat import MPI
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.io import write_json
+from valve_dolfinx.study.grid import StudyCase, StudySettings
+from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
+from valve_dolfinx.study.store import (
+    RESULT_FILE,
+    SETTINGS_FILE,
+    CaseClaim,
+    ClaimHeartbeat,
+    case_dir,
+    commit_case,
+    config_hash,
+    finished_record,
+    prepare_output,
+    read_record,
+    staging_dir,
+)
+
+__all__ = [
+    "CaseFunction",
+    "SweepOutcome",
+    "run_study",
+    "run_closure_case",
+    "case_configs",
+    "study_status",
+    "terminate_on_sigterm",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``f(config, out_dir, comm) -> result dict`` (``CaseResult.to_dict()``), writing into out_dir
+CaseFunction = Callable[[Any, Path, MPI.Comm], dict]
+#: ``progress(event)``: ``{"event": "start" | "case" | "end", "done", "total"}``; a "case"
+#: event also has the ``case`` name and its result ``row``
+ProgressCallback = Callable[[dict], None]
+
+
+def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, figures: bool = True,
+                     fields_output: bool = True) -> dict:
+    """The study's case: :func:`valve_dolfinx.closure.run_case` into ``out_dir``."""
+    from valve_dolfinx.closure import run_case
+
+    return run_case(config, out_dir, comm=comm, figures=figures,
+                    fields_output=fields_output).to_dict()
+
+
+def _merge(base: dict, overrides: dict, where: str = "case") -> dict:
+    out = dict(base)
+    for key, value in overrides.items():
+        if key not in base:
+            raise ParameterError(f"study.{where}: unknown key {key!r}; allowed keys are "
+                                 f"{', '.join(sorted(base))}")
+        if isinstance(value, dict) and isinstance(base[key], dict) and key != "petsc_options":
+            out[key] = _merge(base[key], value, f"{where}.{key}")
+        else:
+            out[key] = value
+    return out
+
+
+def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[str, Any]:
+    """The validated ``CaseConfig`` of every case (raises ParameterError before any run)."""
+    from valve_dolfinx.closure import CaseConfig
+
+    data = _merge(CaseConfig().to_dict(), settings.case)
+    if settings.mesh_size_mm is not None:
+        data["geometry"]["mesh_size"] = settings.mesh_size_mm
+    if settings.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
+        for value in data.values():
+            if isinstance(value, dict) and "wall_time_limit_s" in value:
+                value["wall_time_limit_s"] = settings.wall_time_limit_s
+    try:
+        base = CaseConfig.from_dict(data)
+    except TypeError as err:
+        raise ParameterError(f"study.case: {err}") from None
+    return {c.name: base if c.is_normal else base.with_graft(c.width_pct, c.height_pct)
+            for c in cases}
+
+
+def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
+    """result.json of a case that raised: the SPEC fields unknown, the reason recorded."""
+    from valve_dolfinx._compat import package_versions
+    from valve_dolfinx.closure import CaseResult
+
+    result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
+                        converged=False, n_ranks=n_ranks, wall_time_s=wall,
+                        solver_message=error, parameters=config.to_dict(),
+                        versions=package_versions()).to_dict()
+    result["error"] = error
+    return result
+
+
+def _now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%S%z")
+
+
+def case_line(name: str, row: dict, done: int | None = None, total: int | None = None) -> str:
+    """One log line with a finished case's coaptation numbers."""
+    def num(key: str, fmt: str) -> str:
+        v = row.get(key)
+        return format(v, fmt) if isinstance(v, int | float) and math.isfinite(v) else "–"
+
+    count = f"[{done}/{total}] " if done is not None else ""
+    if row.get("error"):
+        return f"{count}{name}: FAILED ({row['error']})"
+    state = "converged" if row.get("converged") else "NOT converged"
+    roa = row.get("regurgitant_orifice_area_mm2")
+    seal = ("sealed" if row.get("competent") else
+            f"leaks (orifice {num('regurgitant_orifice_area_mm2', '.3g')} mm²)"
+            if isinstance(roa, int | float) and roa > 0 else "not competent")
+    return (f"{count}{name}: {state}, {seal}, min coaptation "
+            f"{num('min_coaptation_height_mm', '.2f')} mm, central "
+            f"{num('central_coaptation_height_mm', '.2f')} mm, area "
+            f"{num('coaptation_area_mm2', '.0f')} mm², {num('wall_time_s', '.0f')} s")
+
+
+class _Monitor:
+    """Rank 0's watcher of the case folders: one log line and one progress event per case."""
+
+    def __init__(self, out: Path, cases: list[StudyCase], hashes: dict[str, str],
+                 progress: ProgressCallback | None, poll_s: float) -> None:
+        self.out, self.cases, self.hashes = out, cases, hashes
+        self.progress, self.poll_s = progress, poll_s
+        self.done = {c.name for c in cases if finished_record(out, c.name, hashes[c.name])}
+        self.initial = len(self.done)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="study-monitor")
+
+    def start(self) -> None:
+        if self.initial:
+            log.info("%d of %d cases already finished with this configuration: skipped",
+                     self.initial, len(self.cases))
+        if self.progress:
+            self.progress({"event": "start", "done": self.initial, "total": len(self.cases)})
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.poll_s):
+            self.scan()
+
+    def scan(self) -> None:
+        for case in self.cases:
+            if case.name in self.done:
+                continue
+            if finished_record(self.out, case.name, self.hashes[case.name]) is None:
+                continue
+            self.done.add(case.name)
+            try:
+                row = json.loads((case_dir(self.out, case.name) / RESULT_FILE).read_text())
+            except (OSError, json.JSONDecodeError):
+                row = {}
+            log.info("%s", case_line(case.name, row, len(self.done), len(self.cases)))
+            if self.progress:
+                self.progress({"event": "case", "case": case.name, "row": row,
+                               "done": len(self.done), "total": len(self.cases)})
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+        self.scan()
+        if self.progress:
+            self.progress({"event": "end", "done": len(self.done), "total": len(self.cases)})
+
+
+@dataclass
+class SweepOutcome:
+    """What :func:`run_study` did (the same on every rank)."""
+
+    out: Path
+    cases: list[StudyCase]
+    computed: list[str] = field(default_factory=list)
+    elapsed_s: float = 0.0
+    report: StudyReport | None = None
+
+
+def _decide(out: Path, case: StudyCase, digest: str, beat: ClaimHeartbeat
+            ) -> tuple[CaseClaim | None, Path | None]:
+    """Leader: claim the case if it is unfinished and unclaimed; its staging folder."""
+    if finished_record(out, case.name, digest):
+        return None, None
+    claim = CaseClaim.for_case(out, case.name)
+    if not claim.acquire():
+        log.debug("%s is being computed by another process", case.name)
+        return None, None
+    if finished_record(out, case.name, digest):  # finished between the test and the claim
+        claim.release()
+        return None, None
+    old = read_record(case_dir(out, case.name))
+    if old is not None:
+        log.info("%s: configuration changed since it was computed: recomputing", case.name)
+    beat.add(claim)
+    return claim, staging_dir(out, case.name)
+
+
+def _run_one(case: StudyCase, config, digest: str, staging: Path, group: MPI.Comm,
+             case_function: CaseFunction, out: Path) -> None:
+    """Compute one case on ``group`` into ``staging``; the leader records and commits it."""
+    started, t0 = _now(), time.perf_counter()
+    error, result = None, None
+    try:
+        result = case_function(config, staging, group)
+    except Exception as err:  # recorded: one failed case must not stop the study
+        error = f"{type(err).__name__}: {err}"
+        log.debug("case %s failed", case.name, exc_info=True)
+    failed = group.allreduce(error is not None, op=MPI.LOR)
+    if group.rank != 0:
+        return
+    wall = time.perf_counter() - t0
+    if failed:
+        error = error or "failed on another rank of its group"
+        result = _failure_result(case, config, error, group.size, wall)
+        write_json(staging / RESULT_FILE, result)
+    elif not (staging / RESULT_FILE).is_file():
+        write_json(staging / RESULT_FILE, result)
+    record = {"case": case.name, "index": case.index, "graft_width_pct": case.width_pct,
+              "graft_height_pct": case.height_pct, "config_hash": digest,
+              "status": "failed" if failed else "finished", "reason": error or "",
+              "converged": bool(result.get("converged")), "started_at": started,
+              "finished_at": _now(), "elapsed_s": wall, "host": socket.gethostname(),
+              "pid": os.getpid(), "n_ranks": group.size}
+    commit_case(out, case.name, staging, record)
+
+
+def _work(group: MPI.Comm, out: Path, cases: list[StudyCase], configs: dict, hashes: dict,
+          case_function: CaseFunction) -> list[str]:
+    """Loop of one rank group over the cases; returns the names it computed."""
+    leader = group.rank == 0
+    computed = []
+    with ClaimHeartbeat() as beat:
+        for case in cases:
+            claim, staging = _decide(out, case, hashes[case.name], beat) if leader else (None,
+                                                                                       None)
+            staging = group.bcast(str(staging) if staging else None, root=0)
+            if staging is None:
+                continue
+            try:
+                _run_one(case, configs[case.name], hashes[case.name], Path(staging), group,
+                         case_function, out)
+                computed.append(case.name)
+            finally:
+                if leader:
+                    claim.release()
+                    beat.remove(claim)
+                    if Path(staging).exists():  # interrupted before its commit
+                        shutil.rmtree(staging, ignore_errors=True)
+    return computed
+
+
+def _split(comm: MPI.Comm, ranks_per_case: int) -> MPI.Comm:
+    if comm.size % ranks_per_case:
+        raise ParameterError(f"ranks_per_case = {ranks_per_case} does not divide the "
+                             f"{comm.size} MPI ranks; use a divisor of {comm.size} "
+                             "(--ranks-per-case 1 runs one case per rank)")
+    return comm.Split(comm.rank // ranks_per_case, comm.rank)
+
+
+def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = None, *,
+              case_indices: Sequence[int] | None = None,
+              case_function: CaseFunction | None = None,
+              progress: ProgressCallback | None = None, report: bool = True,
+              figures: bool = True, fields_output: bool = True,
+              poll_s: float = 1.0) -> SweepOutcome:
+    """Run the cases of a study (all, or ``case_indices``) into ``out`` and build its report.
+
+    Parameters
+    ----------
+    settings
+        The grid and the case settings.
+    out
+        Study folder (created); see :mod:`valve_dolfinx.study.store` for its layout.
+    comm
+        The ranks that share the study (default ``COMM_WORLD``), split into groups of
+        ``settings.ranks_per_case``.
+    case_indices
+        Run only these cases (``--case-index``); the report is then left to
+        ``valve-dolfinx report``.
+    case_function
+        ``f(config, out_dir, comm) -> dict`` computing one case; default
+        :func:`run_closure_case` (looked up at call time).
+    progress
+        Callback on world rank 0 (see ``ProgressCallback``).
+    report
+        Rebuild tables, figures and report.md at the end (rank 0).
+    figures, fields_output
+        Passed to ``run_case``: the PNG figures and the ParaView fields of every case.
+
+    Raises
+    ------
+    ParameterError
+        Before any computation, for settings that cannot run or an unwritable ``out``.
+    """
+    comm = MPI.COMM_WORLD if comm is None else comm
+    out = Path(out)
+    t0, started = time.perf_counter(), _now()
+    cases = settings.select(case_indices)
+    configs = case_configs(settings, cases)
+    hashes = {name: config_hash(cfg.to_dict()) for name, cfg in configs.items()}
+    if case_function is None:
+        def case_function(config, folder, group):
+            return run_closure_case(config, folder, group, figures=figures,
+                                    fields_output=fields_output)
+    error = None
+    if comm.rank == 0:
+        try:
+            prepare_output(out)
+            if case_indices is None or not (out / SETTINGS_FILE).is_file():
+                write_json(out / SETTINGS_FILE, {"settings": settings.to_dict(),
+                                                 "written_at": started})
+        except ParameterError as err:
+            error = str(err)
+    error = comm.bcast(error, root=0)
+    if error:
+        raise ParameterError(error)
+    group = _split(comm, settings.ranks_per_case)
+    monitor = _Monitor(out, cases, hashes, progress, poll_s) if comm.rank == 0 else None
+    if monitor:
+        monitor.start()
+    try:
+        computed = _work(group, out, cases, configs, hashes, case_function)
+    finally:
+        if monitor:
+            monitor.stop()
+        group.Free()
+    computed = sorted(sum(comm.allgather(computed), []))
+    outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
+    if comm.rank == 0:
+        entry = {"started": started, "finished": _now(), "elapsed_s": outcome.elapsed_s,
+                 "n_ranks": comm.size, "ranks_per_case": settings.ranks_per_case,
+                 "cases_run": len(computed), "case_indices": case_indices}
+        with open(out / SWEEP_LOG, "a") as fh:
+            fh.write(json.dumps(entry) + "\n")
+        if report:
+            outcome.report = build_report(out, settings)
+    comm.barrier()
+    return outcome
+
+
+def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
+    """Each case and its state in ``out``: finished, failed, changed, running or pending."""
+    out = Path(out)
+    cases = settings.cases()
+    configs = case_configs(settings, cases)
+    status = []
+    for case in cases:
+        digest = config_hash(configs[case.name].to_dict())
+        record = read_record(case_dir(out, case.name))
+        claim = CaseClaim.for_case(out, case.name).path
+        if record is not None and record.get("config_hash") == digest:
+            state = record.get("status", "finished")
+        elif claim.exists():
+            state = "running"
+        elif record is not None:
+            state = "changed"
+        else:
+            state = "pending"
+        status.append((case, state))
+    return status
+
+
+def terminate_on_sigterm() -> None:
+    """Turn SIGTERM (``kill``, Slurm's time limit) into SystemExit, so claims and staging
+    folders of the cases in flight are cleaned up; call from the main thread of a CLI."""
+    def handler(signum, frame):
+        raise SystemExit(128 + signum)
+
+    with contextlib.suppress(ValueError):  # not the main thread
+        signal.signal(signal.SIGTERM, handler)

@@ -1,0 +1,304 @@
+"""The study folder on disk: case folders, configuration hashes and exclusive claims.
+
+Layout of a study folder ``DIR``::
+
+    DIR/study.json                 the settings the study was started with
+    DIR/cases/<name>/              one finished case: everything ``run`` writes,
+                                   result.json, and case.json (the study's record)
+    DIR/cases/.claims/<name>.claim who is computing <name> right now
+    DIR/cases/.staging/...         cases in flight (renamed into cases/ when done)
+
+A case is computed in a staging folder and renamed into ``cases/<name>`` when
+it is complete, so ``cases/<name>`` is either absent or whole: a sweep that is
+killed loses only the cases in flight.  ``case.json`` holds the hash of the
+case configuration that produced it (:func:`config_hash`); a rerun skips
+finished cases with an unchanged hash and recomputes the others.
+
+Before a case is computed, its claim file is created with ``O_CREAT | O_EXCL``
+(atomic, also on NFS v3+), so two sweeps on the same folder -- two MPI rank
+groups, two job-array tasks, a sweep started twice -- never compute the same
+case.  A claim left behind by a process that was killed is recognised as
+stale (same host: the process is gone; another host: its heartbeat stopped)
+and taken over.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import math
+import os
+import shutil
+import socket
+import tempfile
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.io import write_json
+
+__all__ = [
+    "CASES_DIR",
+    "RECORD_FILE",
+    "RESULT_FILE",
+    "SETTINGS_FILE",
+    "CaseClaim",
+    "ClaimHeartbeat",
+    "config_hash",
+    "case_dir",
+    "read_record",
+    "finished_record",
+    "prepare_output",
+    "staging_dir",
+    "commit_case",
+]
+
+log = logging.getLogger(__name__)
+
+CASES_DIR = "cases"
+RECORD_FILE = "case.json"
+RESULT_FILE = "result.json"
+SETTINGS_FILE = "study.json"
+_CLAIMS = ".claims"
+_STAGING = ".staging"
+_TRASH = ".trash"
+#: a claim from another host is stale once its heartbeat is older than this (s)
+STALE_AFTER_S = 600.0
+#: how often a running sweep refreshes its claims (s)
+HEARTBEAT_S = 60.0
+
+
+def config_hash(config: dict) -> str:
+    """SHA-256 of a case configuration (``CaseConfig.to_dict()``) as canonical JSON.
+
+    Keys are sorted and NaN/infinity written as null, so the hash depends on the
+    values only.  Output settings (figures, ParaView fields, logging) are not part
+    of ``CaseConfig`` and do not enter it.
+    """
+    text = json.dumps(_canonical(config), sort_keys=True, separators=(",", ":"),
+                      allow_nan=False, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _canonical(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _canonical(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_canonical(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if hasattr(value, "item") and callable(value.item):  # NumPy scalars
+        return _canonical(value.item())
+    return value
+
+
+def case_dir(out: Path, name: str) -> Path:
+    return Path(out) / CASES_DIR / name
+
+
+def read_record(folder: Path) -> dict | None:
+    """The study's record ``case.json`` of a case folder, or None if absent or unreadable."""
+    try:
+        return json.loads((Path(folder) / RECORD_FILE).read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def finished_record(out: Path, name: str, digest: str) -> dict | None:
+    """The record of case ``name`` if it finished with the configuration hash ``digest``."""
+    folder = case_dir(out, name)
+    record = read_record(folder)
+    if record is None or record.get("config_hash") != digest:
+        return None
+    if not (folder / RESULT_FILE).is_file():
+        return None
+    return record
+
+
+def prepare_output(out: Path) -> Path:
+    """Create the study folder and prove it writable, before any computation.
+
+    Raises
+    ------
+    ParameterError
+        If the folder cannot be created or written, naming it and the fix.
+    """
+    out = Path(out)
+    try:
+        for sub in ("", CASES_DIR, f"{CASES_DIR}/{_CLAIMS}", f"{CASES_DIR}/{_STAGING}"):
+            (out / sub).mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out / CASES_DIR / _STAGING, prefix=".probe-"):
+            pass
+    except OSError as err:
+        reason = err.strerror or type(err).__name__
+        raise ParameterError(f"output folder {str(out)!r} is not writable ({reason}); choose "
+                             "another --out, or fix its permissions") from None
+    return out
+
+
+# --- claims ---------------------------------------------------------------------------------
+def _process_start(pid: int) -> str | None:
+    """Start time of a process in clock ticks since boot (Linux), to tell reused pids apart."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[1].split()[19]
+
+
+def _alive(pid: int, start: str | None) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    now = _process_start(pid)
+    return start is None or now is None or now == start
+
+
+@dataclass
+class CaseClaim:
+    """Exclusive claim of one case by this process (an ``O_EXCL`` lock file)."""
+
+    path: Path
+    held: bool = False
+
+    @classmethod
+    def for_case(cls, out: Path, name: str) -> CaseClaim:
+        return cls(Path(out) / CASES_DIR / _CLAIMS / f"{name}.claim")
+
+    def _owner(self) -> dict:
+        pid = os.getpid()
+        return {"host": socket.gethostname(), "pid": pid, "start": _process_start(pid),
+                "claimed_at": time.time(), "token": uuid.uuid4().hex}
+
+    def acquire(self) -> bool:
+        """Try to claim the case; False if a live process holds it."""
+        for _ in range(2):  # second try after breaking a stale claim
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                if not self._break_if_stale():
+                    return False
+                continue
+            self._token = self._owner()
+            with os.fdopen(fd, "w") as fh:
+                json.dump(self._token, fh)
+            self.held = True
+            return True
+        return False
+
+    def _break_if_stale(self) -> bool:
+        try:
+            text = self.path.read_text()
+            age = time.time() - self.path.stat().st_mtime
+        except FileNotFoundError:
+            return True  # released meanwhile
+        try:
+            owner = json.loads(text)
+        except json.JSONDecodeError:  # being written right now, or torn by a crash
+            stale = age > 10.0
+            owner = {}
+        else:
+            if owner.get("host") == socket.gethostname():
+                stale = not _alive(int(owner.get("pid", -1)), owner.get("start"))
+            else:
+                stale = age > STALE_AFTER_S
+        if not stale:
+            return False
+        with contextlib.suppress(OSError):
+            if self.path.read_text() == text:  # still the claim judged stale
+                self.path.unlink()
+                log.warning("took over the stale claim %s (%s)", self.path.name,
+                            f"pid {owner.get('pid')} on {owner.get('host')}" if owner
+                            else "unreadable")
+        return True
+
+    def refresh(self) -> None:
+        """Heartbeat: touch the claim so other hosts see it is alive."""
+        if self.held:
+            with contextlib.suppress(OSError):
+                os.utime(self.path)
+
+    def release(self) -> None:
+        if not self.held:
+            return
+        self.held = False
+        with contextlib.suppress(OSError):
+            if json.loads(self.path.read_text()).get("token") == self._token["token"]:
+                self.path.unlink()
+
+
+class ClaimHeartbeat:
+    """A daemon thread that refreshes the claims this process holds every ``HEARTBEAT_S``."""
+
+    def __init__(self, interval: float = HEARTBEAT_S) -> None:
+        self._objects: dict[int, CaseClaim] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="claim-heartbeat")
+        self._interval = interval
+        self._lock = threading.Lock()
+
+    def __enter__(self) -> ClaimHeartbeat:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def add(self, claim: CaseClaim) -> None:
+        with self._lock:
+            self._objects[id(claim)] = claim
+
+    def remove(self, claim: CaseClaim) -> None:
+        with self._lock:
+            self._objects.pop(id(claim), None)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._interval):
+            with self._lock:
+                claims = list(self._objects.values())
+            for claim in claims:
+                claim.refresh()
+
+
+# --- staging and commit ---------------------------------------------------------------------
+def staging_dir(out: Path, name: str) -> Path:
+    """A fresh, empty staging folder for case ``name``; leftovers of killed runs go first.
+
+    Call it only while holding the case's claim: any other staging folder of the
+    case then belongs to a process that is gone.
+    """
+    root = Path(out) / CASES_DIR / _STAGING
+    for old in root.glob(f"{name}@*"):
+        shutil.rmtree(old, ignore_errors=True)
+    path = root / f"{name}@{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    path.mkdir(parents=True)
+    return path
+
+
+def commit_case(out: Path, name: str, staging: Path, record: dict) -> Path:
+    """Write the record into ``staging`` and rename it to ``cases/<name>`` (replacing an old one).
+
+    The record is written last inside the staging folder and the folder renamed
+    in one step, so readers see the old case, no case, or the new case whole.
+    """
+    write_json(staging / RECORD_FILE, record)
+    final = case_dir(out, name)
+    if final.exists():
+        trash = Path(out) / CASES_DIR / _TRASH / f"{name}@{uuid.uuid4().hex[:8]}"
+        trash.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(final, trash)
+        os.replace(staging, final)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        os.replace(staging, final)
+    return final

@@ -1,0 +1,132 @@
+"""The study table: one row per case, read from the case folders alone (SPEC §7 schema).
+
+A row is a case's ``result.json`` (whatever fields ``CaseResult`` has) with the
+study's bookkeeping (case name, status, reason, configuration hash).  The SPEC
+§7 columns come first, then the bookkeeping, then every other field of the
+result in its own order.  ``results.json`` keeps the nested fields (per-leaflet
+numbers, parameters, versions) as they are; ``results.csv`` flattens them into
+dotted column names (``parameters.geometry.mesh_size``), so both hold the
+same numbers.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx.io import atomic_write, write_json
+from valve_dolfinx.study.grid import NORMAL_CASE
+from valve_dolfinx.study.store import CASES_DIR, RECORD_FILE, RESULT_FILE, read_record
+
+__all__ = ["SPEC_COLUMNS", "STUDY_COLUMNS", "case_rows", "flatten", "write_tables",
+           "read_csv_rows"]
+
+log = logging.getLogger(__name__)
+
+#: The columns SPEC §7 requires of every case, in its order
+SPEC_COLUMNS = (
+    "graft_width_pct", "graft_height_pct", "converged", "min_coaptation_height_mm",
+    "central_coaptation_height_mm", "coaptation_area_mm2", "regurgitant_orifice_area_mm2",
+    "competent", "root_diameter_mm", "max_penetration_mm", "n_dofs", "n_ranks", "wall_time_s",
+)
+#: The study's own columns: which case, whether it finished or failed, and why not converged
+STUDY_COLUMNS = ("case", "status", "reason", "config_hash")
+
+
+def _sort_key(row: dict) -> tuple:
+    w, h = row.get("graft_width_pct"), row.get("graft_height_pct")
+    return (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
+
+
+def _reason(record: dict, result: dict) -> str:
+    if record.get("status") == "failed":
+        return str(record.get("reason") or result.get("error") or "failed")
+    if not result.get("converged", False):
+        return str(result.get("solver_message") or record.get("reason") or "not converged")
+    return ""
+
+
+def case_rows(out: Path) -> list[dict]:
+    """Rows of every finished or failed case under ``out/cases`` (normal first, then W, H).
+
+    A folder without ``case.json`` (not made by a sweep) or without ``result.json``
+    is skipped with a warning.
+    """
+    rows = []
+    root = Path(out) / CASES_DIR
+    for folder in sorted(root.iterdir()) if root.is_dir() else []:
+        if folder.name.startswith(".") or not folder.is_dir():
+            continue
+        record = read_record(folder)
+        try:
+            result = json.loads((folder / RESULT_FILE).read_text())
+        except (OSError, json.JSONDecodeError):
+            result = None
+        if record is None or result is None:
+            log.warning("skipping %s: no %s or %s", folder, RECORD_FILE, RESULT_FILE)
+            continue
+        rows.append(_row(folder.name, record, result))
+    return sorted(rows, key=_sort_key)
+
+
+def _row(name: str, record: dict, result: dict) -> dict:
+    row: dict[str, Any] = {key: result.get(key) for key in SPEC_COLUMNS}
+    row.update(case=name, status=record.get("status", "finished"),
+               reason=_reason(record, result), config_hash=record.get("config_hash"))
+    for key, value in result.items():
+        if key not in row:
+            row[key] = value
+    if name == NORMAL_CASE:
+        row["graft_width_pct"] = row["graft_height_pct"] = None
+    return row
+
+
+def flatten(row: dict, prefix: str = "") -> dict:
+    """Nested dicts to dotted keys; lists become JSON text (one CSV cell)."""
+    flat: dict[str, Any] = {}
+    for key, value in row.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{name}."))
+        elif isinstance(value, list | tuple):
+            flat[name] = json.dumps(value)
+        else:
+            flat[name] = value
+    return flat
+
+
+def _cell(value: Any) -> str:
+    """CSV text of a value: floats in full (round-trip) precision, booleans lower case."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else repr(value)
+    return str(value)
+
+
+def write_tables(out: Path, rows: list[dict]) -> tuple[Path, Path]:
+    """Write ``results.json`` (rows as they are) and ``results.csv`` (flattened), atomically."""
+    out = Path(out)
+    json_path = write_json(out / "results.json", rows)
+    flat = [flatten(row) for row in rows]
+    columns = list(dict.fromkeys(key for row in flat for key in row))
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in flat:
+        writer.writerow([_cell(row.get(key)) for key in columns])
+    csv_path = atomic_write(out / "results.csv", lambda tmp: tmp.write_text(buffer.getvalue()))
+    return csv_path, json_path
+
+
+def read_csv_rows(path: Path) -> list[dict[str, str]]:
+    """``results.csv`` as a list of {column: text} (for tests and quick looks)."""
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
