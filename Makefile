@@ -1,11 +1,14 @@
 # Two entry points (see README.md):
-#   make run   - create .venv if missing, install, run the main job
+#   make run   - create .venv if missing, install, run the main job (the graft sizing sweep)
 #   make test  - create .venv if missing, install, run the whole test suite (serial + mpirun -n 2)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 NP     ?= 2
+# make run: the graft sizing study on a coarse mesh (README: why, and how long it takes);
+# `make run SWEEP_MESH=0.8` runs it at the default resolution
+SWEEP_MESH ?= 1.6
 
 .PHONY: run test install clean-results
 
@@ -19,7 +22,8 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	$(BIN)/python demos/valve_geometry.py --out results/geometry
-	$(BIN)/valve-dolfinx run --out results/normal_valve
+	$(BIN)/mpirun -n $(NP) $(BIN)/python demos/graft_sweep.py --mesh-size $(SWEEP_MESH) \
+		--out results/graft_sweep
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -409,6 +409,26 @@ def test_every_case_once_over_the_ranks(tmp_path_factory):
         assert [r["case"] for r in rows] == ["normal", "W0_H0", "W7_H0", "W14_H0"]
 
 
+def test_graft_sweep_demo(tmp_path, quiet_cli, monkeypatch, capsys):
+    """demos/graft_sweep.py runs the study through run_study (stand-in cases) and reports."""
+    import importlib.util
+
+    from valve_dolfinx.study import runner
+
+    monkeypatch.setattr(runner, "run_closure_case",
+                        lambda config, out, comm, **_: stand_in_case(config, out, comm))
+    spec = importlib.util.spec_from_file_location("demo_graft_sweep",
+                                                  ROOT / "demos" / "graft_sweep.py")
+    demo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(demo)
+    outcome = demo.main(["--out", str(tmp_path), "--widths", "7", "14", "--heights", "0",
+                         "13", "--no-progress"])
+    assert len(outcome.computed) == 5
+    text = capsys.readouterr().out
+    assert "5 cases:" in text and "Recommended graft: **W7/H13**" in text
+    assert (tmp_path / "report.md").is_file() and (tmp_path / "sizing_map.png").is_file()
+
+
 # --- the recommendation -----------------------------------------------------------------------
 def _row(w, h, height, converged=True, competent=True):
     return {"graft_width_pct": w, "graft_height_pct": h, "converged": converged,

@@ -116,10 +116,10 @@ def plot_sizing_map(rows: list[dict], path: Path, *, recommended: str | None = N
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("minimum coaptation height (mm)")
     normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+    note = "red hatched: leaks (regurgitant orifice area > 0)"
     if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
-        bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2)
-        bar.ax.text(1.05, _num(normal[FIGURE]), " normal", transform=bar.ax.get_yaxis_transform(),
-                    va="center", fontsize=8)
+        bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
+        note += f"; black bar line: normal valve {_num(normal[FIGURE]):.2f} mm"
     finite = grid[np.isfinite(grid)]
     middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
     for (i, j), r in by_cell.items():
@@ -144,7 +144,6 @@ def plot_sizing_map(rows: list[dict], path: Path, *, recommended: str | None = N
     ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("graft height enlargement H (%)")
-    note = "red hatched: leaks (regurgitant orifice area > 0)"
     if recommended:
         note += f"; gold: recommended {recommended}"
     ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
@@ -168,17 +167,26 @@ def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path |
     import matplotlib.image as mpimg
 
     pictures = [(mpimg.imread(p), caption) for p, caption in images]
-    ratios = [img.shape[1] / img.shape[0] for img, _ in pictures]
-    height = 4.0
-    fig, axes = plt.subplots(1, len(pictures), figsize=(height * sum(ratios), height + 0.6),
-                             gridspec_kw={"width_ratios": ratios}, constrained_layout=True)
-    for ax, (img, caption) in zip(np.atleast_1d(axes), pictures, strict=True):
-        ax.imshow(img)
-        ax.set_axis_off()
-        ax.set_title(caption, fontsize=10)
+    # rows of equal width: the valve view and the cuts side by side, the flat map below
+    rows = [pictures[:2], pictures[2:]] if len(pictures) == 3 else [pictures]
+    width, caption_h, title_h = 12.0, 0.3, 0.45 if title else 0.0
+    heights = [width / sum(img.shape[1] / img.shape[0] for img, _ in row) for row in rows]
+    total = title_h + sum(h + caption_h for h in heights)
+    fig = plt.figure(figsize=(width, total))
+    top = total - title_h
+    for row, h in zip(rows, heights, strict=True):
+        left = 0.0
+        top -= h + caption_h
+        for img, caption in row:
+            w = h * img.shape[1] / img.shape[0]
+            ax = fig.add_axes((left / width, top / total, w / width, h / total))
+            ax.imshow(img)
+            ax.set_axis_off()
+            ax.set_title(caption, fontsize=10)
+            left += w
     if title:
-        fig.suptitle(title)
+        fig.suptitle(title, y=1.0 - 0.2 * title_h / total, fontsize=13)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=150)
+    fig.savefig(path, dpi=200)
     plt.close(fig)
     return path

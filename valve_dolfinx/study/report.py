@@ -173,7 +173,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
             panels.append(panel)
     files += panels
     files.append(_write_markdown(out, rows, rec, settings, missing, panels))
-    log.info("report: %d cases, %s -> %s", len(rows), rec.recommended or
+    log.debug("report: %d cases, %s -> %s", len(rows), rec.recommended or
              (f"none qualifies (best {rec.best})" if rec.best else "no recommendation"),
              out / "report.md")
     return StudyReport(out, rows, rec, missing, files)
@@ -182,5 +182,6 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
 def _panel_title(name: str) -> str:
     if name == NORMAL_CASE:
         return "normal valve"
-    return "graft " + name.replace("_", " ").replace("W", "W +").replace("H", "H +") + " (%)"
+    width, height = name[1:].split("_H")
+    return f"graft W +{width} %, H +{height} %"
 
