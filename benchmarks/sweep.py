@@ -34,6 +34,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
+    if comm.rank == 0:  # one line per finished case
+        logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
     out = args.out
     if out is None:
         stamp = comm.bcast(time.strftime("%Y%m%d-%H%M%S"), root=0)
