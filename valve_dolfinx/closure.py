@@ -41,7 +41,10 @@ from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.root import RootParameters, RootState, distend_root
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver, DynamicsParameters
-from valve_dolfinx.solvers.relaxation import DynamicRelaxationSolver, RelaxationParameters
+from valve_dolfinx.solvers.pseudo_transient import (
+    PseudoTransientParameters,
+    PseudoTransientSolver,
+)
 
 __all__ = ["MMHG_TO_KPA", "CaseConfig", "CaseResult", "run_case", "closure_model"]
 
@@ -54,12 +57,9 @@ MMHG_TO_KPA = 0.133322
 #: choices of docs/contact.md: the leaflets' contact surfaces are offset 0.125 mm (half of
 #: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
 #: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
-#: Edge rows fade in (``edge_row_fade_in``, the ContactParameters default): with the blend
-#: of fading rows fixed (session 6) it no longer slows the normal valve, and without it a
-#: node whose projection re-enters a triangle loses its edge row with a jump (0.15 mN).
+#: The side of every node-triangle pair, between leaflets as within one, is the side the node
+#: approaches from (recorded at the last accepted state), whichever face of the triangle that is.
 VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05)
-#: Penetration window (mm) between leaflets, whose contact side is known (ventricular faces)
-BETWEEN_LEAFLETS_DEPTH = 1.0
 #: own-body triangles closer than this many contact reaches (reference state) are not
 #: contacts (see SurfaceContact: a fold meets itself across about 1.57 reaches of material)
 SELF_EXCLUSION_FACTOR = 1.5
@@ -71,15 +71,9 @@ COMMISSURE_EXCLUSION_MM = 2.5
 FREE_EDGE_BAND = 1.0
 #: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/closure.md)
 BENDING_MODULUS_KPA = 200.0
-#: paths to the loaded equilibrium (CaseConfig.solver)
-SOLVERS = ("dynamics", "relaxation", "dynamics+relaxation")
-#: "dynamics+relaxation": the damped dynamics close the valve until the watched increment
-#: of a step falls below this (mm, DynamicsParameters.handover_increment_mm), then the
-#: explicit relaxation settles it
-HANDOVER_INCREMENT_MM = 1e-2
-#: ... or at the latest at this simulated time (s; DynamicsParameters.handover_time_s):
-#: ten relaxation times, long after the leaflets are shut (docs/closure.md, "Session 7")
-HANDOVER_TIME_S = 10.0
+#: paths to the loaded equilibrium (CaseConfig.solver): pseudo-transient continuation (the
+#: default) and damped BDF2 dynamics (SPEC §4, the cross-check)
+SOLVERS = ("ptc", "bdf2")
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
 
@@ -101,20 +95,15 @@ class CaseConfig:
     (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by default:
     with it and the bending stiffness the three-leaflet valve crossed earlier
     than without it (docs/closure.md).
-    ``solver`` picks the path to the equilibrium: ``"dynamics+relaxation"``
-    (the default: BDF2 closes the valve, the relaxation settles it once a step
-    moves the watched nodes less than ``HANDOVER_INCREMENT_MM``), ``"dynamics"``
-    (SPEC §4: BDF2 damped dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`,
-    to the end) or ``"relaxation"`` (explicit dynamic relaxation with
-    stiffness-scaled nodal masses, :mod:`valve_dolfinx.solvers.relaxation`; the
-    dynamics' wall-clock limit and increment test apply).  All stop at a static
-    equilibrium; on the three-leaflet valve the closing path picks between
-    arrangements of the free-edge tips at the triple point: the relaxation
-    alone settles in an asymmetric one, and BDF2 alone is slow to settle the
-    last contacts at the default mesh (docs/closure.md).
-    ``central_band_mm`` (1 mm) reads the coaptation heights outside a band
-    around the triple-point tip of the midline and extrapolates the profile to
-    the midline (:mod:`valve_dolfinx.analysis.coaptation`); 0 reads ``h(0)``.
+    ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
+    pseudo-transient continuation with PETSc TS and SNES, contact and bending
+    in the Newton system from the first step,
+    :mod:`~valve_dolfinx.solvers.pseudo_transient`) or ``"bdf2"`` (SPEC §4: damped
+    BDF2 dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`, the
+    cross-check).  Both stop at a static equilibrium.
+    ``nodulus_length_mm`` (0 mm) is the free-edge length at the triple point
+    treated as the nodulus of Arantius by the coaptation heights
+    (:mod:`valve_dolfinx.analysis.coaptation`); 0 leaves nothing out.
     """
 
     geometry: ValveParameters = field(default_factory=ValveParameters)
@@ -124,13 +113,13 @@ class CaseConfig:
     root: RootParameters = field(default_factory=RootParameters)
     contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
     edge_contact: bool = False
-    lag_contact_driving_force: bool = False
+    solver: str = "ptc"
+    pseudo_transient: PseudoTransientParameters = field(
+        default_factory=PseudoTransientParameters)
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
-    solver: str = "dynamics+relaxation"
-    relaxation: RelaxationParameters = field(default_factory=RelaxationParameters)
     coaptation_threshold_mm: float = 0.5
     orifice_pixel_mm: float = 0.05
-    central_band_mm: float = 1.0
+    nodulus_length_mm: float = 0.0
     commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
     free_edge_band: float = FREE_EDGE_BAND
     quadrature_degree: int = 1
@@ -146,8 +135,8 @@ class CaseConfig:
                     hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
         if self.solver not in SOLVERS:
             raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
-                                 "'dynamics' (BDF2), 'relaxation' (explicit) or "
-                                 "'dynamics+relaxation' (BDF2 closes, relaxation settles)")
+                                 "'ptc' (pseudo-transient continuation, the default) or "
+                                 "'bdf2' (damped BDF2 dynamics, the cross-check)")
         if self.symmetric_reference and self.geometry.has_graft:
             raise ParameterError("symmetric_reference needs the normal valve (no graft)")
 
@@ -167,7 +156,7 @@ class CaseConfig:
         kinds = {"geometry": ValveParameters, "native_material": FungMaterial,
                  "graft_material": FungMaterial, "root": RootParameters,
                  "contact": ContactParameters, "dynamics": DynamicsParameters,
-                 "relaxation": RelaxationParameters}
+                 "pseudo_transient": PseudoTransientParameters}
         unknown = set(data) - {f.name for f in fields(cls)}
         if unknown:
             raise ParameterError(f"unknown configuration keys {sorted(unknown)}")
@@ -188,6 +177,7 @@ class CaseResult:
     graft_height_pct: float | None
     converged: bool
     min_coaptation_height_mm: float = float("nan")
+    min_coaptation_height_raw_mm: float = float("nan")
     central_coaptation_height_mm: float = float("nan")
     coaptation_area_mm2: float = float("nan")
     regurgitant_orifice_area_mm2: float = float("nan")
@@ -201,8 +191,10 @@ class CaseResult:
     mesh_size_mm: float = float("nan")
     n_cells: int = 0
     solver_message: str = ""
-    simulated_time_s: float = float("nan")
+    solver: str = ""
     time_steps: int = 0
+    newton_iterations: int = 0
+    residual_tolerance_mN: float = float("nan")
     equilibrium_residual_mN: float = float("nan")
     leaflets: dict = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
@@ -359,7 +351,6 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     # step 2: closure with the attachment held at the distended root
     bc = clamp_edges(model.V, domain.facet_tags, [ATTACHMENT], value=u0)
     model.u.x.array[:] = u0.x.array
-    stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
     watch = [int(p.nodes[p.midline_free_edge_node]) for p in valve.leaflets]
 
     def make_hook(coupling):
@@ -370,8 +361,6 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
             # a single leaflet may still fold onto itself
         models.append(SurfaceContact(valve.cells, valve.num_nodes, config.contact,
                                      triangle_body=valve.cell_tags,
-                                     between_bodies_side=VALVE_PRESSURE_SIDE,
-                                     between_bodies_depth=BETWEEN_LEAFLETS_DEPTH,
                                      reference=valve.flat,
                                      self_exclusion_radius=SELF_EXCLUSION_FACTOR
                                      * config.contact.reach,
@@ -383,53 +372,33 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                       valve.num_nodes, config.contact, reference=valve.points,
                                       exclusion_radius=SELF_EXCLUSION_FACTOR
                                       * config.contact.reach))
+        # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
+        # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
-                           lag_driving_force=config.lag_contact_driving_force,
+                           lag_driving_force=config.solver == "ptc",
+                           driving_force_relaxation=1.0,
                            fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
 
     hooks = [make_hook]
     if config.bending_modulus_kpa > 0:
         K = leaflet_bending_matrix(valve, model, config.bending_modulus_kpa)
         hooks.append(lambda coupling: BendingHook(coupling, K))
-    dynamics = config.dynamics
-    if config.solver == "dynamics+relaxation":  # the relaxation replaces the static finish
-        dynamics = replace(dynamics, static_finish_increment_mm=0.0,
-                           handover_increment_mm=dynamics.handover_increment_mm
-                           or HANDOVER_INCREMENT_MM,
-                           handover_time_s=dynamics.handover_time_s or HANDOVER_TIME_S)
-    args = (model, [bc], u0, config.pressure_kpa, stiffness, watch, dynamics)
-    if config.solver == "relaxation":
-        solver = DynamicRelaxationSolver(*args, hooks=hooks, relaxation=config.relaxation)
+    if config.solver == "ptc":
+        solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
+                                       config.pseudo_transient, hooks=hooks, watch_nodes=watch)
+        report = solver.solve(progress=progress)
+        state = model.u
     else:
-        solver = DampedDynamicsSolver(*args, hooks=hooks)
-    report = solver.solve(progress=progress)
-    if report.handed_over:
-        solver, report = _settle(model, bc, config, stiffness, watch, hooks, report, progress)
+        stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
+        solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
+                                      config.dynamics, hooks=hooks)
+        report = solver.solve(progress=progress)
+        state = solver.U
     hook = solver.hooks[0]
-    positions = solver.coupling.positions(solver.U)
-    forces = hook.contact_forces(solver.U)
+    positions = solver.coupling.positions(state)
+    forces = hook.contact_forces(state)
     display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
     return CaseState(domain, model, root, positions, forces, report, display=display)
-
-
-def _settle(model, bc, config: CaseConfig, stiffness: dict, watch: list, hooks: list,
-            closing, progress):
-    """The relaxation from the state the closing dynamics handed over (same model, same
-    conditions, the wall-clock time that is left); returns the solver and a report of both."""
-    start = dolfinx.fem.Function(model.V)
-    start.x.array[:] = model.u.x.array
-    remaining = max(config.dynamics.wall_time_limit_s - closing.wall_time_s, 1.0)
-    params = replace(config.dynamics, wall_time_limit_s=remaining, handover_increment_mm=0.0)
-    solver = DynamicRelaxationSolver(model, [bc], start, config.pressure_kpa, stiffness, watch,
-                                     params, hooks=hooks, relaxation=config.relaxation)
-    report = solver.solve(progress=progress)
-    report.reason = f"{closing.reason}; then {report.reason}"
-    report.wall_time_s += closing.wall_time_s
-    for phase, rows in (("dynamics", closing.history), ("relaxation", report.history)):
-        for row in rows:  # the step counts restart with the relaxation: say which is which
-            row["phase"] = phase
-    report.history = closing.history + report.history
-    return solver, report
 
 
 def analyse_case(state: CaseState, config: CaseConfig):
@@ -439,11 +408,12 @@ def analyse_case(state: CaseState, config: CaseConfig):
     valve, positions = state.display or (state.domain.valve, state.positions)
     result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
                                 pixel_mm=config.orifice_pixel_mm,
-                                central_band_mm=config.central_band_mm)
+                                nodulus_length_mm=config.nodulus_length_mm)
     if config.symmetric_reference:
         # the heights are the solved leaflet's (its images see each other only through it)
         solved = result.leaflets[valve.leaflets[0].name]
         result.min_native_height_mm = solved.min_height_mm
+        result.min_native_height_raw_mm = solved.min_height_raw_mm
         result.central_native_height_mm = solved.central_height_mm
     return result
 
@@ -471,6 +441,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
         converged=bool(report.converged),
         min_coaptation_height_mm=fields_["min_coaptation_height_mm"],
+        min_coaptation_height_raw_mm=fields_["min_coaptation_height_raw_mm"],
         central_coaptation_height_mm=fields_["central_coaptation_height_mm"],
         coaptation_area_mm2=fields_["coaptation_area_mm2"],
         regurgitant_orifice_area_mm2=fields_["regurgitant_orifice_area_mm2"],
@@ -483,9 +454,14 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         mesh_size_mm=g.mesh_size,
         n_cells=state.domain.num_cells_global(),
         solver_message=report.reason,
-        simulated_time_s=report.time,
+        solver=config.solver,
         time_steps=report.steps,
-        equilibrium_residual_mN=report.equilibrium_residual,
+        newton_iterations=report.newton_iterations,
+        residual_tolerance_mN=(config.pseudo_transient.residual_tolerance
+                               if config.solver == "ptc"
+                               else config.dynamics.equilibrium_tolerance),
+        equilibrium_residual_mN=(report.residual_mN if config.solver == "ptc"
+                                 else report.equilibrium_residual),
         leaflets={name: lc.to_dict() for name, lc in coaptation.leaflets.items()},
         parameters={**config.to_dict(), "root_state": state.root.to_dict(),
                     "python": platform.python_version()},

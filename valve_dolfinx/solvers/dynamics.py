@@ -27,9 +27,9 @@ them (tested).  They are scaled per tissue to its stiffness,
 ``k = t·c_Fung·λmax(M)`` (:attr:`FungMaterial.stiffness_scale`), so that the
 pericardial graft -- hundreds of times stiffer in-plane than the native
 leaflet -- is not integrated with the native leaflet's time scale (SPEC §4).
-Optionally (``strain_rate_damping_time`` τ_v > 0) a Kelvin–Voigt viscosity
-``τ_v·k_tissue·Ė`` damps the membrane's stretching rate (not rigid or flapping
-motion); it too vanishes at rest (tested in tests/test_dynamics.py).
+This is the cross-check of the default path
+(:mod:`~valve_dolfinx.solvers.pseudo_transient`), which reaches the same static
+equilibrium without a physical time scale.
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import ufl
 
-from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.exceptions import MeshError, check_range
+from valve_dolfinx._compat import PETSc, dolfinx
+from valve_dolfinx.exceptions import check_range
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
@@ -72,14 +72,6 @@ class DynamicsParameters:
         L (mm) in the stiffness-per-area estimate k/L².
     stiffness_exponent
         β in ``c ∝ (k_tissue/k_ref)^β`` (1: damping proportional to stiffness).
-    strain_rate_damping_time
-        τ_v (s) of a Kelvin–Voigt viscosity on the membrane strain rate,
-        tension ``τ_v·k_tissue·Ė`` (``k_tissue`` the tissue's stiffness scale):
-        it damps stretching, not rigid or flapping motion, in proportion to
-        each tissue's stiffness, and its Jacobian is a regular, always positive
-        block even where the tissue switches between slack and taut (the
-        nearly inextensible graft).  0 switches it off.  Like mass and
-        damping it vanishes at rest and leaves the equilibrium unchanged.
     ramp_time
         Pressure ramp duration (s), smooth-step shaped.
     dt_initial, dt_min, dt_max
@@ -106,48 +98,6 @@ class DynamicsParameters:
         Limit on accepted + rejected steps.
     newton_max_it
         Newton iterations per step before the step is retried smaller.
-    newton_step_tolerance_mm
-        Newton also stops (converged) once its last update moved no node by
-        more than this (mm), however large the residual still is.  A node at a
-        crease of a folded sheet in self-contact sees its contact force change
-        direction where its closest triangle changes, so the residual there is
-        discontinuous and Newton can cycle between two states ~1e-5 mm apart
-        without reducing it (the pericardial graft, docs/closure.md); such a
-        state is as exact as the motion it represents.  Keep it far below
-        ``error_tolerance_mm``.  0 (the default) switches the test off
-        (PETSc's residual and step tests only): where Newton converges
-        slowly, stopping on a small update leaves an error larger than the
-        update, and the normal valve then crept on with increments above
-        ``stop_increment_mm`` at t = 530 s instead of converging at 27 s.  The
-        graft experiments used 1e-4 mm (docs/closure.md).
-    static_finish_increment_mm
-        Once the full load is on and the watched increment of an accepted step
-        is below this (mm), try to finish with Newton's method on the *static*
-        equilibrium (no mass, no damping) from the current state, at most once
-        every ``static_finish_interval`` steps; if it converges (static residual
-        below a tenth of ``equilibrium_tolerance``, no node moved further than
-        ``static_finish_max_motion_mm``, no new mid-surface crossing) that state
-        is the answer, otherwise the dynamics carry on from where they were.
-        The settling phase of the damped dynamics is the slow part of a run
-        (Newton has to be restarted at small steps wherever contact or
-        wrinkling switches); the static solve skips it.  0 switches it off.
-    static_finish_interval
-        Accepted steps between two static-finish attempts.
-    handover_increment_mm
-        Stop the dynamics (``handed_over``, not converged) once the full load is
-        on and the watched increment of a step is below this (mm), so that an
-        explicit relaxation finishes from there (``CaseConfig.solver =
-        "dynamics+relaxation"``).  0 (default) never hands over.
-    handover_time_s
-        With ``handover_increment_mm`` set, hand over at the latest at this
-        simulated time (s, at or after the end of the ramp): a stiff, slack graft
-        creeps shut with steps that stay above the increment long after the
-        valve is closed.  0 (default): no limit.
-    static_finish_max_motion_mm
-        Largest nodal motion a static finish may make (mm): further than this it
-        may have jumped through a contact surface, and it is rejected.
-    static_finish_max_it
-        Newton iterations of one static-finish attempt.
     petsc_options
         Extra PETSc options for the TS/SNES/KSP (without prefix), e.g.
         ``{"snes_linesearch_type": "l2"}``.
@@ -157,7 +107,6 @@ class DynamicsParameters:
     mass_ratio: float = 0.05
     length_scale: float = 10.0
     stiffness_exponent: float = 1.0
-    strain_rate_damping_time: float = 0.0
     ramp_time: float = 1.0
     dt_initial: float = 1e-3
     dt_min: float = 1e-8
@@ -170,13 +119,6 @@ class DynamicsParameters:
     wall_time_limit_s: float = 3600.0
     max_steps: int = 20000
     newton_max_it: int = 20
-    newton_step_tolerance_mm: float = 0.0
-    static_finish_increment_mm: float = 1e-3
-    static_finish_interval: int = 10
-    static_finish_max_motion_mm: float = 0.3
-    static_finish_max_it: int = 20
-    handover_increment_mm: float = 0.0
-    handover_time_s: float = 0.0
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -184,26 +126,12 @@ class DynamicsParameters:
         check_range("mass_ratio", self.mass_ratio, 0.0, 1e3, unit="")
         check_range("length_scale", self.length_scale, 0.0, 1e3, low_open=True, unit="mm")
         check_range("stiffness_exponent", self.stiffness_exponent, 0.0, 1.0)
-        check_range("strain_rate_damping_time", self.strain_rate_damping_time, 0.0, 1e6,
-                    unit="s")
         check_range("ramp_time", self.ramp_time, 0.0, 1e6, low_open=True, unit="s")
         check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True, unit="s")
         check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max, unit="s")
         check_range("error_tolerance_mm", self.error_tolerance_mm, 0.0, 10.0, low_open=True)
         check_range("stop_increment_mm", self.stop_increment_mm, 0.0, 1.0, low_open=True)
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
-        check_range("newton_step_tolerance_mm", self.newton_step_tolerance_mm, 0.0,
-                    0.1 * self.error_tolerance_mm, unit="mm")
-        check_range("handover_increment_mm", self.handover_increment_mm, 0.0, 1.0, unit="mm",
-                    hint="0 never hands over to the relaxation")
-        check_range("handover_time_s", self.handover_time_s, 0.0, 1e6, unit="s",
-                    hint="0: no time limit on the hand-over")
-        check_range("static_finish_increment_mm", self.static_finish_increment_mm, 0.0, 1.0,
-                    unit="mm")
-        check_range("static_finish_interval", self.static_finish_interval, 1, 1e6)
-        check_range("static_finish_max_it", self.static_finish_max_it, 1, 1e4)
-        check_range("static_finish_max_motion_mm", self.static_finish_max_motion_mm, 0.0,
-                    10.0, low_open=True, unit="mm")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -222,9 +150,6 @@ class DynamicsReport:
     rejected_for_motion: int = 0
     equilibrium_residual: float = float("nan")
     wall_time_s: float = 0.0
-    static_finish_attempts: int = 0
-    static_finished: bool = False
-    handed_over: bool = False
     history: list[dict] = field(default_factory=list)
 
 
@@ -289,8 +214,6 @@ class DampedDynamicsSolver:
 
         self.stiffness = dict(stiffness)
         self.damping, self.mass = self._coefficients(stiffness)
-        self.viscosity = {tag: self.params.strain_rate_damping_time * k
-                          for tag, k in stiffness.items()}
         self.G_form, self.J_form = self._forms()
         self.F_vec = fem_petsc.create_vector(self.W)
         self.J_mat = fem_petsc.create_matrix(self.J_form)
@@ -303,7 +226,6 @@ class DampedDynamicsSolver:
         self._snes_options = snes_options or {}
         self.report = DynamicsReport()
         self._ts = None
-        self._ksp = None  # LU of the static finish, made on first use
         self._progress: Callable[[dict], None] | None = None
 
     # --- setup -------------------------------------------------------------------
@@ -354,11 +276,6 @@ class DampedDynamicsSolver:
              + ufl.inner(self.mass[tag] * vdot + self.damping[tag] * v, w_v)) * dA * dxv(tag)
             for tag in self.damping)
         G = inertial + model.residual(w_v, u=u)
-        if any(eta > 0.0 for eta in self.viscosity.values()):
-            # Kelvin–Voigt: tension η·Ė with Ė the strain rate of the velocity v
-            rate, virtual = model.strain_variation(v, u), model.strain_variation(w_v, u)
-            G = G + sum(eta * ufl.inner(rate, virtual) * dA * model.dx(tag)
-                        for tag, eta in self.viscosity.items() if eta > 0.0)
         dU = ufl.TrialFunction(self.W)
         J = ufl.derivative(G, U, dU) + self.shift * ufl.derivative(G, Udot, dU)
         return fem.form(G), fem.form(J)
@@ -393,9 +310,8 @@ class DampedDynamicsSolver:
         F.assemble()
         fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
 
-    def ijacobian(self, ts, t, X, Xdot, a, J, P, hooks: Sequence | None = None) -> None:
-        """TS Jacobian callback; ``hooks`` (default: all) are the hooks whose blocks it adds."""
-        hooks = self.hooks if hooks is None else hooks
+    def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
+        hooks = self.hooks
         self._set_state(t, X, Xdot)
         self.shift.value = a
         J.zeroEntries()
@@ -432,24 +348,19 @@ class DampedDynamicsSolver:
             "snes_max_it": p.newton_max_it,
             # residuals are forces (mN); nodal pressure forces are ~1-10 mN, and 1e-2 mN
             # moves a node by 1e-3 mm against the contact stiffness (10 mN/mm): the path
-            # needs no more, and the equilibrium tests (equilibrium_tolerance, the static
-            # finish, the relaxation after hand-over) are separate.  A step test ends
-            # Newton when round-off (huge shift at tiny dt) stalls |F|:
-            # newton_step_tolerance_mm (_newton_converged), or PETSc's stol when that is 0.
+            # needs no more, and the equilibrium test (equilibrium_tolerance) is separate.
+            # PETSc's stol ends Newton when round-off (huge shift at tiny dt) stalls |F|.
             "snes_rtol": 1e-4,
             "snes_atol": 1e-2,
             "snes_stol": 1e-12,
             # The LU factorisation took half the time of a step: it is refreshed every
             # 10th Newton iteration, across time steps, and GMRES preconditioned by it
-            # solves each Newton system with the current Jacobian (docs/closure.md,
-            # "Session 7": the 0.8 mm valve closes 2.5x faster, same equilibrium).
+            # solves each Newton system with the current Jacobian.
             "snes_lag_preconditioner": 10,
             "snes_lag_preconditioner_persists": True,
             "ksp_type": "gmres",
             # modified Gram-Schmidt: with PETSc's default (classical, VecMDot/VecMAXPY) two
-            # runs of the same case differed in the last bits from the ~17th step on, and
-            # the graft valves' relaxation amplified that into different results
-            # (docs/closure.md, "Session 8"); with it runs are bit-reproducible
+            # runs of the same case differ in the last bits; with it runs are bit-reproducible
             "ksp_gmres_modifiedgramschmidt": True,
             "ksp_rtol": 1e-8,
             "pc_type": "lu",
@@ -471,34 +382,8 @@ class DampedDynamicsSolver:
             arr[:, 3:] = 1e30  # velocities are not error-controlled
         ts.setTolerances(rtol=0.0, atol=atol)
         ts.setFromOptions()
-        if p.newton_step_tolerance_mm > 0.0:
-            ts.getSNES().setConvergenceTest(self._newton_converged)
         ts.setPostStep(self._post_step)
         return ts
-
-    def _newton_converged(self, snes: PETSc.SNES, its: int, norms) -> int:
-        """SNES test: PETSc's residual tests, or the last update moved no node further
-        than ``newton_step_tolerance_mm`` (see :class:`DynamicsParameters`)."""
-        reason = PETSc.SNES.ConvergedReason
-        fnorm = norms[2]
-        rtol, atol, _, max_it = snes.getTolerances()
-        x = snes.getSolution().array_r.reshape(-1, 6)[:, :3]
-        if its == 0:
-            self._fnorm0, self._newton_x = fnorm, x.copy()
-            return reason.CONVERGED_FNORM_ABS if fnorm < atol else reason.ITERATING
-        if not np.isfinite(fnorm):
-            return reason.DIVERGED_FUNCTION_NANORINF
-        if fnorm < atol:
-            return reason.CONVERGED_FNORM_ABS
-        if fnorm <= rtol * self._fnorm0:
-            return reason.CONVERGED_FNORM_RELATIVE
-        step = self._largest_node_motion(x - self._newton_x)
-        self._newton_x = x.copy()
-        if step < self.params.newton_step_tolerance_mm:
-            return reason.CONVERGED_SNORM_RELATIVE
-        if its >= max_it:
-            return reason.DIVERGED_MAX_IT
-        return reason.ITERATING
 
     def _post_step(self, ts: PETSc.TS) -> None:
         p = self.params
@@ -532,21 +417,7 @@ class DampedDynamicsSolver:
                  "pressure": self._load(t)}
         self._record(entry)
         elapsed = time.perf_counter() - self._t0
-        if (p.static_finish_increment_mm > 0.0 and t >= p.ramp_time
-                and increment < p.static_finish_increment_mm and r.steps >= self._next_finish):
-            self._next_finish = r.steps + p.static_finish_interval
-            if self._static_finish(ts, t, entry):
-                return
-        late = 0.0 < p.handover_time_s <= t
-        if (p.handover_increment_mm > 0.0 and t >= p.ramp_time
-                and (increment < p.handover_increment_mm or late)):
-            why = (f"increment {increment:.2e} mm < {p.handover_increment_mm:g} mm"
-                   if increment < p.handover_increment_mm
-                   else f"t ≥ {p.handover_time_s:g} s, increment {increment:.2e} mm")
-            r.handed_over, r.reason = True, (
-                f"closing dynamics handed over at t = {t:.4g} s, step {r.steps} ({why})")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-        elif (t >= p.ramp_time and increment < p.stop_increment_mm
+        if (t >= p.ramp_time and increment < p.stop_increment_mm
                 and self.equilibrium_residual(t) < p.equilibrium_tolerance):
             r.converged, r.reason = True, (
                 f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and static residual "
@@ -560,63 +431,6 @@ class DampedDynamicsSolver:
             r.reason = (f"time step fell to the floor dt_min = {p.dt_min:g} s at t = {t:.4g} s, "
                         f"step {r.steps}, increment {increment:.3g} mm")
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-
-    def _static_finish(self, ts: PETSc.TS, t: float, entry: dict) -> bool:
-        """Newton's method on the static equilibrium from the current state (see
-        ``static_finish_increment_mm``); on success the TS solution becomes that state."""
-        p, r = self.params, self.report
-        r.static_finish_attempts += 1
-        start = ts.getSolution()  # self.U holds the same state (_post_step)
-        X, Xdot, t_full = self._at_rest(t)
-        F, dX = X.duplicate(), X.duplicate()
-        x0 = self.coupling.displacements(self.U)
-        ksp = self._static_ksp()
-        tol = 0.1 * p.equilibrium_tolerance
-        ok, why, fnorm = False, "", float("nan")
-        try:
-            for it in range(p.static_finish_max_it):
-                self.ifunction(None, t_full, X, Xdot, F)
-                if it == 0:  # the hooks have just evaluated the starting positions
-                    crossing0 = self._crossing()
-                fnorm = F.norm(PETSc.NormType.INFINITY)
-                if not np.isfinite(fnorm):
-                    why = "the residual became non-finite"
-                    break
-                motion = self._largest_node_motion(self.coupling.displacements(self.U) - x0)
-                if motion > p.static_finish_max_motion_mm:
-                    why = f"it moved a node {motion:.3g} mm"
-                    break
-                if fnorm < tol:
-                    crossing = self._crossing()
-                    ok = crossing <= max(crossing0, 0.0) + 1e-3
-                    why = "" if ok else f"it crossed surfaces by {crossing:.3g} mm"
-                    break
-                self.ijacobian(None, t_full, X, Xdot, 0.0, self.J_mat, self.J_mat)
-                ksp.setOperators(self.J_mat)
-                ksp.solve(F, dX)
-                if ksp.getConvergedReason() < 0:
-                    why = f"the linear solve failed ({ksp.getConvergedReason()})"
-                    break
-                step = self._largest_node_motion(dX.array_r.reshape(-1, 6)[:, :3])
-                # at most max_increment_mm per iteration, as for a time step (contact search)
-                X.axpy(-min(1.0, p.max_increment_mm / max(step, 1e-300)), dX)
-        except (PETSc.Error, MeshError) as err:  # MeshError: non-finite positions
-            why = f"{type(err).__name__}: {err}"
-        if not ok:
-            why = why or (f"Newton did not converge in {p.static_finish_max_it} iterations "
-                          f"(|F| = {fnorm:.3g} mN)")
-            log.info("static finish at t = %.4g s rejected: %s", t, why)
-            self._set_state(t, start, Xdot)  # back to the dynamic state
-            return False
-        start.array[:] = X.array_r
-        self._set_state(t, start, Xdot)
-        self._accept_state()
-        r.static_finished, r.converged = True, True
-        r.reason = (f"static Newton finish from t = {t:.4g} s: static residual {fnorm:.2e} mN "
-                    f"< {tol:g} mN")
-        entry["static_finish"] = True
-        ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-        return True
 
     def _record(self, entry: dict) -> None:
         """Add the hooks' diagnostics to a history row, keep it and report it."""
@@ -635,11 +449,6 @@ class DampedDynamicsSolver:
             if update is not None:
                 update(self.U)
 
-    def _largest_node_motion(self, motion: np.ndarray) -> float:
-        """max over nodes (and ranks) of |motion| for an (n, 3) array of nodal vectors."""
-        local = float(np.max(np.linalg.norm(motion, axis=1), initial=0.0))
-        return self.model.domain.comm.allreduce(local, op=MPI.MAX)
-
     def _at_rest(self, t: float | None = None) -> tuple[PETSc.Vec, PETSc.Vec, float]:
         """The current state with velocities and rates zero, and the time of full load."""
         X = self.U.x.petsc_vec.copy()
@@ -648,21 +457,6 @@ class DampedDynamicsSolver:
         Xdot.set(0.0)
         t_full = max(self.params.ramp_time, self.report.time if t is None else t)
         return X, Xdot, t_full
-
-    def _crossing(self) -> float:
-        """Largest mid-surface crossing the hooks report (mm) for the current state."""
-        values = [hook.diagnostics().get("max_penetration_mm", 0.0) for hook in self.hooks
-                  if hasattr(hook, "diagnostics")]
-        return max(values, default=0.0)
-
-    def _static_ksp(self) -> PETSc.KSP:
-        if self._ksp is None:
-            ksp = PETSc.KSP().create(self.model.domain.comm)
-            ksp.setType("preonly")
-            ksp.getPC().setType("lu")
-            ksp.getPC().setFactorSolverType("mumps")
-            self._ksp = ksp
-        return self._ksp
 
     def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
         """Integrate until converged, stalled, or out of time; never raises on divergence.
@@ -675,7 +469,6 @@ class DampedDynamicsSolver:
         self.report = DynamicsReport()
         self._last_displacement = self.coupling.displacements(self.U)
         self._t_prev = 0.0
-        self._next_finish = 0
         ts = self._make_ts()
         X = self.U.x.petsc_vec.copy()
         try:
@@ -696,9 +489,9 @@ class DampedDynamicsSolver:
         self.report.equilibrium_residual = self.equilibrium_residual()
         self.report.wall_time_s = time.perf_counter() - self._t0
         log.info("damped dynamics: %s; %d steps (%d rejected), %d Newton its, t = %.4g s, "
-                 "|R_static|_inf = %.3g mN, %.1f s", "converged" if self.report.converged
-                 else "handed over to the relaxation" if self.report.handed_over
-                 else "NOT converged", self.report.steps, self.report.rejected_steps,
+                 "|R_static|_inf = %.3g mN, %.1f s",
+                 "converged" if self.report.converged else "NOT converged",
+                 self.report.steps, self.report.rejected_steps,
                  self.report.newton_iterations, self.report.time,
                  self.report.equilibrium_residual, self.report.wall_time_s)
         self._ts = ts

@@ -1,0 +1,441 @@
+"""Pseudo-transient continuation to the loaded static equilibrium (SPEC §4).
+
+The static equilibrium ``R(u) = 0`` (internal − pressure − contact − bending
+forces, full diastolic pressure) of membranes that have no stiffness normal to
+themselves when unstressed is reached by integrating, in a pseudo-time τ,
+
+    M·du/dτ + R(u) = 0
+
+with implicit (backward) Euler steps, PETSc TS (``beuler``) and Newton's
+method (SNES) in every step.  The step Δτ follows the residual (switched
+evolution relaxation, Mulder & van Leer 1985; Kelley & Keyes 1998):
+
+    Δτ_{n+1} = Δτ_n · clip(c·‖R_{n-1}‖₂ / ‖R_n‖₂, 1/growth_limit, growth_limit),
+
+(c = ``increment``) so that far from the equilibrium the mass term ``M/Δτ`` regularises the
+singular tangent, and near it Δτ → ∞ turns the steps into Newton's method on
+the static problem.  Δτ is also limited so that no node moves further than
+``max_step_motion_mm`` in one step, and every Newton update is scaled so that
+no node moves further than ``newton_motion_mm`` between two contact
+evaluations (a line-search pre-check), which keeps nodes from tunnelling
+through a surface.
+
+**The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
+nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
+L = ``mass_length_mm``): at Δτ = 1 an unbalanced node under its full pressure
+force moves about L, whatever tissue it belongs to.  A mass scaled by each
+tissue's in-plane stiffness lets the slack pericardial graft's soft modes
+(held only by bending and contact) settle about 10⁶ times slower than its stiff
+ones; a mass in force units treats soft and stiff modes alike.
+
+**What is frozen within a step.**  The hooks' ``accept_state`` is called after
+every accepted step: contact sides (the side a node approaches a triangle from)
+and the contact law's driving force (the nodal pressure force) are those of the
+last accepted state during the next step, so the contact Jacobian is exact and
+Newton converges quadratically.  At a steady state the accepted and the current
+state coincide, so the equilibrium is the SPEC's.
+
+**Convergence.**  A run converges when the static residual at the accepted
+state — evaluated with contact sides and driving forces of that state —
+satisfies ``‖R‖∞ < residual_tolerance`` (mN) over the free degrees of freedom.
+Otherwise it stops ``converged = False`` at the step, wall-time or Δτ-floor
+limit, with the reason.  Mass, ``L`` and the step control are numerical
+devices: the equilibrium does not depend on them (tested).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import ufl
+
+from valve_dolfinx._compat import MPI, PETSc, dolfinx
+from valve_dolfinx.exceptions import MeshError, check_range
+from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.solvers.nodal import NodalCoupling
+
+__all__ = ["PseudoTransientParameters", "SolveReport", "PseudoTransientSolver"]
+
+log = logging.getLogger(__name__)
+fem = dolfinx.fem
+fem_petsc = dolfinx.fem.petsc
+
+
+@dataclass
+class PseudoTransientParameters:
+    """Step control of the pseudo-transient continuation (lengths in mm, forces in mN).
+
+    Attributes
+    ----------
+    residual_tolerance
+        Convergence: ``‖R‖∞`` of the static residual at full load (mN).
+    mass_length_mm
+        L in the nodal mass ``p·A_i/L`` (mm): the distance an unbalanced node
+        moves in a unit pseudo-time step.
+    dt_initial, dt_min, dt_max
+        Pseudo-time steps (dimensionless); below ``dt_min`` the run has stalled.
+    increment
+        Factor on the residual ratio of switched evolution relaxation (PETSc's
+        ``-ts_pseudo_increment``): Δτ grows by it while the residual stalls.
+    growth_limit
+        Largest factor by which Δτ grows (or shrinks) from one step to the next.
+    max_step_motion_mm
+        The next Δτ is shortened so that no node is expected to move further
+        than this in one step.
+    newton_motion_mm
+        Largest nodal motion of one Newton update (mm); longer updates are
+        scaled down (contact is evaluated at every Newton iterate).
+    newton_max_it, newton_rtol
+        Newton iterations per step and the relative residual reduction that ends
+        a step's Newton solve; a step whose Newton solve fails is retried with
+        half the Δτ.
+    max_steps
+        Limit on pseudo-time steps (accepted + rejected).
+    wall_time_limit_s
+        Wall-clock limit (s).
+    petsc_options
+        Extra PETSc options (without prefix) for the TS/SNES/KSP.
+    """
+
+    residual_tolerance: float = 0.05
+    mass_length_mm: float = 1.0
+    dt_initial: float = 0.05
+    dt_min: float = 1e-8
+    dt_max: float = 1e12
+    increment: float = 1.2
+    growth_limit: float = 3.0
+    max_step_motion_mm: float = 0.5
+    newton_motion_mm: float = 0.1
+    newton_max_it: int = 12
+    newton_rtol: float = 0.05
+    max_steps: int = 4000
+    wall_time_limit_s: float = 900.0
+    petsc_options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
+                    unit="mN", hint="nodal pressure forces are ~1-10 mN; 0.05 mN is the default")
+        check_range("mass_length_mm", self.mass_length_mm, 0.0, 1e3, low_open=True, unit="mm")
+        check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True)
+        check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max)
+        check_range("increment", self.increment, 1.0, 10.0)
+        check_range("growth_limit", self.growth_limit, 1.0, 100.0, low_open=True)
+        check_range("max_step_motion_mm", self.max_step_motion_mm, 0.0, 10.0, low_open=True,
+                    unit="mm")
+        check_range("newton_motion_mm", self.newton_motion_mm, 0.0, 10.0, low_open=True,
+                    unit="mm", hint="keep it below the contact's penetration window")
+        check_range("newton_max_it", self.newton_max_it, 1, 1000)
+        check_range("newton_rtol", self.newton_rtol, 0.0, 1.0, low_open=True)
+        check_range("max_steps", self.max_steps, 1, 1e7)
+        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
+                    unit="s")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class SolveReport:
+    """How a solve ended; ``history`` has a row per accepted step."""
+
+    converged: bool = False
+    reason: str = ""
+    steps: int = 0
+    rejected_steps: int = 0
+    newton_iterations: int = 0
+    pseudo_time: float = 0.0
+    last_dt: float = float("nan")
+    residual_mN: float = float("nan")
+    wall_time_s: float = 0.0
+    timings: dict = field(default_factory=dict)
+    history: list[dict] = field(default_factory=list)
+
+
+class _Stop(RuntimeError):
+    """Raised from a TS callback to end a run whose step fell below the floor."""
+
+
+class PseudoTransientSolver:
+    """Static equilibrium of a :class:`MembraneModel` with hooks and Dirichlet conditions.
+
+    Parameters
+    ----------
+    model
+        The membrane; ``model.u`` is the starting displacement on entry and the
+        final one on return (on the fixed dofs it must hold their values).
+    bcs
+        Dirichlet conditions on ``model.V``.
+    target_pressure
+        The pressure (kPa), applied in full from the first step.
+    params
+        Step control.
+    hooks
+        Factories ``make(coupling) -> hook`` of extra forces (contact, bending),
+        called with the :class:`NodalCoupling` of ``model.V``; a hook has
+        ``add_residual(u, b)``, ``add_jacobian(u, A)`` and optionally
+        ``accept_state(u)`` and ``diagnostics()``.
+    watch_nodes
+        Mesh node ids whose motion per step is recorded (the middle of each
+        leaflet's free edge).
+    """
+
+    _count = 0
+
+    def __init__(self, model: MembraneModel, bcs: Sequence[fem.DirichletBC],
+                 target_pressure: float, params: PseudoTransientParameters | None = None,
+                 hooks: Sequence[Callable[[NodalCoupling], object]] = (),
+                 watch_nodes: Sequence[int] = ()):
+        self.model = model
+        self.params = params or PseudoTransientParameters()
+        self.target_pressure = float(target_pressure)
+        self.bcs = list(bcs)
+        V = model.V
+        self.coupling = NodalCoupling(V)
+        self.hooks = [make(self.coupling) for make in hooks]
+        self.watch_nodes = np.asarray(watch_nodes, dtype=np.int64)
+        self.u = model.u
+        self.udot = fem.Function(V, name="displacement_rate")
+        self.shift = fem.Constant(model.domain.mesh, PETSc.ScalarType(0.0))
+        # nodal mass p·A/L in force units: the same for every tissue
+        scale = max(abs(self.target_pressure), 1e-12) / self.params.mass_length_mm
+        self.mass_scale = fem.Constant(model.domain.mesh, PETSc.ScalarType(scale))
+        self.F_form, self.J_form = self._forms()
+        self.F_vec = fem_petsc.create_vector(V)
+        self.J_mat = fem_petsc.create_matrix(self.J_form)
+        self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+        local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs]
+                                  or [np.empty(0, np.int32)])
+        self._bc_local = local_bc[local_bc < imap.size_local * bs]
+        self._bc_rows = (imap.local_range[0] * bs + self._bc_local).astype(PETSc.IntType)
+        self.report = SolveReport()
+        self._progress: Callable[[dict], None] | None = None
+        self._clock: dict[str, float] = {}
+
+    # --- forms -------------------------------------------------------------------------
+    def _forms(self):
+        model = self.model
+        v = ufl.TestFunction(model.V)
+        du = ufl.TrialFunction(model.V)
+        dxv = ufl.Measure("dx", domain=model.domain.mesh,
+                          metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
+        dA = model.area_factor()
+        residual = model.residual(v)
+        F = self.mass_scale * ufl.inner(self.udot, v) * dA * dxv + residual
+        J = (ufl.derivative(residual, model.u, du)
+             + self.shift * self.mass_scale * ufl.inner(du, v) * dA * dxv)
+        return fem.form(F), fem.form(J)
+
+    # --- timing ------------------------------------------------------------------------
+    def _lap(self, name: str, t0: float) -> float:
+        now = time.perf_counter()
+        self._clock[name] = self._clock.get(name, 0.0) + now - t0
+        return now
+
+    # --- PETSc callbacks ---------------------------------------------------------------
+    def _set_state(self, X: PETSc.Vec, Xdot: PETSc.Vec | None) -> None:
+        X.copy(self.u.x.petsc_vec)
+        self.u.x.scatter_forward()
+        if Xdot is None:
+            self.udot.x.array[:] = 0.0
+        else:
+            Xdot.copy(self.udot.x.petsc_vec)
+            self.udot.x.scatter_forward()
+
+    def ifunction(self, ts, t, X, Xdot, F) -> None:
+        if ts is not None and ts.getTimeStep() < self.params.dt_min:
+            self.report.reason = (
+                f"pseudo-time step fell below dt_min = {self.params.dt_min:g} at step "
+                f"{ts.getStepNumber()} (Newton kept failing; last |R| = "
+                f"{self.report.residual_mN:.3g} mN)")
+            raise _Stop(self.report.reason)
+        t0 = time.perf_counter()
+        self._set_state(X, Xdot)
+        with F.localForm() as f_local:
+            f_local.set(0.0)
+        fem_petsc.assemble_vector(F, self.F_form)
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        t0 = self._lap("residual_assembly", t0)
+        for hook in self.hooks:
+            hook.add_residual(self.u, F)
+            t0 = self._lap(getattr(hook, "timing_name", "hooks"), t0)
+        F.assemble()
+        fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
+        self._lap("residual_assembly", t0)
+
+    def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
+        t0 = time.perf_counter()
+        self._set_state(X, Xdot)
+        self.shift.value = a
+        J.zeroEntries()
+        fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
+        J.assemble(PETSc.Mat.AssemblyType.FLUSH)
+        t0 = self._lap("jacobian_assembly", t0)
+        for hook in self.hooks:
+            hook.add_jacobian(self.u, J)
+            t0 = self._lap(getattr(hook, "timing_name", "hooks"), t0)
+        J.assemble()
+        if len(self.hooks):
+            J.zeroRows(self._bc_rows, diag=1.0)
+        self._lap("jacobian_assembly", t0)
+
+    def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """Line-search pre-check: scale the Newton update so that no node moves further
+        than ``newton_motion_mm``."""
+        motion = self._largest_node_motion(y.array_r)
+        cap = self.params.newton_motion_mm
+        if motion > cap:
+            y.scale(cap / motion)
+
+    def _largest_node_motion(self, owned: np.ndarray) -> float:
+        local = owned.reshape(-1, 3)
+        value = float(np.max(np.linalg.norm(local, axis=1), initial=0.0))
+        return self.model.domain.comm.allreduce(value, op=MPI.MAX)
+
+    # --- static residual -----------------------------------------------------------------
+    def static_residual(self) -> tuple[float, float]:
+        """(‖R‖∞, ‖R‖₂) of the static residual at ``model.u`` (mN), over the free dofs."""
+        X = self.u.x.petsc_vec.copy()
+        F = X.duplicate()
+        self.ifunction(None, 0.0, X, None, F)
+        with F.localForm() as f_local:
+            f_local.array[self._bc_local] = 0.0
+        norms = F.norm(PETSc.NormType.INFINITY), F.norm(PETSc.NormType.NORM_2)
+        X.destroy()
+        F.destroy()
+        return float(norms[0]), float(norms[1])
+
+    # --- the run -------------------------------------------------------------------------
+    def _make_ts(self) -> PETSc.TS:
+        p = self.params
+        comm = self.model.domain.comm
+        PseudoTransientSolver._count += 1
+        prefix = f"valve_ptc{PseudoTransientSolver._count}_"
+        ts = PETSc.TS().create(comm)
+        ts.setOptionsPrefix(prefix)
+        options = {
+            "ts_type": "beuler",
+            "ts_adapt_type": "none",
+            "ts_max_snes_failures": -1,
+            "ts_max_step_rejections": -1,
+            "ts_adapt_scale_solve_failed": 0.5,
+            "snes_type": "newtonls",
+            "snes_linesearch_type": "basic",
+            "snes_max_it": p.newton_max_it,
+            "snes_rtol": p.newton_rtol,
+            "snes_atol": 0.2 * p.residual_tolerance,
+            "snes_stol": 0.0,
+            "snes_divergence_tolerance": -1,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": "mumps",
+        }
+        opts = PETSc.Options()
+        for key, value in {**options, **p.petsc_options}.items():
+            opts[f"{prefix}{key}"] = value
+        ts.setIFunction(self.ifunction, self.F_vec)
+        ts.setIJacobian(self.ijacobian, self.J_mat)
+        ts.setTime(0.0)
+        ts.setTimeStep(p.dt_initial)
+        ts.setMaxTime(1e300)
+        ts.setMaxSteps(p.max_steps)
+        ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
+        ts.setFromOptions()
+        ts.getSNES().setLineSearchPreCheck(self._limit_update)
+        ts.setPostStep(self._post_step)
+        return ts
+
+    def _post_step(self, ts: PETSc.TS) -> None:
+        p, r = self.params, self.report
+        t0 = time.perf_counter()
+        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
+        self.u.x.scatter_forward()
+        displacement = self.coupling.displacements(self.u)
+        step = np.linalg.norm(displacement - self._last_displacement, axis=1)
+        self._last_displacement = displacement
+        motion = float(np.max(step, initial=0.0))
+        watched = float(np.max(step[self.watch_nodes], initial=0.0))
+        for hook in self.hooks:  # contact sides and driving forces of this state
+            accept = getattr(hook, "accept_state", None)
+            if accept is not None:
+                accept(self.u)
+        r_inf, r_two = self.static_residual()
+        dt = ts.getTimeStep()
+        r.steps = ts.getStepNumber()
+        r.pseudo_time = ts.getTime()
+        r.newton_iterations += ts.getSNES().getIterationNumber()
+        r.residual_mN, r.last_dt = r_inf, dt
+        entry = {"step": r.steps, "pseudo_time": r.pseudo_time, "dt": dt,
+                 "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
+                 "watched_motion_mm": watched,
+                 "newton_iterations": ts.getSNES().getIterationNumber()}
+        for hook in self.hooks:
+            diag = getattr(hook, "diagnostics", None)
+            if diag is not None:
+                entry.update(diag())
+        r.history.append(entry)
+        if self._progress is not None:
+            self._progress(entry)
+        self._lap("post_step", t0)
+        elapsed = time.perf_counter() - self._t0
+        if r_inf < p.residual_tolerance:
+            r.converged = True
+            r.reason = (f"static residual {r_inf:.3g} mN < {p.residual_tolerance:g} mN after "
+                        f"{r.steps} pseudo-time steps, {r.newton_iterations} Newton iterations")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+            return
+        if elapsed > p.wall_time_limit_s:
+            r.reason = (f"wall-clock limit {p.wall_time_limit_s:g} s reached at step {r.steps}: "
+                        f"static residual {r_inf:.3g} mN, Δτ = {dt:.3g}")
+            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+            return
+        # switched evolution relaxation, bounded growth, bounded nodal motion
+        ratio = p.increment * self._r_prev / r_two if r_two > 0 else p.growth_limit
+        new_dt = dt * min(max(ratio, 1.0 / p.growth_limit), p.growth_limit)
+        if motion > 0.0:
+            new_dt = min(new_dt, dt * p.max_step_motion_mm / motion)
+        self._r_prev = r_two
+        ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
+
+    def solve(self, progress: Callable[[dict], None] | None = None) -> SolveReport:
+        """Step to the static equilibrium; never raises because the solve failed.
+
+        ``model.u`` holds the final state whatever happened; the report says
+        whether it is the equilibrium and, if not, where and why it stopped.
+        """
+        self._progress = progress
+        self._t0 = time.perf_counter()
+        self._clock = {}
+        self.report = SolveReport()
+        self.model.pressure.value = self.target_pressure
+        self._last_displacement = self.coupling.displacements(self.u)
+        _, self._r_prev = self.static_residual()
+        ts = self._make_ts()
+        X = self.u.x.petsc_vec.copy()
+        try:
+            ts.solve(X)
+        except (PETSc.Error, MeshError, _Stop) as err:
+            if not self.report.reason:
+                self.report.reason = (f"{type(err).__name__} at step {ts.getStepNumber()}, "
+                                      f"Δτ = {ts.getTimeStep():.3g}: {err}")
+            log.error("pseudo-transient continuation failed: %s", self.report.reason)
+        if not self.report.converged and not self.report.reason:
+            self.report.reason = (f"TS stopped ({ts.getConvergedReason()}) after "
+                                  f"{ts.getStepNumber()} steps (max_steps = "
+                                  f"{self.params.max_steps}): static residual "
+                                  f"{self.report.residual_mN:.3g} mN")
+        self.report.rejected_steps = ts.getStepRejections()
+        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
+        self.u.x.scatter_forward()
+        self.report.wall_time_s = time.perf_counter() - self._t0
+        self.report.timings = dict(self._clock)
+        ts.destroy()
+        X.destroy()
+        log.info("pseudo-transient continuation: %s (%s; %.1f s)",
+                 "converged" if self.report.converged else "NOT converged", self.report.reason,
+                 self.report.wall_time_s)
+        return self.report
