@@ -385,6 +385,21 @@ def test_case_index_runs_and_report_equal_one_sweep(tmp_path, capsys, caplog, qu
     assert "case index 3 is outside the allowed range [0, 2]" in caplog.text
 
 
+def test_progress_bar_and_plain_lines(tmp_path, capsys, caplog, quiet_cli):
+    """One bar of cases done/total; --no-progress: the per-case log lines without a bar."""
+    with caplog.at_level(logging.INFO, logger="valve_dolfinx.study"):
+        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "sweep:" in err and "3/3" in err and ("case/s" in err or "s/case" in err)
+    assert sum("min coaptation" in r.getMessage() for r in caplog.records) == 3
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="valve_dolfinx.study"):
+        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(tmp_path / "b"),
+                                    "--no-progress"]) == 0
+    assert "sweep:" not in capsys.readouterr().err
+    assert sum("min coaptation" in r.getMessage() for r in caplog.records) == 3
+
+
 @pytest.mark.mpi
 def test_every_case_once_over_the_ranks(tmp_path_factory):
     """In process, on COMM_WORLD (1 or 2 ranks): each case exactly once, the same table on
