@@ -36,7 +36,7 @@ import tempfile
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -169,6 +169,7 @@ class CaseClaim:
 
     path: Path
     held: bool = False
+    _token: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def for_case(cls, out: Path, name: str) -> CaseClaim:
@@ -232,7 +233,7 @@ class CaseClaim:
             return
         self.held = False
         with contextlib.suppress(OSError):
-            if json.loads(self.path.read_text()).get("token") == self._token["token"]:
+            if json.loads(self.path.read_text()).get("token") == self._token.get("token"):
                 self.path.unlink()
 
 
