@@ -365,6 +365,24 @@ def test_serial_and_mpi_sweeps_agree(tmp_path):
         assert {r["n_ranks"] for r in rows} == {k}
 
 
+def test_two_sweeps_on_one_folder_share_the_cases(tmp_path):
+    """Two sweeps started together on one folder: every case computed once, by one of them."""
+    out, run_log = tmp_path / "study", tmp_path / "runs.log"
+    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "0.5"}
+    grid = ["--widths", "0", "7", "14", "--heights", "0", "13", "--no-progress"]
+    procs = [subprocess.Popen(_sweep_cmd(*grid, "--out", str(out)), env=env, cwd=ROOT,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+             for _ in range(2)]
+    for proc in procs:
+        _, err = proc.communicate(timeout=180)
+        assert proc.returncode == 0, err[-2000:]
+    runs = [line.split() for line in run_log.read_text().splitlines()]
+    assert sorted(r[0] for r in runs) == sorted(
+        ["normal"] + [f"W{w}_H{h}" for w in (0, 7, 14) for h in (0, 13)])
+    assert len({r[1] for r in runs}) == 2  # both took cases
+    assert len(json.loads((out / "results.json").read_text())) == 7
+
+
 def test_case_index_runs_and_report_equal_one_sweep(tmp_path, capsys, caplog, quiet_cli):
     whole, array = tmp_path / "whole", tmp_path / "array"
     assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(whole), "--no-progress"]) == 0
