@@ -1,5 +1,10 @@
 """Contact inside the finite element solve: two pressed membranes, a membrane folded onto
-itself, Newton's convergence rate with contact active, and MPI consistency."""
+itself, Newton's convergence rate with contact active, and MPI consistency.
+
+The solves take the closure's path: pseudo-transient continuation at the full pressure
+(:class:`PseudoTransientSolver`) with the contact hook given as a factory of the solver's
+:class:`NodalCoupling`, its driving force frozen at the last accepted step
+(``lag_driving_force``, ``driving_force_relaxation = 1``) as in :mod:`valve_dolfinx.closure`."""
 
 from __future__ import annotations
 
@@ -13,11 +18,20 @@ from valve_dolfinx.materials import FungMaterial
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
-from valve_dolfinx.solvers.quasistatic import ContinuationParameters, QuasiStaticSolver
+from valve_dolfinx.solvers.pseudo_transient import (
+    PseudoTransientParameters,
+    PseudoTransientSolver,
+)
 
 #: Soft isotropic Fung membrane: the sheets balloon into each other at 2 kPa.
 SOFT = FungMaterial.isotropic(c=20.0, a=5.0, thickness=0.2, name="soft")
 SIDE, CELLS, GAP = 6.0, 12, 1.0
+
+
+def contact_hook(models, triangles, pressure):
+    """The hook factory the solver calls with its coupling (the closure's settings)."""
+    return lambda coupling: ContactHook(coupling, models, triangles, pressure, 1.0,
+                                        lag_driving_force=True, driving_force_relaxation=1.0)
 
 
 def two_sheets(comm):
@@ -59,43 +73,51 @@ def clamp_boundary(model):
     return dolfinx.fem.dirichletbc(dolfinx.fem.Function(V), dofs)
 
 
+class NewtonRecordingSolver(PseudoTransientSolver):
+    """Records, per Newton solve (one per pseudo-time step try), the residual norm and the
+    number of active contacts at each iterate."""
+
+    def solve(self, progress=None):
+        self.newton_histories: list[dict] = []
+        return super().solve(progress)
+
+    def _make_ts(self):
+        ts = super()._make_ts()
+        ts.getSNES().setMonitor(self._record)
+        return ts
+
+    def _record(self, snes, iteration, norm):
+        if iteration == 0:
+            self.newton_histories.append({"norms": [], "contacts": []})
+        self.newton_histories[-1]["norms"].append(norm)
+        self.newton_histories[-1]["contacts"].append(self.hooks[0].diagnostics()["contacts"])
+
+
 @pytest.fixture(scope="module")
 def pressed_sheets():
+    """Each pseudo-time step's Newton solve is run to round-off (newton_rtol 1e-12) so that
+    its convergence rate can be read; the run ends at ‖R‖∞ < 1e-10 mN."""
     comm = MPI.COMM_SELF
     domain, (points, cells, tags) = two_sheets(comm)
     model = MembraneModel(domain, {1: SOFT, 2: SOFT}, pressure_side=1.0)
-    coupling = NodalCoupling(model.V)
     params = ContactParameters()                       # the SPEC law: k = 10 mN/mm, h = 0.1 mm
     contact = SurfaceContact(cells, len(points), params, triangle_body=tags)
-    hook = ContactHook(coupling, [contact], cells, model.pressure, 1.0)
-    solver = QuasiStaticSolver(model, [clamp_boundary(model)], 2.0, hooks=[hook],
-                               continuation=ContinuationParameters(viscosity=1e-3))
-    histories = record_newton_histories(solver, hook)
+    solver = NewtonRecordingSolver(
+        model, [clamp_boundary(model)], 2.0,
+        PseudoTransientParameters(residual_tolerance=1e-10, newton_rtol=1e-12,
+                                  newton_max_it=30),
+        hooks=[contact_hook([contact], cells, model.pressure)])
     report = solver.solve()
-    x = coupling.positions(model.u)
-    return report, hook, x, cells, tags, coupling, model, histories
-
-
-def record_newton_histories(solver, hook) -> list[dict]:
-    """Per Newton solve: the residual norm and the number of active contacts at each iterate."""
-    histories: list[dict] = []
-
-    def monitor(snes, iteration, norm):
-        if iteration == 0:
-            histories.append({"pressure": float(solver.model.pressure.value), "norms": [],
-                              "contacts": []})
-        histories[-1]["norms"].append(norm)
-        histories[-1]["contacts"].append(hook.diagnostics()["contacts"])
-
-    solver.snes.setMonitor(monitor)
-    return histories
+    x = solver.coupling.positions(model.u)
+    return (report, solver.hooks[0], x, cells, tags, solver.coupling, model,
+            solver.newton_histories)
 
 
 def test_pressed_membranes_converge_without_penetration(pressed_sheets):
     report, hook, x, cells, tags, *_ = pressed_sheets
-    # nodal pressure forces are p·h² ≈ 0.5 mN; the residual left by the lagged driving
-    # force (updated once per load step) is far below that
-    assert report.converged and report.residual_norm < 1e-3
+    # the static residual with the driving force of the final state, against nodal pressure
+    # forces of p·h² ≈ 0.5 mN
+    assert report.converged and report.residual_mN < 1e-10, report.reason
     diag = hook.diagnostics()
     assert diag["contacts"] > 20                          # a real contact patch formed
     assert diag["max_penetration_mm"] < 0.01
@@ -131,22 +153,24 @@ def test_contact_reactions_balance_the_pressure_on_the_flat_patch(pressed_sheets
 
 def test_newton_converges_quadratically_with_contact_active(pressed_sheets):
     """The contact Jacobian is exact (turning normal, sliding point, blending; the driving
-    force frozen within a load step), so Newton's method converges quadratically on the
-    curved, ballooned contact patch.  Dropping the geometric terms
-    (``geometric_stiffness=False``) gives linear convergence here (ratio ≈ 0.6 per iteration,
-    13-30 iterations per load step), which this test rejects."""
+    force frozen within a pseudo-time step), so Newton's method converges quadratically on
+    the curved, ballooned contact patch.  Dropping the geometric terms
+    (``SurfaceContact(geometric_stiffness=False)``) gives linear convergence here (order
+    1.0 in all 14 such solves, 325 Newton iterations instead of 52), which this test
+    rejects.  The order is read from the last three norms of each Newton
+    solve with the patch formed throughout, above 1e-12 mN (round-off is ~4e-14 mN here)."""
     *_, histories = pressed_sheets
     orders = []
     for history in histories:
         norms = np.array(history["norms"])
-        if min(history["contacts"]) < 20 or norms[-1] > 1e-8:
+        if min(history["contacts"]) < 20 or norms[-1] > 1e-10:
             continue                          # contact not active throughout, or a failed try
-        above = norms[norms > 1e-10]          # well above round-off (~4e-14 here)
+        above = norms[norms > 1e-12]
         if len(above) < 3:
             continue
         e0, e1, e2 = above[-3:]
         orders.append(np.log(e2 / e1) / np.log(e1 / e0))
-    assert len(orders) >= 8
+    assert len(orders) >= 4
     assert min(orders) > 1.5 and np.median(orders) > 1.8
 
 
@@ -216,14 +240,14 @@ def test_membrane_folded_onto_itself_does_not_pass_through_itself():
         | np.isclose(dofs_x[:, 1], W_FOLD)
     bc = dolfinx.fem.dirichletbc(dolfinx.fem.Function(model.V),
                                  np.flatnonzero(clamped).astype(np.int32))
-    coupling = NodalCoupling(model.V)
     contact = SurfaceContact(cells, len(points), ContactParameters())   # one body
-    hook = ContactHook(coupling, [contact], loaded, model.pressure, 1.0)
-    report = QuasiStaticSolver(model, [bc], 2.0, hooks=[hook],
-                               continuation=ContinuationParameters(viscosity=1e-3)).solve()
-    assert report.converged
-    x = coupling.positions(model.u)
-    diag = hook.diagnostics()
+    solver = PseudoTransientSolver(model, [bc], 2.0,
+                                   PseudoTransientParameters(residual_tolerance=1e-6),
+                                   hooks=[contact_hook([contact], loaded, model.pressure)])
+    report = solver.solve()
+    assert report.converged, report.reason
+    x = solver.coupling.positions(model.u)
+    diag = solver.hooks[0].diagnostics()
     assert diag["contacts"] > 50 and diag["max_penetration_mm"] < 0.01
     assert diag["contact_force_mN"] > 20.0            # of the ~140 mN pressure load on the halves
     lower, upper = np.unique(cells[part == 0]), np.unique(cells[part == 2])
