@@ -127,12 +127,13 @@ class BendingHook:
         x = self.coupling.positions(state)
         self.coupling.add_forces(b, self.K_owned @ x, scale=1.0)
 
+    def coupled_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(row nodes, column nodes) of K's blocks, for the Jacobian's sparsity pattern."""
+        return self._rows, self._cols
+
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
         """``A += K``, row by row from a CSR copy of K's 3×3 blocks made once
-        (:meth:`NodalCoupling.block_csr`).  The blocks are K_ij·I, but their zero
-        off-diagonal entries are inserted too: the matrix keeps the sparsity pattern, hence
-        the LU ordering and round-off, of block-by-block insertion (docs/closure.md,
-        "Session 8")."""
+        (:meth:`NodalCoupling.block_csr`); the blocks are K_ij·I."""
         if self._csr is None:
             blocks = self._values[:, None, None] * np.eye(3)
             self._csr = self.coupling.block_csr(self._rows, self._cols, blocks)

@@ -107,13 +107,22 @@ class NodalCoupling:
 
     def add_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
                    blocks: np.ndarray, scale: float = 1.0) -> None:
-        """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block."""
+        """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block.
+
+        Blocks of the same (row node, column node) pair are summed first, then
+        inserted one matrix row at a time (:meth:`block_csr`, :meth:`add_csr`):
+        a PETSc call per block costs ~20 ms for the valve's contact blocks.
+        """
         if len(row_nodes) == 0:
             return
-        rows = self.row_indices(row_nodes)
-        cols = self.col_indices(col_nodes)
-        values = np.ascontiguousarray(scale * np.asarray(blocks, dtype=PETSc.ScalarType))
-        A.setValuesRCV(rows, cols, values, addv=PETSc.InsertMode.ADD)
+        key = np.asarray(row_nodes, dtype=np.int64) * self.num_nodes + np.asarray(col_nodes)
+        order = np.argsort(key, kind="stable")
+        key = key[order]
+        start = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+        summed = np.add.reduceat(np.asarray(blocks, dtype=float)[order], start, axis=0)
+        unique = key[start]
+        self.add_csr(A, self.block_csr(unique // self.num_nodes, unique % self.num_nodes,
+                                       scale * summed))
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:

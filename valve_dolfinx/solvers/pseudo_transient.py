@@ -205,8 +205,7 @@ class PseudoTransientSolver:
         self.mass_scale = fem.Constant(model.domain.mesh, PETSc.ScalarType(scale))
         self.F_form, self.J_form = self._forms()
         self.F_vec = fem_petsc.create_vector(V)
-        self.J_mat = fem_petsc.create_matrix(self.J_form)
-        self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self.J_mat = self._create_jacobian()
         imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
         local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs]
                                   or [np.empty(0, np.int32)])
@@ -229,6 +228,31 @@ class PseudoTransientSolver:
         J = (ufl.derivative(residual, model.u, du)
              + self.shift * self.mass_scale * ufl.inner(du, v) * dA * dxv)
         return fem.form(F), fem.form(J)
+
+    def _create_jacobian(self) -> PETSc.Mat:
+        """The Jacobian's matrix: the form's sparsity plus the node couplings the hooks
+        declare (``coupled_nodes()``, e.g. the bending stencil), so that inserting them
+        does not reallocate the matrix; contact pairs, which change, may still add
+        entries."""
+        pattern = fem.create_sparsity_pattern(self.J_form)
+        imap = self.model.V.dofmap.index_map
+        for hook in self.hooks:
+            coupled = getattr(hook, "coupled_nodes", None)
+            if coupled is None:
+                continue
+            rows, cols = coupled()
+            local = [imap.global_to_local(self.coupling.block_of_node[n]) for n in (rows, cols)]
+            keep = (local[0] >= 0) & (local[1] >= 0)  # columns off this rank's halo: malloc
+            rows, cols = local[0][keep], local[1][keep]
+            order = np.argsort(rows, kind="stable")
+            rows, cols = rows[order], cols[order]
+            starts = np.flatnonzero(np.concatenate([[True], rows[1:] != rows[:-1], [True]]))
+            for a, b in zip(starts[:-1], starts[1:], strict=True):
+                pattern.insert(rows[a:a + 1].astype(np.int32), cols[a:b].astype(np.int32))
+        pattern.finalize()
+        J = dolfinx.cpp.la.petsc.create_matrix(self.model.domain.comm, pattern)
+        J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        return J
 
     # --- timing ------------------------------------------------------------------------
     def _lap(self, name: str, t0: float) -> float:
