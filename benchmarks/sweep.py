@@ -21,7 +21,7 @@ from pathlib import Path
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
-from valve_dolfinx.study.runner import run_study
+from valve_dolfinx.study.runner import run_study, terminate_on_sigterm
 
 
 def main(argv=None) -> int:
@@ -42,6 +42,7 @@ def main(argv=None) -> int:
         out = Path("results/benchmark_sweep") / stamp
     settings = StudySettings(widths_pct=tuple(args.widths), heights_pct=tuple(args.heights),
                              mesh_size_mm=args.mesh_size, wall_time_limit_s=args.wall_time_limit)
+    terminate_on_sigterm()  # a killed benchmark resumes with the same --out
     outcome = run_study(settings, out, comm)
     if comm.rank != 0:
         return 0
