@@ -628,6 +628,11 @@ class SurfaceContact:
     :math:`s = -\\operatorname{sign}(f_{ext,p}\\cdot n_t)`; when that too is
     zero, the node's current side.  The sided normal is :math:`n = s\\,n_t` and
     :math:`d = (x_p - x_{t_0})\\cdot n`.
+    The rule is the same within a leaflet and between leaflets, on either face
+    of a triangle (a graft sliding below its neighbours meets their aortic
+    faces): the force acts along :math:`s\\,n_t` with a non-negative
+    magnitude, so a node that has not passed through a triangle is only ever
+    pushed away from it, and one that has passed through is pushed back.
 
     **Jacobian.**  The blocks are the exact derivative of the forces for given
     external forces ``f_ext``: with :math:`B = [1, -λ_0, -λ_1, -λ_2]` over
@@ -658,15 +663,6 @@ class SurfaceContact:
         leaflet once even above a shared edge, but can touch two leaflets at
         once.  Nodes shared by bodies (commissures) need no special care: the
         exclusion is topological and the grouping is by the triangle's body.
-    between_bodies_side
-        ``None`` (default): the side of a node of another body is found like
-        that of the body's own nodes (recorded state, then pressure).  ``-1``
-        or ``+1``: nodes of another body always meet a triangle from the side
-        ``s·n_t``.  The closing valve uses ``-1``: adjacent leaflets coapt with
-        their ventricular faces, the faces opposite to the chart normals
-        (which point to the aortic side).  A fixed side cannot flip when a
-        node passes a fold, a crease or a free edge, so a node that has
-        crossed a neighbour leaflet is always pushed back out of it.
     reference, self_exclusion_radius
         ``(M, 3, D)`` vertex coordinates of every triangle in the stress-free
         state, and a radius (mm): a node never contacts the triangles of its
@@ -694,14 +690,6 @@ class SurfaceContact:
         force appears and vanishes within that distance.  A band of about one
         triangle continues the neighbour's last row of faces as a plane (as
         the symmetry planes of the reference do).
-    between_bodies_depth
-        Penetration window (mm) of contacts between bodies when their side is
-        fixed (``between_bodies_side``); default ``params.penetration_depth``.
-        With the side known there is no far side of a sheet to confuse with a
-        penetration, so the window can be deep: the SPEC §5 penalty is soft
-        (10 mN/mm) and a leaflet's free edge, pulled by its own tension, can
-        press a few tenths of a millimetre into its neighbour before the
-        reaction balances it.
     geometric_stiffness
         Include the Jacobian of the turning contact direction and the sliding
         contact point (:mod:`~valve_dolfinx.contact.linearisation`); without
@@ -711,11 +699,9 @@ class SurfaceContact:
     def __init__(self, triangles: np.ndarray, num_nodes: int,
                  params: ContactParameters = DEFAULT_PARAMETERS, *,
                  triangle_body: np.ndarray | None = None,
-                 between_bodies_side: float | None = None,
                  reference: np.ndarray | None = None,
                  self_exclusion_radius: float = 0.0,
                  geometric_stiffness: bool = True,
-                 between_bodies_depth: float | None = None,
                  attached_reference: np.ndarray | None = None,
                  attached_exclusion_radius: float = 0.0,
                  boundary_band: float = FACE_BAND,
@@ -730,19 +716,13 @@ class SurfaceContact:
             else np.asarray(triangle_body).ravel()
         if body.shape != (len(triangles),):
             raise MeshError(f"triangle_body has {body.size} labels for {len(triangles)} triangles")
-        if between_bodies_side not in (None, -1, 1, -1.0, 1.0):
-            raise ParameterError(f"between_bodies_side = {between_bodies_side!r}: use None, -1 "
-                                 "or +1")
         self.triangles = triangles
         self.num_nodes = int(num_nodes)
         self.params = params
-        self.between_bodies_side = between_bodies_side
         self.geometric_stiffness = bool(geometric_stiffness)
-        self.between_bodies_depth = params.penetration_depth if between_bodies_depth is None \
-            else float(between_bodies_depth)
-        #: padding of the search: the deepest penetration window plus the contact thickness
+        #: padding of the search: the penetration window plus the contact thickness
         self.search_distance = max(params.search_distance,
-                                   params.thickness + self.between_bodies_depth)
+                                   params.thickness + params.penetration_depth)
         self.body_labels, self.triangle_body = np.unique(body, return_inverse=True)
         #: body of each node: the lowest body among its triangles (commissure nodes are shared)
         self.node_body = np.full(self.num_nodes, np.iinfo(np.int64).max, dtype=np.int64)
@@ -846,9 +826,6 @@ class SurfaceContact:
         clock = _Clock() if clock is None else clock
         node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
         s = self._side(node, tri, d0, f_ext, n_tri)
-        if self.between_bodies_side is not None:
-            other = self.node_body[node] != self.triangle_body[tri]
-            s = np.where(other, float(self.between_bodies_side), s)
         edge = ~np.isnan(gap)
         # face contacts: signed plane distance; edge/vertex contacts: distance to the
         # closest point, only for nodes on their own side of the triangle's plane
@@ -880,10 +857,7 @@ class SurfaceContact:
             presence *= _ramp(p.cutoff - d, eps)
         else:
             presence *= d < p.cutoff
-        depth = np.full(len(d), p.penetration_depth)
-        if self.between_bodies_side is not None:
-            depth[self.node_body[node] != self.triangle_body[tri]] = self.between_bodies_depth
-        keep = (d > -depth) & (presence > 0.0)
+        keep = (d > -p.penetration_depth) & (presence > 0.0)
         weight = self._pair_weight(node, tri)
         keep &= weight > 0.0
         node, tri, d, lam, weight, presence, normal, edge, side_distance = (

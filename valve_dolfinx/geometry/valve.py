@@ -74,8 +74,9 @@ class ValveParameters:
     a graft of 0 %/0 % is a pericardial leaflet of native size.
     ``graft_placement`` chooses the slack initial 3-D placement of the graft:
     ``"conformal"`` lays it onto the native leaflet's wrapped surface,
-    ``"billowed"`` additionally bulges it towards the valve axis by
-    ``billow_mm`` (the loaded result must not depend on this choice).
+    ``"billowed"`` additionally bulges it by ``billow_mm`` towards the valve axis
+    (the ventricular side of the leaflet) or, if negative, away from it (towards
+    the aortic sinus); the loaded result must not depend on this choice.
     """
 
     root_diameter: float = 20.0
@@ -103,7 +104,9 @@ class ValveParameters:
             raise ParameterError(f"graft_placement = {self.graft_placement!r}; "
                                  f"choose one of {GRAFT_PLACEMENTS}")
         shape = self.native_shape()  # validates the outline parameters first
-        check_range("billow_mm", self.billow_mm, 0.0, 0.4 * self.root_diameter, unit="mm")
+        check_range("billow_mm", self.billow_mm, -0.4 * self.root_diameter,
+                    0.4 * self.root_diameter, unit="mm",
+                    hint="positive bulges the graft towards the valve axis, negative away")
         shape.check_mesh_size(self.mesh_size)
 
     @property
@@ -320,8 +323,8 @@ def place_graft(graft: FlatLeafletMesh, native: LeafletShape, placement: str = "
         ``(n, 2)`` points in the native leaflet's flat coordinates (to be wrapped).
     inward
         ``(n,)`` extra displacement towards the valve axis (mm): zero for
-        ``"conformal"``, a smooth bulge of height ``billow_mm`` vanishing on the
-        attachment for ``"billowed"``.
+        ``"conformal"``, a smooth bulge of height ``billow_mm`` (negative: outwards)
+        vanishing on the attachment for ``"billowed"``.
     """
     gs = graft.shape
     pts = graft.points
@@ -344,7 +347,7 @@ def place_graft(graft: FlatLeafletMesh, native: LeafletShape, placement: str = "
     native_flat = affine + correction
     native_flat[fixed] = target[fixed]
     inward = np.zeros(len(pts))
-    if placement == "billowed" and billow_mm > 0:
+    if placement == "billowed" and billow_mm != 0:
         bump = _harmonic(pts, graft.triangles, fixed, np.zeros(len(fixed)), source=1.0)
         inward = billow_mm * bump / bump.max()
     elif placement not in GRAFT_PLACEMENTS:
