@@ -1,83 +1,230 @@
-"""Closure of the normal valve: full three-leaflet valve against the symmetric reference.
+"""Speed of one closure (issue 18, deliverable 6): where the wall time of a case goes.
 
-Runs, at each mesh size given,
+Runs the normal valve, W0/H0, W27/H0 and W21/H27 (``--cases``; default 0.8 mm mesh,
+``--mesh-size``) one after the other, each in a fresh single-process subprocess, through
+:func:`valve_dolfinx.closure.run_case` with an output folder in a temporary directory, as
+``valve-dolfinx run`` does (result, fields and figures written).  Each subprocess runs its
+case ``--repeat`` times (default 2): the first run compiles the forms into an empty FFCx
+cache (``--user-cache``: into the user's cache, which may already hold them), the later
+runs find it warm; the table shows the first ("cold") and the median warm run.
 
-* the symmetric reference of SPEC §4 (one leaflet against the ±60° planes),
-* optionally (``--full``) the full three-leaflet valve with leaflet–leaflet
-  contact,
+The time of a run is split exclusively (nested calls are charged to the innermost) by
+wrapping, inside the subprocess only: ``dolfinx.jit.ffcx_jit`` (form compilation),
+the solver's residual and Jacobian callbacks (assembly), the contact and bending hooks,
+the solver's post-step (step control, diagnostics), ``analyse_case`` (coaptation
+analysis), ``output.write_case``/``write_result`` (output); what is left of the solve is
+"linear solve + PETSc" (LU factorisation and solves, TS/SNES), what is left of the run is
+"mesh, root, setup" (Gmsh, distribution, root step, function spaces, sparsity).  Peak
+memory is the subprocess's ``ru_maxrss`` after the run.  The targets of the issue (warm
+run, one core): normal valve <= 30 s, each graft case <= 60 s, contact <= 25 % of the solve.
 
-and prints for each: converged, central (midline) and minimum coaptation
-height of every leaflet, regurgitant orifice area, mid-surface penetration,
-time steps and wall time; then the mesh-convergence steps of the reference
-and the full-vs-reference differences.  These are the figures of the mesh
-study and the full-valve comparison in docs/closure.md (the full valve takes
-~10 min at 1.0 mm and ~25 min at 0.8 mm on one core, too long for the test
-suite).
-
-Run: ``.venv/bin/python benchmarks/closure.py --mesh-sizes 1.0 0.8 0.6 [--full]``
-(add ``--out DIR`` to keep each case's outputs and figures; ``--solver relaxation``
-for the explicit dynamic relaxation instead of the BDF2 dynamics, whose "steps"
-are then iterations).
+Run: ``.venv/bin/python benchmarks/closure.py`` (``--mesh-size 1.6 --cases normal`` for a
+quick look; ``--json FILE`` keeps the measured figures).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
 import time
-from pathlib import Path
 
-from valve_dolfinx._compat import MPI
-from valve_dolfinx.closure import SOLVERS, CaseConfig, run_case
-from valve_dolfinx.geometry.valve import ValveParameters
+CASES = ("normal", "W0/H0", "W27/H0", "W21/H27")
+MARK = "BENCHMARK-RESULT "
+#: rows of the table: (label, key of a run's figures, format)
+ROWS = [("converged", "converged", "s"), ("TS steps", "time_steps", "d"),
+        ("rejected steps", "rejected_steps", "d"), ("Newton iterations", "newton_iterations", "d"),
+        ("form compilation s", "form compilation", ".2f"), ("assembly s", "assembly", ".2f"),
+        ("linear solve + PETSc s", "linear solve + PETSc", ".2f"),
+        ("contact hook s", "contact", ".2f"), ("bending hook s", "bending", ".2f"),
+        ("post-step s", "post-step", ".2f"), ("analysis s", "analysis", ".2f"),
+        ("output s", "output", ".2f"), ("mesh, root, setup s", "mesh, root, setup", ".2f"),
+        ("solve s", "solve_s", ".2f"), ("whole run s", "total_s", ".2f"),
+        ("contact % of solve", "contact_pct", ".1f"), ("peak memory MB", "peak_mb", ".0f"),
+        ("residual mN", "equilibrium_residual_mN", ".3g")]
 
 
-def _row(label: str, mesh: float, result) -> str:
-    heights = " ".join(f"{name[:5]} {lc['midline_height_mm']:.3f}/{lc['min_height_mm']:.3f}"
-                       for name, lc in result.leaflets.items()
-                       if "mirror" not in name)
-    return (f"{label:<10} {mesh:5.2f} {str(result.converged):>5} "
-            f"{result.central_coaptation_height_mm:8.3f} {result.min_coaptation_height_mm:8.3f} "
-            f"{result.regurgitant_orifice_area_mm2:7.3f} {result.max_penetration_mm:7.4f} "
-            f"{result.time_steps:6d} {result.wall_time_s:8.1f}   {heights}")
+def parse_case(text: str) -> tuple[float, float] | None:
+    """``normal`` -> None; ``W21/H27`` (or ``W21_H27``, ``21/27``) -> (21.0, 27.0)."""
+    if text.strip().lower() == "normal":
+        return None
+    match = re.fullmatch(r"\s*W?([\d.]+)\s*[/_,x]\s*H?([\d.]+)\s*", text, re.IGNORECASE)
+    if match is None:
+        raise argparse.ArgumentTypeError(f"case {text!r}: expected 'normal' or 'W<w>/H<h>'")
+    return float(match[1]), float(match[2])
+
+
+class ExclusiveClock:
+    """Seconds per label of wrapped functions, each call charged net of wrapped callees."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._children: list[float] = []
+
+    def wrap(self, owner, name: str, label: str) -> None:
+        original = getattr(owner, name, None)
+        if original is None:
+            return
+
+        def timed(*args, **kwargs):
+            self._children.append(0.0)
+            t0 = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                elapsed = time.perf_counter() - t0
+                net = elapsed - self._children.pop()
+                self.seconds[label] = self.seconds.get(label, 0.0) + net
+                if self._children:
+                    self._children[-1] += elapsed
+
+        setattr(owner, name, timed)
+
+
+def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
+           user_cache: bool) -> list[dict]:
+    """Run one case ``repeat`` times in this process; the figures of every run."""
+    import logging
+    import resource
+
+    logging.basicConfig(level=logging.WARNING)
+    from valve_dolfinx import closure, output
+    from valve_dolfinx._compat import MPI, dolfinx
+    from valve_dolfinx.bending import BendingHook
+    from valve_dolfinx.geometry.valve import ValveParameters
+    from valve_dolfinx.solvers.contact_hook import ContactHook
+    from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
+
+    cache = tempfile.TemporaryDirectory(prefix="ffcx-cache-")
+    if not user_cache:
+        options = dolfinx.jit.DOLFINX_DEFAULT_JIT_OPTIONS
+        options["cache_dir"] = (cache.name, options["cache_dir"][1])
+    clock = ExclusiveClock()
+    clock.wrap(dolfinx.jit, "ffcx_jit", "form compilation")
+    for name in ("ifunction", "ijacobian"):
+        clock.wrap(PseudoTransientSolver, name, "assembly")
+    clock.wrap(PseudoTransientSolver, "_post_step", "post-step")
+    clock.wrap(PseudoTransientSolver, "solve", "linear solve + PETSc")
+    for hook, label in ((ContactHook, "contact"), (BendingHook, "bending")):
+        for name in ("add_residual", "add_jacobian", "accept_state", "diagnostics"):
+            clock.wrap(hook, name, label)
+    clock.wrap(closure, "analyse_case", "analysis")
+    for name in ("write_case", "write_result"):
+        clock.wrap(output, name, "output")
+    clock.wrap(closure, "run_case", "mesh, root, setup")
+    reports = []  # the SolveReport of every run (run_case keeps only its scalars)
+    solve_case = closure.solve_case
+
+    def keep_report(*args, **kwargs):
+        state = solve_case(*args, **kwargs)
+        reports.append(state.report)
+        return state
+
+    closure.solve_case = keep_report
+    config = closure.CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
+    if case is not None:
+        config = config.with_graft(*case)
+    runs = []
+    for _ in range(repeat):
+        clock.seconds.clear()
+        with tempfile.TemporaryDirectory(prefix="closure-benchmark-") as out:
+            t0 = time.perf_counter()
+            result = closure.run_case(config, out, comm=MPI.COMM_WORLD)
+            total = time.perf_counter() - t0
+        report = reports[-1]
+        contact_s = clock.seconds.get("contact", 0.0)
+        runs.append({**clock.seconds, "total_s": total, "solve_s": report.wall_time_s,
+                     "converged": result.converged, "time_steps": result.time_steps,
+                     "rejected_steps": report.rejected_steps,
+                     "newton_iterations": result.newton_iterations,
+                     "equilibrium_residual_mN": result.equilibrium_residual_mN,
+                     "contact_pct": 100.0 * contact_s / max(report.wall_time_s, 1e-12),
+                     "report_timings": report.timings, "reason": result.solver_message,
+                     "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
+    cache.cleanup()
+    return runs
+
+
+def case_label(case: tuple[float, float] | None) -> str:
+    return "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
+
+
+def run_in_subprocess(case, args) -> list[dict]:
+    command = [sys.executable, os.path.abspath(__file__), "--worker", "--cases",
+               case_label(case), "--mesh-size", str(args.mesh_size), "--repeat",
+               str(args.repeat)] + (["--user-cache"] if args.user_cache else [])
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run(command, stdout=subprocess.PIPE, text=True, env=env)
+    for line in done.stdout.splitlines():
+        if line.startswith(MARK):
+            return json.loads(line[len(MARK):])
+    raise RuntimeError(f"{case_label(case)}: worker exited with {done.returncode} and no result")
+
+
+def _cell(value, fmt: str) -> str:
+    if value is None:
+        return "-"
+    return str(value) if fmt == "s" else format(value, fmt)
+
+
+def print_tables(measured: dict[str, list[dict]]) -> None:
+    columns = {}
+    for label, runs in measured.items():
+        warm = sorted(runs[1:], key=lambda r: r["total_s"])
+        columns[f"{label} cold"] = runs[0]
+        if warm:
+            columns[f"{label} warm"] = warm[(len(warm) - 1) // 2]
+    print(f"{'':<24}" + "".join(f"{name:>15}" for name in columns))
+    for label, key, fmt in ROWS:
+        print(f"{label:<24}" + "".join(f"{_cell(run.get(key, 0.0), fmt):>15}"
+                                       for run in columns.values()))
+    print(f"\n{'target (warm run, one core)':<40} {'measured':>10}  result")
+    for label, runs in measured.items():
+        run = columns.get(f"{label} warm", runs[0])
+        limit = 30.0 if label == "normal" else 60.0
+        checks = [(f"{label}: whole run <= {limit:g} s", run["total_s"], limit, "s"),
+                  (f"{label}: contact <= 25 % of the solve", run["contact_pct"], 25.0, "%")]
+        for text, value, bound, unit in checks:
+            verdict = "PASS" if value <= bound and run["converged"] else "MISS"
+            note = "" if run["converged"] else f" (not converged: {run['reason'][:60]})"
+            print(f"{text:<40} {value:>8.1f} {unit}  {verdict}{note}")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--mesh-sizes", type=float, nargs="+", default=[1.0, 0.8, 0.6])
-    parser.add_argument("--full", action="store_true", help="also run the three-leaflet valve")
-    parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--solver", choices=SOLVERS, default=CaseConfig.solver)
+    parser.add_argument("--cases", type=lambda s: [parse_case(c) for c in s.split(",")],
+                        default=[parse_case(c) for c in CASES],
+                        help="comma-separated, e.g. normal,W27/H0 (default: %(default)s)")
+    parser.add_argument("--mesh-size", type=float, default=None,
+                        help="mesh size (mm); default: the package's (0.8 mm)")
+    parser.add_argument("--repeat", type=int, default=2, help="runs per case and process")
+    parser.add_argument("--user-cache", action="store_true",
+                        help="compile into the user's FFCx cache instead of an empty one")
+    parser.add_argument("--json", type=str, default=None, help="write the figures to FILE")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    comm = MPI.COMM_WORLD
-    print(f"{'case':<10} {'mesh':>5} {'conv':>5} {'central':>8} {'min':>8} {'RO mm2':>7} "
-          f"{'pen mm':>7} {'steps':>6} {'wall s':>8}   per leaflet: midline/min (mm)")
-    reference, full = {}, {}
-    for mesh in args.mesh_sizes:
-        for label, symmetric in (("reference", True), ("full", False)):
-            if not symmetric and not args.full:
-                continue
-            config = CaseConfig(geometry=ValveParameters(mesh_size=mesh),
-                                symmetric_reference=symmetric, solver=args.solver)
-            out = None if args.out is None else args.out / f"{label}_{mesh:g}"
-            t0 = time.perf_counter()
-            result = run_case(config, out, comm=comm, figures=out is not None,
-                              fields_output=out is not None)
-            result.wall_time_s = time.perf_counter() - t0
-            (reference if symmetric else full)[mesh] = result
-            if comm.rank == 0:
-                print(_row(label, mesh, result), flush=True)
-    if comm.rank == 0:
-        meshes = sorted(reference, reverse=True)
-        for coarse, fine in zip(meshes, meshes[1:], strict=False):
-            a, b = reference[coarse], reference[fine]
-            print(f"reference {coarse:g} -> {fine:g} mm: central height changes by "
-                  f"{b.central_coaptation_height_mm - a.central_coaptation_height_mm:+.3f} mm")
-        for mesh, result in sorted(full.items()):
-            spread = [lc["central_height_mm"] for lc in result.leaflets.values()]
-            difference = (result.central_coaptation_height_mm
-                          - reference[mesh].central_coaptation_height_mm)
-            print(f"full valve {mesh:g} mm: three leaflets within {max(spread) - min(spread):.3f}"
-                  f" mm; full - reference = {difference:+.3f} mm")
+    if args.mesh_size is None:
+        from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
+        args.mesh_size = DEFAULT_MESH_SIZE
+    if args.worker:
+        runs = worker(args.cases[0], args.mesh_size, args.repeat, args.user_cache)
+        print(MARK + json.dumps(runs), flush=True)
+        return 0
+    measured = {}
+    for case in args.cases:
+        measured[case_label(case)] = run_in_subprocess(case, args)
+        print(f"{case_label(case)}: " + ", ".join(f"{r['total_s']:.1f} s"
+                                                 for r in measured[case_label(case)]),
+              file=sys.stderr, flush=True)
+    print(f"mesh {args.mesh_size:g} mm, one process per case, {args.repeat} runs each\n")
+    print_tables(measured)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f, indent=1)
     return 0
 
 

@@ -1,0 +1,168 @@
+"""Every case of the study grid, one process each (issue 18, deliverable 7).
+
+Runs the normal valve and every graft of the study grid (widths 0, 7, 14, 21, 27 % x
+heights 0, 13, 27, 40 %; ``--cases`` for a subset) at the default mesh (``--mesh-size``),
+each case in its own single-process subprocess (``--jobs N`` at a time, default 1)
+through :func:`valve_dolfinx.closure.run_case` with an output folder (a temporary one,
+or ``--keep DIR``), as ``valve-dolfinx run`` does.  Prints a line per case as it ends,
+then a Markdown table in grid order: converged, static residual (mN), penetration (mm),
+figure of merit (``min_coaptation_height_mm``), raw minimum, central height, regurgitant
+orifice area, root diameter, Newton iterations, wall time (s, the case's own, output
+included).  ``--out FILE.md`` and ``--json FILE`` keep the table and the figures.
+
+Run: ``.venv/bin/python benchmarks/grid.py --jobs 2`` (the whole grid on 2 cores;
+``--mesh-size 1.6 --cases normal,W21/H27`` for a quick look; ``--wall-time-limit S`` is
+the solver's limit per case).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+
+from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
+
+MARK = "BENCHMARK-RESULT "
+#: columns of the table: (header, result key, format)
+COLUMNS = [("converged", "converged", "s"), ("residual mN", "equilibrium_residual_mN", ".3g"),
+           ("penetration mm", "max_penetration_mm", ".3f"),
+           ("min h mm", "min_coaptation_height_mm", ".2f"),
+           ("raw min mm", "min_coaptation_height_raw_mm", ".2f"),
+           ("central mm", "central_coaptation_height_mm", ".2f"),
+           ("orifice mm²", "regurgitant_orifice_area_mm2", ".2f"),
+           ("root mm", "root_diameter_mm", ".2f"), ("Newton", "newton_iterations", "d"),
+           ("wall s", "wall_time_s", ".0f")]
+FIELDS = [key for _, key, _ in COLUMNS] + ["time_steps", "solver_message", "n_cells"]
+
+
+def parse_case(text: str) -> tuple[float, float] | None:
+    """``normal`` -> None; ``W21/H27`` (or ``W21_H27``, ``21/27``) -> (21.0, 27.0)."""
+    if text.strip().lower() == "normal":
+        return None
+    match = re.fullmatch(r"\s*W?([\d.]+)\s*[/_,x]\s*H?([\d.]+)\s*", text, re.IGNORECASE)
+    if match is None:
+        raise argparse.ArgumentTypeError(f"case {text!r}: expected 'normal' or 'W<w>/H<h>'")
+    return float(match[1]), float(match[2])
+
+
+def study_grid() -> list[tuple[float, float] | None]:
+    return [None] + [(w, h) for w in STUDY_WIDTHS_PCT for h in STUDY_HEIGHTS_PCT]
+
+
+def worker(case, mesh_size: float, limit: float | None, out: str) -> dict:
+    """Run one case in this process; its result's fields."""
+    import logging
+    from dataclasses import replace
+
+    logging.basicConfig(level=logging.WARNING)
+    from valve_dolfinx.closure import CaseConfig, run_case
+    from valve_dolfinx.geometry.valve import ValveParameters
+
+    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
+    if case is not None:
+        config = config.with_graft(*case)
+    if limit is not None:
+        config = replace(config, pseudo_transient=replace(config.pseudo_transient,
+                                                          wall_time_limit_s=limit))
+    result = run_case(config, out).to_dict()
+    return {key: result[key] for key in FIELDS}
+
+
+def run_in_subprocess(case, args, root: str) -> dict:
+    name = case_name(*(case or (None, None)))
+    command = [sys.executable, os.path.abspath(__file__), "--worker", "--cases", name,
+               "--keep", os.path.join(root, name), "--mesh-size", str(args.mesh_size)]
+    command += [] if args.wall_time_limit is None else ["--wall-time-limit",
+                                                        str(args.wall_time_limit)]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    # a hard stop beyond the solver's own limit (mesh, analysis, output)
+    timeout = None if args.wall_time_limit is None else args.wall_time_limit + 600.0
+    t0 = time.perf_counter()
+    try:
+        done = subprocess.run(command, stdout=subprocess.PIPE, text=True, env=env,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"case": name, "converged": False, "wall_time_s": time.perf_counter() - t0,
+                "solver_message": f"killed after {timeout:g} s"}
+    for line in done.stdout.splitlines():
+        if line.startswith(MARK):
+            return {"case": name, **json.loads(line[len(MARK):])}
+    return {"case": name, "converged": False, "wall_time_s": time.perf_counter() - t0,
+            "solver_message": f"worker exited with {done.returncode} and no result"}
+
+
+def _cell(row: dict, key: str, fmt: str) -> str:
+    value = row.get(key)
+    if value is None or (isinstance(value, float) and value != value):
+        return "-"
+    return str(value) if fmt == "s" else format(value, fmt)
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = ["| case | " + " | ".join(h for h, _, _ in COLUMNS) + " |",
+             "|---|" + "---:|" * len(COLUMNS)]
+    lines += [f"| {r['case']} | " + " | ".join(_cell(r, k, f) for _, k, f in COLUMNS) + " |"
+              for r in rows]
+    failed = [r for r in rows if not r.get("converged")]
+    lines += [""] + [f"- {r['case']}: {r.get('solver_message', '')}" for r in failed]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", type=lambda s: [parse_case(c) for c in s.split(",")],
+                        default=study_grid(), help="comma-separated subset, e.g. normal,W21/H27")
+    parser.add_argument("--mesh-size", type=float, default=None, help="mm (default 0.8)")
+    parser.add_argument("--jobs", type=int, default=1, help="cases run at a time")
+    parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
+    parser.add_argument("--keep", type=str, default=None, help="keep the case folders in DIR")
+    parser.add_argument("--out", type=Path, default=None, help="write the table to FILE.md")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures to FILE")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.mesh_size is None:
+        from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
+        args.mesh_size = DEFAULT_MESH_SIZE
+    if args.worker:
+        row = worker(args.cases[0], args.mesh_size, args.wall_time_limit, args.keep)
+        print(MARK + json.dumps(row), flush=True)
+        return 0
+    scratch = tempfile.TemporaryDirectory(prefix="grid-benchmark-")
+    root = args.keep or scratch.name
+    t0 = time.perf_counter()
+    rows = {}
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(run_in_subprocess, case, args, root): case for case in args.cases}
+        for future in as_completed(futures):
+            row = future.result()
+            rows[futures[future]] = row
+            print(f"{row['case']:<8} " + " ".join(f"{h} {_cell(row, k, f)}" for h, k, f in COLUMNS)
+                  + ("" if row.get("converged") else f"  ({row.get('solver_message', '')})"),
+                  flush=True)
+    elapsed = time.perf_counter() - t0
+    scratch.cleanup()
+    ordered = [rows[case] for case in args.cases]
+    table = markdown(ordered)
+    total = sum(float(r.get("wall_time_s") or 0.0) for r in ordered)
+    summary = (f"{sum(bool(r.get('converged')) for r in ordered)} of {len(ordered)} cases "
+               f"converged; mesh {args.mesh_size:g} mm, {args.jobs} at a time; "
+               f"elapsed {elapsed:.0f} s, sum of case wall times {total:.0f} s\n")
+    print("\n" + table + "\n" + summary, end="")
+    if args.out:
+        args.out.write_text(table + "\n" + summary)
+    if args.json:
+        args.json.write_text(json.dumps({"mesh_size_mm": args.mesh_size, "jobs": args.jobs,
+                                         "elapsed_s": elapsed, "cases": ordered}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
