@@ -4,7 +4,7 @@ itself, Newton's convergence rate with contact active, and MPI consistency.
 The solves take the closure's path: pseudo-transient continuation at the full pressure
 (:class:`PseudoTransientSolver`) with the contact hook given as a factory of the solver's
 :class:`NodalCoupling`, its driving force frozen at the last accepted step
-(``lag_driving_force``, ``driving_force_relaxation = 1``) as in :mod:`valve_dolfinx.closure`."""
+(``lag_driving_force``) as in :mod:`valve_dolfinx.closure`."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ SIDE, CELLS, GAP = 6.0, 12, 1.0
 def contact_hook(models, triangles, pressure):
     """The hook factory the solver calls with its coupling (the closure's settings)."""
     return lambda coupling: ContactHook(coupling, models, triangles, pressure, 1.0,
-                                        lag_driving_force=True, driving_force_relaxation=1.0)
+                                        lag_driving_force=True)
 
 
 def two_sheets(comm):

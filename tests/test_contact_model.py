@@ -598,7 +598,7 @@ def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
 
 
 def test_forces_only_evaluation_gives_the_same_forces_and_diagnostics():
-    """``jacobian=False`` (the explicit relaxation's mode) skips the blocks, nothing else."""
+    """``jacobian=False`` (forces for output and diagnostics) skips the blocks, nothing else."""
     x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=3)
     x_prev = x.copy()
     x = x + np.random.default_rng(4).normal(scale=0.02, size=x.shape)

@@ -111,6 +111,9 @@ class BendingHook:
     each rank adds the rows of the nodes it owns.
     """
 
+    #: name of this hook's share in a solver's timings
+    timing_name = "bending"
+
     def __init__(self, coupling: NodalCoupling, stiffness: sp.csr_matrix):
         self.coupling = coupling
         K = sp.csr_matrix(stiffness)

@@ -80,7 +80,7 @@ def _progress_bar(comm):
     from tqdm import tqdm
 
     bar = tqdm(total=None, desc="closing", dynamic_ncols=True,
-               bar_format="{desc}: {postfix} [{elapsed}]")
+               bar_format="{desc} [{elapsed}]")
 
     def update(entry: dict) -> None:
         contacts = f"{entry.get('contacts', 0)} contacts"
@@ -90,8 +90,7 @@ def _progress_bar(comm):
         else:  # BDF2 dynamics
             text = (f"step {entry['step']}, t = {entry['time']:.3g} s, dt {entry['dt']:.2g} s, "
                     f"increment {entry['increment_mm']:.1e} mm, {contacts}")
-        bar.set_postfix_str(text, refresh=False)
-        bar.refresh()
+        bar.set_description_str(f"closing: {text}", refresh=True)
 
     return update, bar.close
 

@@ -1,8 +1,9 @@
 """Valve closure under diastolic pressure: one case from geometry to result.json (SPEC §2-§7).
 
 :func:`run_case` builds the valve (normal, or with a graft), distends the root
-(step 1), holds the attachment at the distended root and closes the leaflets
-under 80 mmHg with damped BDF2 dynamics and leaflet contact (step 2), then
+(step 1), holds the attachment at the distended root and brings the leaflets to
+their static equilibrium under 80 mmHg with leaflet contact and bending (step 2:
+pseudo-transient continuation, or damped BDF2 dynamics as the cross-check), then
 measures coaptation and writes the result, the configuration, ParaView fields
 and figures.  It never raises because a solve failed: a stalled or diverged
 run is reported with ``converged: false`` and where it stopped, and whatever
@@ -376,7 +377,6 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
                            lag_driving_force=config.solver == "ptc",
-                           driving_force_relaxation=1.0,
                            fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
 
     hooks = [make_hook]

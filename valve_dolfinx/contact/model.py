@@ -79,11 +79,8 @@ PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
 _BOUND_MARGIN = 1e-6
 #: Verlet skin of the candidate pairs (mm): the search widens every distance test by
 #: this much, and the pairs found are reused while no node can have crossed the widened
-#: tests (:class:`_CandidatePairs`).  An explicit relaxation moves nodes by micrometres
-#: per iteration at the end, so the search, two thirds of an evaluation, runs rarely.
-#: Off (0) by default: the rows are the same, but in another order, and on the valve that
-#: round-off difference alone changes which arrangement of the three free-edge tips the
-#: relaxation settles in (docs/closure.md, "Session 8").
+#: tests (:class:`_CandidatePairs`).  Off (0) by default: the rows are the same, in another
+#: order, so results differ in the last bits from a full search's.
 CANDIDATE_SKIN = 0.0
 #: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
 #: tell the side of a node; the pressure direction decides instead.

@@ -10,20 +10,14 @@ positions reuses the forces and blocks of the residual evaluation.
 Driving force.  The law's force scale is the nodal pressure force
 ``f_ext`` (SPEC §5).  Two treatments (``lag_driving_force``):
 
-* ``False`` (the closure default): ``f_ext`` of the current positions.  The
+* ``True`` (pseudo-transient continuation): ``f_ext`` of the last *accepted*
+  step, scaled by the current pressure.  Within a step it is a constant, so
+  the contact Jacobian is exact and Newton quadratic; at a steady state the
+  accepted and current states coincide, so the equilibrium is the SPEC's.
+* ``False`` (BDF2 dynamics): ``f_ext`` of the current positions.  The
   Jacobian has the turning of the contact direction under a fixed ``f_ext``
-  but not the change of ``f_ext`` itself with the surface (area and normal of
-  the pressure-loaded triangles), so Newton converges fast but not quite
-  quadratically once contact is active.  The equilibrium is exactly the
-  SPEC's.
-* ``True``: ``f_ext`` of the last *accepted* step (under-relaxed by
-  ``driving_force_relaxation`` from step to step), scaled by the current
-  pressure.  Within a step it is a constant, so the contact Jacobian is
-  exact and Newton quadratic; at a steady state the accepted and current
-  states coincide.  On the symmetric valve reference the step-to-step update
-  settled into a two-cycle (increments stuck at 0.01-0.03 mm for 1500
-  simulated seconds), while the current-force treatment converged in 30 s
-  of simulated time, so it is off by default.
+  but not the change of ``f_ext`` itself with the surface, so Newton
+  converges fast but not quite quadratically once contact is active.
 """
 
 from __future__ import annotations
@@ -60,19 +54,13 @@ class ContactHook:
         Sign of the pressure force relative to the triangle normal.
     """
 
-    #: explicit solvers leave this hook's Jacobian out of their nodal masses (its entries
-    #: ``f/d`` where a contact force turns around a triangle edge are unbounded as d -> 0;
-    #: see :mod:`valve_dolfinx.solvers.relaxation`)
-    stiffness_in_nodal_mass = False
-    #: evaluate forces without Jacobian blocks (set by explicit solvers for their run)
-    forces_only = False
+    #: name of this hook's share in a solver's timings
+    timing_name = "contact"
 
     def __init__(self, coupling: NodalCoupling, models: Sequence, pressure_triangles: np.ndarray,
                  pressure: dolfinx.fem.Constant, pressure_side: float, *,
-                 lag_driving_force: bool = True, driving_force_relaxation: float = 0.5,
-                 fixed_nodes: np.ndarray | None = None):
+                 lag_driving_force: bool = True, fixed_nodes: np.ndarray | None = None):
         self.coupling = coupling
-        self.driving_force_relaxation = float(driving_force_relaxation)
         # nodes held by Dirichlet conditions (the attachment) are never contacting nodes;
         # their triangles still are contact surfaces
         fixed = np.empty(0, dtype=np.int64) if fixed_nodes is None else np.asarray(fixed_nodes)
@@ -83,7 +71,6 @@ class ContactHook:
         self.pressure = pressure
         self.side = float(pressure_side)
         self._key: np.ndarray | None = None
-        self._forces_only_key = False
         self._results: list = []
         self.last_positions: np.ndarray | None = None
         self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
@@ -91,16 +78,14 @@ class ContactHook:
     def _evaluate(self, state: dolfinx.fem.Function) -> list:
         x = self.coupling.positions(state)
         p = float(self.pressure.value)
-        if (self._key is not None and self._pressure_key == p and np.array_equal(x, self._key)
-                and self._forces_only_key <= self.forces_only):
+        if self._key is not None and self._pressure_key == p and np.array_equal(x, self._key):
             return self._results
         if self._unit_forces is None or not self.lag_driving_force:
             self._unit_forces = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
         f_ext = p * self._unit_forces
         nodes = self.contact_nodes
-        self._results = [m.evaluate(x, f_ext, nodes, jacobian=not self.forces_only)
-                         for m in self.models]
-        self._key, self._pressure_key, self._forces_only_key = x, p, self.forces_only
+        self._results = [m.evaluate(x, f_ext, nodes) for m in self.models]
+        self._key, self._pressure_key = x, p
         self.last_positions = x
         return self._results
 
@@ -117,12 +102,7 @@ class ContactHook:
         """Record an accepted (time/load) step: sides and driving forces come from it."""
         x = self.coupling.positions(state)
         if self.lag_driving_force:  # (otherwise every evaluation computes its own)
-            current = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
-            if self._unit_forces is None:
-                self._unit_forces = current
-            else:  # under-relaxed update: damps the step-to-step flip-flop of a lagged load
-                beta = self.driving_force_relaxation
-                self._unit_forces = (1.0 - beta) * self._unit_forces + beta * current
+            self._unit_forces = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
         self._key = None
         for m in self.models:
             update = getattr(m, "update_history", None)
