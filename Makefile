@@ -26,7 +26,7 @@ run: $(STAMP)
 		--out results/graft_sweep
 
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(NP) --dist loadfile
 	$(BIN)/mpirun -n $(NP) $(BIN)/python -m pytest -q -m mpi -p no:cacheprovider
 
 clean-results:

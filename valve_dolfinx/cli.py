@@ -125,10 +125,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         symmetric_reference=args.symmetric_reference, solver=args.solver)
     if graft is not None:
         config = config.with_graft(*graft)
-    limit = args.wall_time_limit
-    config = replace(config,
-                     pseudo_transient=replace(config.pseudo_transient, wall_time_limit_s=limit),
-                     dynamics=replace(config.dynamics, wall_time_limit_s=limit))
+    if args.wall_time_limit is not None:
+        limit = args.wall_time_limit
+        config = replace(config, pseudo_transient=replace(config.pseudo_transient,
+                                                          wall_time_limit_s=limit),
+                         dynamics=replace(config.dynamics, wall_time_limit_s=limit))
     comm = MPI.COMM_WORLD
     done = _finished_result(args.out, config)
     if done is not None and not args.force:
@@ -305,8 +306,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--solver", choices=("ptc", "bdf2"), default="ptc",
                    help="pseudo-transient continuation to the static equilibrium (the "
                    "default), or damped BDF2 dynamics (SPEC §4, the cross-check)")
-    p.add_argument("--wall-time-limit", type=float, default=900.0, metavar="SECONDS",
-                   help="stop (converged: false, results written) after this wall time")
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="stop (converged: false, results written) after this wall time "
+                   "(default: the solver's, 900 s)")
     p.add_argument("--root-diameter", type=float, default=None, metavar="D",
                    help="prescribe the root diameter at 80 mmHg in mm (a patient's measured "
                    "root, 10-40 mm) instead of distending the root with its wall law")
