@@ -68,8 +68,12 @@ def _main_with_stand_in(argv: list[str]) -> int:
     from valve_dolfinx import cli
     from valve_dolfinx.study import runner
 
+    real = runner.run_closure_case
     runner.run_closure_case = lambda config, out, comm, **_: stand_in_case(config, out, comm)
-    return cli.main(argv)
+    try:
+        return cli.main(argv)
+    finally:  # in-process callers (tests) get the real case function back
+        runner.run_closure_case = real
 
 
 # --- helpers ----------------------------------------------------------------------------------
