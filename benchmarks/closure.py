@@ -27,11 +27,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
 import tempfile
 import time
+
+from cases import parse_case  # benchmarks/cases.py, beside this script
 
 CASES = ("normal", "W0/H0", "W27/H0", "W21/H27")
 MARK = "BENCHMARK-RESULT "
@@ -46,16 +47,6 @@ ROWS = [("converged", "converged", "s"), ("TS steps", "time_steps", "d"),
         ("solve s", "solve_s", ".2f"), ("whole run s", "total_s", ".2f"),
         ("contact % of solve", "contact_pct", ".1f"), ("peak memory MB", "peak_mb", ".0f"),
         ("residual mN", "equilibrium_residual_mN", ".3g")]
-
-
-def parse_case(text: str) -> tuple[float, float] | None:
-    """``normal`` -> None; ``W21/H27`` (or ``W21_H27``, ``21/27``) -> (21.0, 27.0)."""
-    if text.strip().lower() == "normal":
-        return None
-    match = re.fullmatch(r"\s*W?([\d.]+)\s*[/_,x]\s*H?([\d.]+)\s*", text, re.IGNORECASE)
-    if match is None:
-        raise argparse.ArgumentTypeError(f"case {text!r}: expected 'normal' or 'W<w>/H<h>'")
-    return float(match[1]), float(match[2])
 
 
 class ExclusiveClock:

@@ -20,13 +20,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
+
+from cases import parse_case  # benchmarks/cases.py, beside this script
 
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
 
@@ -41,16 +42,6 @@ COLUMNS = [("converged", "converged", "s"), ("residual mN", "equilibrium_residua
            ("root mm", "root_diameter_mm", ".2f"), ("Newton", "newton_iterations", "d"),
            ("wall s", "wall_time_s", ".0f")]
 FIELDS = [key for _, key, _ in COLUMNS] + ["time_steps", "solver_message", "n_cells"]
-
-
-def parse_case(text: str) -> tuple[float, float] | None:
-    """``normal`` -> None; ``W21/H27`` (or ``W21_H27``, ``21/27``) -> (21.0, 27.0)."""
-    if text.strip().lower() == "normal":
-        return None
-    match = re.fullmatch(r"\s*W?([\d.]+)\s*[/_,x]\s*H?([\d.]+)\s*", text, re.IGNORECASE)
-    if match is None:
-        raise argparse.ArgumentTypeError(f"case {text!r}: expected 'normal' or 'W<w>/H<h>'")
-    return float(match[1]), float(match[2])
 
 
 def study_grid() -> list[tuple[float, float] | None]:
