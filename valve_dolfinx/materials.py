@@ -40,7 +40,7 @@ also rotate the wrinkle direction until the stress is uniaxial, which would
 need a local iteration at every quadrature point.  Without it, wrinkles
 oblique to the fibres keep a small compressive principal stress (down to
 −0.16 × the tension for the native leaflet, −0.02 for the pericardium); see
-docs/membrane.md, which documents the treatment, its parameters and sources.
+docs/model.md, which documents the treatment, its parameters and sources.
 """
 
 from __future__ import annotations
