@@ -36,7 +36,7 @@ RESULT_FIELDS = ("graft_width_pct", "graft_height_pct", "converged", "min_coapta
                  "root_diameter_mm", "max_penetration_mm", "n_dofs", "n_ranks", "wall_time_s",
                  "mesh_size_mm", "equilibrium_residual_mN", "residual_tolerance_mN",
                  "newton_iterations")
-#: two results are the same equilibrium (mm; the issue's figure-of-merit tolerances)
+#: two results are the same equilibrium (mm; the acceptance tolerance of the figure of merit)
 SAME = 0.02
 
 

@@ -125,8 +125,8 @@ class FungMaterial:
         """Membrane stiffness scale (mN/mm): thickness × c × largest eigenvalue of M.
 
         The small-strain tangent modulus along the stiffest direction is about
-        ``c·λmax(M)``; used to scale numerical mass, damping and
-        regularisation to each tissue (SPEC §4: graft cases are stiff).
+        ``c·λmax(M)``; the BDF2 cross-check scales its numerical mass and
+        damping to each tissue with it (SPEC §4: graft cases are stiff).
         """
         return self.thickness * self.c * float(np.linalg.eigvalsh(self.matrix).max())
 
