@@ -10,7 +10,7 @@ The expected numbers come from outside the code:
 * the full three-leaflet valve agrees with its one-leaflet symmetry-plane reference.
 
 The clinical 3-4 mm central coaptation of a normal valve (Swanson & Clark 1974) is
-compared, not asserted: docs/closure.md reports where the model lands and why.
+compared, not asserted: docs/numerics.md reports where the model lands and why.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ RESULT_FIELDS = ("graft_width_pct", "graft_height_pct", "converged", "min_coapta
                  "root_diameter_mm", "max_penetration_mm", "n_dofs", "n_ranks", "wall_time_s",
                  "mesh_size_mm", "equilibrium_residual_mN", "residual_tolerance_mN",
                  "newton_iterations")
-#: two results are the same equilibrium (mm; the issue's figure-of-merit tolerances)
+#: two results are the same equilibrium (mm; the acceptance tolerance of the figure of merit)
 SAME = 0.02
 
 
@@ -234,7 +234,7 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
     """The normal valve seals, and its coaptation region agrees with the one-leaflet
     reference (SPEC §4): the areas of the three regions within 2 %.  (The minimum height
     sits at the triple-point tip, where the planes and the neighbouring leaflets hold the
-    tip differently; docs/closure.md reports both.)"""
+    tip differently; docs/numerics.md reports both.)"""
     _, fields, *_ = default_mesh_cases["normal"]
     _, reference, *_ = default_mesh_cases["reference"]
     assert fields["regurgitant_orifice_area_mm2"] == 0.0 and fields["competent"]

@@ -101,7 +101,7 @@ def test_cli_mesh_rejects_bad_graft(tmp_path):
                                            (["--graft-height", "0"], "--graft-width")])
 def test_cli_mesh_needs_both_graft_sizes(tmp_path, capsys, given, missing):
     """One graft enlargement without the other is a usage error naming the missing one
-    (it used to build a W/0 or 0/H graft silently), and nothing is written."""
+    (rather than a W/0 or 0/H graft built silently), and nothing is written."""
     from valve_dolfinx.cli import main
 
     with pytest.raises(SystemExit) as exit_info:

@@ -164,7 +164,7 @@ def test_sphere_pressure_radius_curve_and_convergence():
 
     Flat triangles facet the sphere, an O(h²) geometric error: the relative radius error at
     10.666 kPa falls from 3.6e-4 (h = 2 mm) to 7.5e-5 (h = 1 mm), an observed rate of 2.25
-    in the nominal mesh size (2.07 over h = 2 → 0.5 mm; docs/convergence.md).  The rate is
+    in the nominal mesh size (2.07 over h = 2 → 0.5 mm; docs/verification.md).  The rate is
     asserted in a band around that measurement, 1.8-2.6, wide enough for the scatter of
     unstructured Gmsh meshes, narrow enough to catch a first-order (or a locking) scheme.
     On the h = 1 mm mesh the curve is followed through four pressures, each solve starting
@@ -182,7 +182,7 @@ def test_sphere_pressure_radius_curve_and_convergence():
     hs = sorted(errors, reverse=True)
     assert errors[hs[0]] > errors[hs[1]] > errors[hs[2]]
     rate = math.log(errors[hs[0]] / errors[hs[2]]) / math.log(hs[0] / hs[2])
-    assert 1.8 < rate < 2.6  # measured 2.25 (docs/convergence.md)
+    assert 1.8 < rate < 2.6  # measured 2.25 (docs/verification.md)
     assert errors[1.0] < 2e-4
 
 

@@ -1,4 +1,4 @@
-"""The aortic root step (SPEC §2; issue 18, deliverable 2).
+"""The aortic root step (SPEC §2).
 
 Expected numbers are worked out here by hand, not by the code under test:
 

@@ -1,4 +1,4 @@
-"""The graft sizing study (issue 19): grid validation, resumable sweeps, MPI, job arrays, report.
+"""The graft sizing study (SPEC §7): grid validation, resumable sweeps, MPI, job arrays, report.
 
 Most tests run a fast stand-in for the case function (:func:`stand_in_case`, a
 deterministic function of the graft size that sleeps a little and writes

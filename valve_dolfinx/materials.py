@@ -40,7 +40,7 @@ also rotate the wrinkle direction until the stress is uniaxial, which would
 need a local iteration at every quadrature point.  Without it, wrinkles
 oblique to the fibres keep a small compressive principal stress (down to
 −0.16 × the tension for the native leaflet, −0.02 for the pericardium); see
-docs/membrane.md, which documents the treatment, its parameters and sources.
+docs/model.md, which documents the treatment, its parameters and sources.
 """
 
 from __future__ import annotations
@@ -125,8 +125,8 @@ class FungMaterial:
         """Membrane stiffness scale (mN/mm): thickness × c × largest eigenvalue of M.
 
         The small-strain tangent modulus along the stiffest direction is about
-        ``c·λmax(M)``; used to scale numerical mass, damping and
-        regularisation to each tissue (SPEC §4: graft cases are stiff).
+        ``c·λmax(M)``; the BDF2 cross-check scales its numerical mass and
+        damping to each tissue with it (SPEC §4: graft cases are stiff).
         """
         return self.thickness * self.c * float(np.linalg.eigvalsh(self.matrix).max())
 

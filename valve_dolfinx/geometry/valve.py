@@ -60,9 +60,8 @@ FREE_EDGE = 2
 GRAFT_POSITION = 2
 GRAFT_PLACEMENTS = ("conformal", "billowed")
 
-#: Default target edge length (mm).  docs/convergence.md holds the membrane convergence
-#: study; the coaptation-height study at this resolution (SPEC §8) goes there with the
-#: closure pipeline.
+#: Default target edge length (mm).  The membrane convergence study is in
+#: docs/verification.md, the coaptation height's mesh convergence (SPEC §8) in docs/numerics.md.
 DEFAULT_MESH_SIZE = 0.8
 
 

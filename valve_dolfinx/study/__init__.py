@@ -1,4 +1,4 @@
-"""The graft sizing study (SPEC §7, issue 19): the normal valve and a W × H grid of grafts.
+"""The graft sizing study (SPEC §7): the normal valve and a W × H grid of grafts.
 
 * :mod:`~valve_dolfinx.study.grid`: the grid and study settings, validated (no DOLFINx);
 * :mod:`~valve_dolfinx.study.store`: case folders, configuration hashes, exclusive claims;

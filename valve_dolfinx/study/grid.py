@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 #: The published study grid (SPEC §1, §7): graft width and height enlargements in per cent
 STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
-#: Cases drawn as figure panels besides the normal valve (issue 19)
+#: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
 #: Name of the normal valve's case folder
 NORMAL_CASE = "normal"

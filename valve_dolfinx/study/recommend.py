@@ -1,4 +1,4 @@
-"""The sizing recommendation from a study table (issue 19).
+"""The sizing recommendation from a study table (SPEC §7).
 
 Rule: among the graft cases that converged and are competent (regurgitant
 orifice 0), take those whose minimum native coaptation height reaches the

@@ -1,4 +1,4 @@
-"""Running a sizing study: every case once, spread over MPI ranks, resumable (issue 19).
+"""Running a sizing study: every case once, spread over MPI ranks, resumable (SPEC §7).
 
 Parallel layout
 ---------------
