@@ -21,7 +21,7 @@ from valve_dolfinx.contact import (
     SurfaceContact,
     vertex_adjacency,
 )
-from valve_dolfinx.contact.model import FACE_BAND
+from valve_dolfinx.contact.surface import FACE_BAND
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 K, H = 10.0, 0.1

@@ -42,7 +42,7 @@ from valve_dolfinx.contact.law import (
     law_force,
 )
 from valve_dolfinx.contact.linearisation import skew
-from valve_dolfinx.contact.model import ContactResult
+from valve_dolfinx.contact.results import ContactResult
 from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["EdgeContact", "closest_points_on_lines"]

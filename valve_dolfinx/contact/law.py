@@ -27,7 +27,8 @@ from valve_dolfinx.exceptions import ParameterError, check_range
 
 __all__ = [
     "ContactParameters", "DRIVING_FORCE_MODES", "PAIRINGS", "contact_force",
-    "contact_force_slope_in_F", "crossing_barrier", "law_force", "driving_force",
+    "DEFAULT_PARAMETERS", "contact_force_slope_in_F", "crossing_barrier", "law_force",
+    "driving_force", "law_force_from_load",
 ]
 
 log = logging.getLogger(__name__)
@@ -168,6 +169,10 @@ class ContactParameters:
         return self.thickness + self.cutoff
 
 
+#: The SPEC §5 parameters (frozen, so safe as a default argument).
+DEFAULT_PARAMETERS = ContactParameters()
+
+
 def contact_force(d: np.ndarray, F: np.ndarray, k: float, h: float, taper: float = 0.0
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Magnitude ``f(d, F)`` of the SPEC §5 contact force and its derivative ``df/dd``.
@@ -295,3 +300,11 @@ def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParamete
     else:
         F = np.linalg.norm(f_ext, axis=1)
     return np.maximum(F, params.min_driving_force)
+
+
+def law_force_from_load(d: np.ndarray, f_ext: np.ndarray, normal: np.ndarray,
+                        params: ContactParameters) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`law_force` and its slope in ``d`` with ``F`` the :func:`driving_force` of the
+    external nodal forces ``f_ext`` ``(K, 3)`` against the sided normals ``normal``."""
+    F = driving_force(f_ext, normal, params)
+    return law_force(d, F, params)

@@ -14,7 +14,7 @@ barycentric coordinates of the contact point).  With ``B = [1, -λ_a, -λ_b,
       + φ\, n \otimes \frac{\partial B_r}{\partial x_m}.
 
 The first term (the distance ``d`` changing, ``∂d/∂x_m = B_m n`` exactly) is
-built in :meth:`valve_dolfinx.contact.model._Contacts.result`.  This module
+built in :meth:`valve_dolfinx.contact.results.ContactRows.result`.  This module
 adds the other two:
 
 * **the direction turns.**  Face contact: ``n = s N/|N|``, ``N = e₁ × e₂``

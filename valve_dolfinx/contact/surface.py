@@ -1,4 +1,4 @@
-"""Node-to-surface penalty contact between membrane triangles and with rigid planes (SPEC §5).
+"""Node-to-surface penalty contact between membrane triangles (SPEC §5).
 
 Every call to :meth:`SurfaceContact.evaluate` searches the whole surface:
 
@@ -27,34 +27,34 @@ their union.
 from __future__ import annotations
 
 import logging
-import time
-from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
+from valve_dolfinx.contact.exclusions import merge_exclusions, reference_neighbours, triangle_halo
 from valve_dolfinx.contact.geometry import (
     barycentric_gradients,
     closest_point_on_triangles,
     triangle_normals,
 )
 from valve_dolfinx.contact.law import (
+    DEFAULT_PARAMETERS,
     ContactParameters,
     contact_force_slope_in_F,
-    driving_force,
-    law_force,
+    law_force_from_load,
 )
 from valve_dolfinx.contact.linearisation import direction_derivatives
+from valve_dolfinx.contact.results import (
+    ContactResult,
+    ContactRows,
+    StepClock,
+    check_nodes,
+    check_positions,
+)
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
-__all__ = [
-    "ContactResult",
-    "SurfaceContact",
-    "PlaneContact",
-    "vertex_adjacency",
-    "triangle_halo",
-]
+__all__ = ["FACE_BAND", "SurfaceContact"]
 
 log = logging.getLogger(__name__)
 
@@ -64,8 +64,6 @@ log = logging.getLogger(__name__)
 #: node right above a shared edge or vertex is caught by at least one of the
 #: triangles around it, while enlarging each triangle by only 1e-10 of its size.
 INSIDE_TOLERANCE = 1e-10
-#: The SPEC §5 parameters (frozen, so safe as a default argument).
-DEFAULT_PARAMETERS = ContactParameters()
 #: Face rows extend this far outside their triangle, in barycentric coordinates, and fade
 #: out across the band: a node pressed through a sheet near its boundary then loses its
 #: contact force smoothly instead of at once (a jump that makes Newton's method cycle).
@@ -85,118 +83,6 @@ CANDIDATE_SKIN = 0.0
 #: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
 #: tell the side of a node; the pressure direction decides instead.
 SIDE_TOLERANCE = 1e-12
-
-
-@dataclass
-class ContactResult:
-    """Contact forces, their Jacobian blocks and diagnostics of one evaluation.
-
-    Attributes
-    ----------
-    forces
-        ``(N, 3)`` nodal contact forces (mN): on the contacting nodes and the
-        reactions on the vertices of the triangles they touch.
-    jac_rows, jac_cols
-        ``(K,)`` node ids of the Jacobian blocks (duplicates allowed: sum them).
-    jac_blocks
-        ``(K, 3, 3)`` blocks :math:`\\partial\\,\\mathrm{forces}[row] / \\partial x[col]`
-        (mN/mm); for a residual ``R = R_int - f_ext - forces`` subtract them from
-        the Jacobian.
-    n_active
-        Number of contacts (node–triangle or node–plane) with ``f > 0``.
-    max_penetration
-        ``max(-d, 0)`` over the active contacts whose node is over the surface
-        (mm; contacts fading out beyond a boundary, presence < 1/2, are not
-        counted), 0.0 if none.
-    total_force
-        Sum of the contact force magnitudes ``f`` (mN).
-    max_crossing
-        How far the mid-surfaces themselves have passed through each other
-        (mm): the penetration without the contact thickness, 0 while the
-        contact layers only overlap (see ``ContactParameters.thickness``).
-    pairs
-        ``(n_active, 2)`` ``[node, triangle]`` of the active contacts;
-        ``triangle = -1 - i`` for plane ``i``.
-    """
-
-    forces: np.ndarray
-    jac_rows: np.ndarray
-    jac_cols: np.ndarray
-    jac_blocks: np.ndarray
-    n_active: int
-    max_penetration: float
-    total_force: float
-    pairs: np.ndarray
-    max_crossing: float = 0.0
-
-    @classmethod
-    def empty(cls, num_nodes: int) -> ContactResult:
-        """No contact on a mesh of ``num_nodes`` nodes."""
-        ids = np.empty(0, dtype=np.int64)
-        return cls(forces=np.zeros((num_nodes, 3)), jac_rows=ids, jac_cols=ids.copy(),
-                   jac_blocks=np.empty((0, 3, 3)), n_active=0, max_penetration=0.0,
-                   total_force=0.0, pairs=np.empty((0, 2), dtype=np.int64))
-
-    @classmethod
-    def combine(cls, results: Iterable[ContactResult]) -> ContactResult:
-        """Sum of results on the same mesh (several surfaces/planes, or disjoint node sets)."""
-        results = list(results)
-        if not results:
-            raise ParameterError("ContactResult.combine needs at least one result")
-        return cls(
-            forces=np.sum([r.forces for r in results], axis=0),
-            jac_rows=np.concatenate([r.jac_rows for r in results]),
-            jac_cols=np.concatenate([r.jac_cols for r in results]),
-            jac_blocks=np.concatenate([r.jac_blocks for r in results]),
-            n_active=sum(r.n_active for r in results),
-            max_penetration=max(r.max_penetration for r in results),
-            total_force=float(sum(r.total_force for r in results)),
-            pairs=np.concatenate([r.pairs for r in results]),
-            max_crossing=max(r.max_crossing for r in results),
-        )
-
-
-def vertex_adjacency(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
-    """Closed edge neighbourhoods of the nodes as a padded table.
-
-    Returns an ``(N, W)`` integer array whose row ``p`` holds ``p`` itself, then
-    the nodes sharing an edge with ``p`` (ascending), then ``-1`` padding;
-    ``W - 1`` is the largest vertex degree.
-    """
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    edges = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    edges = np.concatenate([edges, edges[:, ::-1]])
-    keys = np.unique(edges[:, 0] * num_nodes + edges[:, 1])
-    row, col = np.divmod(keys, num_nodes)
-    degree = np.bincount(row, minlength=num_nodes)
-    table = np.full((num_nodes, int(degree.max(initial=0)) + 1), -1, dtype=np.int64)
-    table[:, 0] = np.arange(num_nodes)
-    rank = np.arange(len(row)) - (np.cumsum(degree) - degree)[row]
-    table[row, 1 + rank] = col
-    return table
-
-
-class _Clock:
-    """Wall-clock and CPU (process) laps (s) of the steps of an evaluation, for benchmarks.
-
-    On a loaded machine the wall-clock laps include the time spent waiting for a
-    core; the CPU laps do not (they do include the kernel's page-fault work).
-    """
-
-    def __init__(self, cpu: bool = False) -> None:
-        self.laps: dict[str, float] = {}
-        self.cpu_laps: dict[str, float] = {}
-        # process_time() is a system call (~0.1-1 ms here): only when asked for
-        self._cpu = time.process_time if cpu else (lambda: 0.0)
-        self._last = time.perf_counter()
-        self._last_cpu = self._cpu()
-
-    def add(self, name: str) -> None:
-        """Add the time since the previous call to lap ``name``."""
-        now, now_cpu = time.perf_counter(), self._cpu()
-        self.laps[name] = self.laps.get(name, 0.0) + now - self._last
-        self.cpu_laps[name] = self.cpu_laps.get(name, 0.0) + now_cpu - self._last_cpu
-        self._last, self._last_cpu = now, now_cpu
 
 
 @dataclass(frozen=True)
@@ -224,6 +110,7 @@ class _TriangleFrames:
                    grad1=np.ascontiguousarray(grad[:, 1].T),
                    grad2=np.ascontiguousarray(grad[:, 2].T),
                    altitudes=np.ascontiguousarray((1.0 / np.linalg.norm(grad, axis=2)).T))
+
 
 
 class _CandidatePairs:
@@ -275,320 +162,10 @@ class _CandidatePairs:
                            < self.margin))
 
 
-def triangle_halo(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
-    """Nodes that never contact each triangle: its vertices and their edge-neighbours.
-
-    Returns an ``(M, U)`` table, ascending ids per row padded with ``-1``
-    (``U`` = 12 for a regular mesh of degree-6 vertices).
-    """
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    around = vertex_adjacency(triangles, num_nodes)[triangles].reshape(len(triangles), -1)
-    around = np.where(around < 0, num_nodes, around)
-    around.sort(axis=1)
-    repeated = np.zeros(around.shape, dtype=bool)
-    repeated[:, 1:] = around[:, 1:] == around[:, :-1]
-    around[repeated] = num_nodes
-    around.sort(axis=1)
-    width = int((around < num_nodes).sum(axis=1).max(initial=0))
-    halo = around[:, :width]
-    halo[halo == num_nodes] = -1
-    return halo
-
-
-def reference_neighbours(triangles: np.ndarray, reference: np.ndarray, body: np.ndarray,
-                         radius: float) -> list[np.ndarray]:
-    """For each triangle, the nodes of its own body within ``radius`` of it in the reference state.
-
-    ``reference`` holds each triangle's vertex coordinates in the stress-free
-    state, ``(M, 3, D)`` (the flat leaflet, D = 2; a node shared by two bodies may
-    have different coordinates in each).  A node counts if its reference
-    distance to the triangle's centroid is below ``radius`` plus the
-    triangle's centroid-to-vertex radius (a cheap superset of "within
-    ``radius`` of the triangle").
-    """
-    from scipy.spatial import cKDTree
-
-    out: list[np.ndarray] = [np.empty(0, dtype=np.int64)] * len(triangles)
-    centroid = reference.mean(axis=1)
-    size = np.linalg.norm(reference - centroid[:, None], axis=2).max(axis=1)
-    for b in np.unique(body):
-        cells = np.flatnonzero(body == b)
-        nodes = triangles[cells].ravel()
-        coords = reference[cells].reshape(-1, reference.shape[2])
-        nodes, first = np.unique(nodes, return_index=True)
-        tree = cKDTree(coords[first])
-        hits = tree.query_ball_point(centroid[cells], radius + size[cells])
-        for cell, found in zip(cells, hits, strict=True):
-            out[cell] = nodes[np.asarray(found, dtype=np.int64)]
-    return out
-
-
-def _merge_exclusions(halo: np.ndarray, extra: list[np.ndarray]) -> np.ndarray:
-    """Padded table of the union, per row, of ``halo`` (padded with -1) and ``extra``."""
-    rows = [np.union1d(h[h >= 0], e) for h, e in zip(halo, extra, strict=True)]
-    width = max((len(r) for r in rows), default=0)
-    table = np.full((len(rows), width), -1, dtype=np.int64)
-    for i, r in enumerate(rows):
-        table[i, :len(r)] = r
-    return table
-
 
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
-
-def _check_positions(x: np.ndarray, num_nodes: int, name: str) -> np.ndarray:
-    x = np.asarray(x, dtype=float)
-    if x.shape != (num_nodes, 3):
-        raise MeshError(f"{name} has shape {x.shape}; expected ({num_nodes}, 3), "
-                        "one row per node of the contact surface")
-    if not np.isfinite(x).all():
-        raise MeshError(f"{name} has non-finite entries (a diverged solve?)")
-    return x
-
-
-def _check_nodes(nodes: np.ndarray | None, num_nodes: int) -> np.ndarray:
-    if nodes is None:
-        return np.arange(num_nodes, dtype=np.int64)
-    nodes = np.asarray(nodes, dtype=np.int64).ravel()
-    if nodes.size and (nodes.min() < 0 or nodes.max() >= num_nodes):
-        raise MeshError(f"contact nodes must be ids in [0, {num_nodes}); got "
-                        f"[{nodes.min()}, {nodes.max()}]")
-    return nodes
-
-
-@dataclass(frozen=True)
-class _Contacts:
-    """Contact rows: a node, the nodes taking the reaction, and everything the Jacobian needs.
-
-    Row ``i`` pushes its node with ``s_i = w_i p_i f_i`` along ``n_i`` and its
-    support nodes with ``-λ_j s_i n_i``: ``f`` is the law's force (pairing
-    weight included), ``p`` the row's presence (its smooth fade-in/out) and
-    ``w`` the softmin blending weight of the rows of one (node, body) group,
-    ``w_i ∝ p_i exp(-d_i/ε)``.
-    """
-
-    node: np.ndarray        # (A,) contacting node
-    support: np.ndarray     # (A, s) nodes taking the reaction (triangle vertices; none for planes)
-    weights: np.ndarray     # (A, s) reaction weights λ (barycentric coordinates)
-    normal: np.ndarray      # (A, 3) unit force direction on the node
-    d: np.ndarray           # (A,) signed distance (mm)
-    f: np.ndarray           # (A,) law force (mN), before presence and blending
-    dfdd: np.ndarray        # (A,) derivative of f w.r.t. d (mN/mm)
-    partner: np.ndarray     # (A,) triangle id, or -1 - plane index
-    group: np.ndarray | None = None  # (A,) contact id: blended rows of one contact share it
-    blend: np.ndarray | None = None  # (A,) blending weights w (sum to 1 per group)
-    blend_scale: float = 1.0         # ε of the softmin (mm)
-    blend_cutoff: float = np.inf     # h (with blend): a row of presence p blends at h - p(h - d)
-    presence: np.ndarray | None = None         # (A,) p in (0, 1]
-    grad_log_presence: np.ndarray | None = None  # (A, 1+s, 3) ∂log p/∂x over [node, support]
-    grad_f: np.ndarray | None = None  # (A, 1+s, 3) ∂f/∂x beyond f'·∇d (the driving force turning)
-    #: ``(∂n/∂x_m (A, 4, 3, 3), ∂λ_j/∂x_m (A, 3, 4, 3))`` over ``[node, support]``
-    #: (:func:`~valve_dolfinx.contact.linearisation.direction_derivatives`): the turning
-    #: direction and the sliding contact point, for the geometric Jacobian blocks
-    geometric: tuple[np.ndarray, np.ndarray] | None = None
-    #: distance of the contact surface from the mid-surface (mm): d + offset is the gap
-    #: between the mid-surfaces
-    surface_offset: float = 0.0
-
-    def _group_presence(self) -> tuple[np.ndarray, np.ndarray]:
-        """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``).
-
-        ``G = 1 - Π_j (1 - p_j)`` over the rows of a group: 1 as soon as one row
-        is fully present (a node over the shared edge of two coplanar faces gets
-        the full force), ``p`` for a lone row (a node sliding off a free edge
-        loses its force smoothly).
-        """
-        p = np.ones(len(self.node)) if self.presence is None else self.presence
-        if self.group is None:
-            return p, np.ones(len(p))
-        _, inverse = np.unique(self.group, return_inverse=True)
-        exact_one = p >= 1.0
-        log_slack = np.where(exact_one, 0.0, np.log(np.maximum(1.0 - p, 1e-300)))
-        total = np.bincount(inverse, log_slack)[inverse]       # Σ log(1-p) over p < 1
-        ones = np.bincount(inverse, exact_one.astype(float))[inverse]
-        G = np.where(ones > 0, 1.0, 1.0 - np.exp(total))
-        c = np.where(ones == 0, np.exp(total - log_slack),
-                     np.where((ones == 1) & exact_one, np.exp(total), 0.0))
-        return G, c
-
-    @property
-    def magnitude(self) -> np.ndarray:
-        """``s = w G f`` (mN) of every row."""
-        w = np.ones(len(self.node)) if self.blend is None else self.blend
-        G, _ = self._group_presence()
-        return w * G * self.f
-
-    def result(self, num_nodes: int, clock: _Clock | None = None, jacobian: bool = True
-               ) -> ContactResult:
-        """Nodal forces and their Jacobian blocks (``clock``: laps "forces" and "jacobian").
-
-        ``jacobian=False``: the forces and diagnostics only (no blocks).
-
-        Row ``i`` pushes with ``s_i = w_i G f_i``: ``f`` the law's force,
-        ``w_i = p_i e^{-d_i/ε}/Σ_k p_k e^{-d_k/ε}`` the blending weight of the
-        rows of its (node, body) group and ``G`` the group's presence
-        (:meth:`_group_presence`).  With ``B = [1, -λ...]`` over
-        ``ids = [node, support...]``, ``∇d = B⊗n`` (exact: the distance to a
-        triangle's plane moves with its vertices as ``-λ_j n``),
-        ``∇L = ∇log p - ∇d/ε`` and ``∇f = f'∇d + (∂f/∂F)∇F``:
-
-        * over the row's own nodes: ``G f w(1-w) ∇L + w f c_i ∇p_i + w G ∇f``,
-        * over the nodes of another row ``k`` of the group:
-          ``-G f_i w_i w_k ∇L_k + w_i f_i c_k ∇p_k``,
-
-        and the force on ``ids[r]`` is ``B_r s n``: its blocks are
-        ``B_r n ⊗ ∂s/∂x_m``, plus the turning of ``n`` and the sliding of ``λ``
-        (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).  The
-        couplings between the rows of a group are summed per group over the
-        distinct nodes it touches (:func:`_group_outer_blocks`), not pair by
-        pair; the blocks may repeat a (row, col) pair and are to be summed.
-        """
-        count = len(self.node)
-        w = np.ones(count) if self.blend is None else self.blend
-        p = np.ones(count) if self.presence is None else self.presence
-        G, c = self._group_presence()
-        f = self.f
-        magnitude = w * G * f
-        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
-        B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
-        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
-        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
-                                       minlength=num_nodes) for i in range(3)], axis=1)
-        if clock is not None:
-            clock.add("forces")
-        if not jacobian:
-            return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
-                                     np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
-        grad_d = B[:, :, None] * self.normal[:, None, :]                           # (A, m, 3)
-        grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
-            else self.grad_log_presence
-        grad_p = p[:, None, None] * grad_logp
-        grad_f = self.dfdd[:, None, None] * grad_d
-        if self.grad_f is not None:
-            grad_f = grad_f + self.grad_f
-        own = (w * G)[:, None, None] * grad_f + (w * f * c)[:, None, None] * grad_p
-        if self.blend is not None:
-            # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
-            depth = (self.blend_cutoff - self.d) / self.blend_scale
-            grad_L = (grad_logp * (1.0 + p * depth)[:, None, None]
-                      - (p / self.blend_scale)[:, None, None] * grad_d)
-            own += (G * f * w * (1.0 - w))[:, None, None] * grad_L
-        m = ids.shape[1]
-        Bn = B[:, :, None] * self.normal[:, None, :]                               # (A, m, 3)
-        multi = None
-        if self.blend is not None and self.group is not None:
-            _, inverse, group_size = np.unique(self.group, return_inverse=True,
-                                               return_counts=True)
-            multi = np.flatnonzero(group_size[inverse] > 1)
-            # the pair sum below includes i = k: take that term out of the row's own part
-            own[multi] += ((G * f * w * w)[multi, None, None] * grad_L[multi]
-                           - (w * f * c)[multi, None, None] * grad_p[multi])
-        outer = None
-        if multi is not None and len(multi):
-            outer = _group_outer_blocks(
-                inverse[multi], ids[multi], Bn[multi], num_nodes,
-                left=(-(G * f * w)[multi], (w * f)[multi]),
-                right=(w[multi, None, None] * grad_L[multi],
-                       c[multi, None, None] * grad_p[multi]))
-        # one allocation for all blocks: at 10^5 triangles they take hundreds of MB
-        size = count * m * m
-        total = size + (0 if outer is None else len(outer[0]))
-        rows = np.empty(total, dtype=np.int64)
-        cols = np.empty(total, dtype=np.int64)
-        blocks = np.empty((total, 3, 3))
-        row_blocks = blocks[:size].reshape(count, m, m, 3, 3)
-        if self.geometric is None:
-            np.multiply(Bn[:, :, None, :, None], own[:, None, :, None, :], out=row_blocks)
-        else:
-            # with the turning direction and the sliding point (linearisation module):
-            # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m
-            dn, dlam = self.geometric
-            T = B[:, :, None, None] * own[:, None, :, :]                           # (A, m, m, 3)
-            T[:, 1:] -= magnitude[:, None, None, None] * dlam
-            np.multiply(self.normal[:, None, None, :, None], T[:, :, :, None, :], out=row_blocks)
-            scratch = np.empty((count, m, 3, 3))
-            for r in range(m):  # one row node at a time: a temporary of a quarter of the size
-                np.multiply((B[:, r] * magnitude)[:, None, None, None], dn, out=scratch)
-                row_blocks[:, r] += scratch
-        rows[:size] = np.repeat(ids, m, axis=1).ravel()
-        cols[:size] = np.tile(ids, (1, m)).ravel()
-        if outer is not None:
-            rows[size:], cols[size:], blocks[size:] = outer
-        if clock is not None:
-            clock.add("jacobian")
-        return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
-
-    def _diagnostics(self, forces: np.ndarray, magnitude: np.ndarray, p: np.ndarray,
-                     rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray) -> ContactResult:
-        """The result: forces, blocks and the counts and depths of the active contacts."""
-        active = magnitude > 0.0
-        groups = self.group[active] if self.group is not None else None
-        # a penetration is measured where the node is over the surface: rows fading out
-        # beyond a boundary (presence p < 1/2, e.g. a node that has slid past a
-        # neighbour's free edge) push a little but are not a crossing of that surface
-        over = active & (p >= 0.5)
-        return ContactResult(
-            forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
-            n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
-            max_penetration=float(np.max(-self.d[over], initial=0.0)),
-            total_force=float(magnitude.sum()),
-            pairs=np.stack([self.node[active], self.partner[active]], axis=1),
-            max_crossing=float(np.max(-(self.d[over] + self.surface_offset), initial=0.0)),
-        )
-
-
-def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_nodes: int,
-                        left: tuple[np.ndarray, np.ndarray],
-                        right: tuple[np.ndarray, np.ndarray]
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    r"""Blocks coupling the rows of each group: ``Σ_{i,k} Bn_i[r] ⊗ (α_i U_k[m] + β_i V_k[m])``.
-
-    The sum runs over all ordered pairs of rows ``(i, k)`` with the same
-    ``group`` label, ``i = k`` included, and puts the block at
-    ``(ids[i, r], ids[k, m])``.  It factorises into
-    :math:`P\otimes Q + P'\otimes Q'` over the distinct nodes the group's rows
-    touch, with :math:`P_a = Σ_{(i,r): ids[i,r]=a} α_i Bn_i[r]`,
-    :math:`Q_b = Σ_{(k,m): ids[k,m]=b} U_k[m]` (and β, V for the primed
-    vectors), so a group of ``r`` rows over ``u`` distinct nodes costs ``u²``
-    blocks instead of the ``16 r²`` of the pair-by-pair sum (about 12 times
-    fewer on the meshes of ``benchmarks/contact.py``).
-
-    Parameters
-    ----------
-    group
-        ``(A,)`` group index of every row.
-    ids, Bn
-        ``(A, m)`` node ids of each row and ``(A, m, 3)`` the row vectors ``Bn_i[r]``.
-    left, right
-        ``(α, β)``, each ``(A,)``, and ``(U, V)``, each ``(A, m, 3)``.
-
-    Returns
-    -------
-    rows, cols, blocks
-        Node ids and ``(K, 3, 3)`` blocks.
-    """
-    alpha, beta = left
-    U, V = right
-    key = group[:, None] * np.int64(num_nodes) + ids
-    entry_key, entry = np.unique(key.ravel(), return_inverse=True)
-    count = len(entry_key)
-
-    def gather(values: np.ndarray) -> np.ndarray:
-        flat = values.reshape(-1, 3)
-        return np.stack([np.bincount(entry, flat[:, j], minlength=count) for j in range(3)],
-                        axis=1)
-
-    P, P2 = gather(alpha[:, None, None] * Bn), gather(beta[:, None, None] * Bn)
-    Q, Q2 = gather(U), gather(V)
-    entry_group, entry_node = np.divmod(entry_key, num_nodes)
-    # entries are sorted by key, so those of one group are contiguous
-    start = np.searchsorted(entry_group, entry_group, side="left")
-    size = np.bincount(entry_group)[entry_group]
-    a = np.repeat(np.arange(count), size)
-    b = np.repeat(start, size) + np.arange(len(a)) - np.repeat(np.cumsum(size) - size, size)
-    blocks = P[a, :, None] * Q[b, None, :] + P2[a, :, None] * Q2[b, None, :]
-    return entry_node[a], entry_node[b], blocks
 
 
 def _ramp(x: np.ndarray, width: float) -> np.ndarray:
@@ -602,11 +179,6 @@ def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
     xi = np.clip(np.asarray(x, dtype=float) / width, 1e-300, 1.0)
     return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
 
-
-def _law(params: ContactParameters, f_ext: np.ndarray, normal: np.ndarray, d: np.ndarray
-         ) -> tuple[np.ndarray, np.ndarray]:
-    F = driving_force(f_ext, normal, params)
-    return law_force(d, F, params)
 
 
 class SurfaceContact:
@@ -725,7 +297,8 @@ class SurfaceContact:
         self.node_body = np.full(self.num_nodes, np.iinfo(np.int64).max, dtype=np.int64)
         for k in range(3):
             np.minimum.at(self.node_body, triangles[:, k], self.triangle_body)
-        #: ``(M, U)`` nodes that never contact triangle ``t`` (see :func:`triangle_halo`).
+        #: ``(M, U)`` nodes that never contact triangle ``t``
+        #: (:func:`~valve_dolfinx.contact.exclusions.triangle_halo`).
         self.excluded_nodes = triangle_halo(triangles, self.num_nodes)
         if reference is not None and self_exclusion_radius > 0.0:
             reference = np.asarray(reference, dtype=float)
@@ -734,15 +307,15 @@ class SurfaceContact:
                                 f"({len(triangles)}, 3, D), the vertices of every triangle")
             extra = reference_neighbours(triangles, reference, self.triangle_body,
                                          self_exclusion_radius)
-            self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)
+            self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
         if attached_reference is not None and attached_exclusion_radius > 0.0:
-            placed = _check_positions(attached_reference, self.num_nodes, "attached_reference")
+            placed = check_positions(attached_reference, self.num_nodes, "attached_reference")
             extra = reference_neighbours(triangles, placed[triangles],
                                          np.zeros(len(triangles), dtype=np.int64),
                                          attached_exclusion_radius)
             # other bodies only: self-contact keeps its own (flat reference) rule
             extra = [e[self.node_body[e] != self.triangle_body[t]] for t, e in enumerate(extra)]
-            self.excluded_nodes = _merge_exclusions(self.excluded_nodes, extra)
+            self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
         #: ``(M, 3)`` band (barycentric) beyond the side opposite each vertex over which face
         #: rows of *other* bodies fade out: ``boundary_band`` on the surface's boundary
         #: (free edges), ``FACE_BAND`` on interior sides (the neighbour takes over there)
@@ -773,7 +346,7 @@ class SurfaceContact:
 
     def update_history(self, x: np.ndarray) -> None:
         """Record the positions of the last accepted state; they fix each node's side."""
-        x = _check_positions(x, self.num_nodes, "x").copy()
+        x = check_positions(x, self.num_nodes, "x").copy()
         t = self.triangles
         normals, _ = triangle_normals(x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
         self._history = (x, normals)
@@ -803,10 +376,10 @@ class SurfaceContact:
             False: forces and diagnostics only, no Jacobian blocks (an explicit
             solver needs no more; about three times cheaper).
         """
-        x = _check_positions(x, self.num_nodes, "x")
-        f_ext = _check_positions(f_ext, self.num_nodes, "f_ext")
-        nodes = _check_nodes(nodes, self.num_nodes)
-        clock = _Clock(cpu=self.record_cpu_time)
+        x = check_positions(x, self.num_nodes, "x")
+        f_ext = check_positions(f_ext, self.num_nodes, "f_ext")
+        nodes = check_nodes(nodes, self.num_nodes)
+        clock = StepClock(cpu=self.record_cpu_time)
         contacts = self._find_contacts(x, f_ext, nodes, clock, jacobian=jacobian)
         result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
         self.timings, self.cpu_timings = clock.laps, clock.cpu_laps
@@ -817,10 +390,10 @@ class SurfaceContact:
     # -- steps of evaluate -------------------------------------------------------------------
 
     def _find_contacts(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray,
-                       clock: _Clock | None = None, jacobian: bool = True) -> _Contacts:
+                       clock: StepClock | None = None, jacobian: bool = True) -> ContactRows:
         """Candidates → sides → window ``-penetration_depth < d < h`` → nearest per body → law."""
         p = self.params
-        clock = _Clock() if clock is None else clock
+        clock = StepClock() if clock is None else clock
         node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
         s = self._side(node, tri, d0, f_ext, n_tri)
         edge = ~np.isnan(gap)
@@ -865,7 +438,7 @@ class SurfaceContact:
         band = band[keep]
         clock.add("narrow")
         blend = self._blend_weights(node, tri, d, presence)
-        f, dfdd = _law(p, f_ext[node], normal, d)
+        f, dfdd = law_force_from_load(d, f_ext[node], normal, p)
         f, dfdd = weight * f, weight * dfdd
         # rows with no force stay: their distance still moves the blending weights
         a = (f > 0.0) | (dfdd != 0.0) | (blend < 1.0)
@@ -874,7 +447,7 @@ class SurfaceContact:
         clock.add("forces")
         group = node * len(self.body_labels) + self.triangle_body[tri]
         support = self.triangles[tri]
-        contacts = _Contacts(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
+        contacts = ContactRows(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
                              dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
                              blend_cutoff=p.cutoff, presence=presence,
                              surface_offset=p.thickness)
@@ -921,7 +494,7 @@ class SurfaceContact:
         clock.add("jacobian")
         return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f, geometric=geometric)
 
-    def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: _Clock
+    def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: StepClock
                     ) -> tuple[np.ndarray, ...]:
         """All (node, triangle) pairs passing the geometric tests, in (node, triangle) order.
 
@@ -942,7 +515,7 @@ class SurfaceContact:
         return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
 
     def _search(self, x: np.ndarray, xt: np.ndarray, frames: _TriangleFrames,
-                nodes: np.ndarray, clock: _Clock) -> tuple[np.ndarray, ...]:
+                nodes: np.ndarray, clock: StepClock) -> tuple[np.ndarray, ...]:
         """Box test, then :meth:`_near`, block by block of triangles, with every distance
         widened by the skin; keeps the pairs for reuse and returns those of the exact tests
         (:meth:`_near`'s arrays)."""
@@ -1190,78 +763,3 @@ class SurfaceContact:
         keep[order[first]] = True
         return keep
 
-
-class PlaneContact:
-    """Penalty contact of nodes with rigid planes (half-spaces).
-
-    Plane ``i`` passes through ``points[i]``; ``normals[i]`` points to the side
-    where the nodes live, so :math:`d = (x - p_i)\\cdot n_i`.  Same law as
-    :class:`SurfaceContact` with ``F`` from :math:`f_{ext}\\cdot n_i`; the planes
-    take no reaction.  A node is in contact whenever ``d < h`` — there is no
-    ``penetration_depth`` window, because a half-space has no far side a node
-    could legitimately be on.  The Jacobian block ``(df/dd) n⊗n`` on the
-    node's diagonal is exact up to ``∂F/∂x`` (``F`` depends on ``f_ext`` only).
-
-    Parameters
-    ----------
-    points, normals
-        ``(P, 3)`` a point on each plane (mm) and its normal (normalised here).
-    params
-        Contact law parameters.
-    mirror
-        ``False``: a rigid wall, ``d = δ − t_c/2`` (δ the distance to the plane,
-        the sheet's half of the contact layer).  ``True``: a symmetry plane
-        whose far side holds the sheet's mirror image (SPEC §4's one-leaflet
-        reference): the law sees the distance to that image, ``d = 2δ − t_c``,
-        exactly as a neighbouring sheet's node would, so the symmetric
-        reference and the full valve share one contact law.  With two-pass
-        pairing (``params.pairing``) the image's nodes would also push back on
-        the sheet's triangles; for a mirror image those reactions equal the
-        sheet's own contact forces, so the force is doubled (the sheets rest
-        where each pass carries half the load, as between leaflets).
-    """
-
-    def __init__(self, points: np.ndarray, normals: np.ndarray,
-                 params: ContactParameters = DEFAULT_PARAMETERS, *,
-                 mirror: bool = False) -> None:
-        points = np.atleast_2d(np.asarray(points, dtype=float))
-        normals = np.atleast_2d(np.asarray(normals, dtype=float))
-        if points.shape != normals.shape or points.shape[1:] != (3,):
-            raise ParameterError(f"plane points {points.shape} and normals {normals.shape} "
-                                 "must both be (P, 3)")
-        length = np.linalg.norm(normals, axis=1)
-        if np.any(~np.isfinite(length) | (length <= 0.0)):
-            raise ParameterError("plane normals must be finite and non-zero")
-        self.points = points
-        self.normals = normals / length[:, None]
-        self.params = params
-        self.mirror = bool(mirror)
-
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
-                 jacobian: bool = True) -> ContactResult:
-        """Contact forces of ``nodes`` (default: all) against the planes (``jacobian``: the
-        blocks are cheap here and always computed).
-
-        Arguments as in :meth:`SurfaceContact.evaluate`.
-        """
-        num_nodes = len(np.asarray(x))
-        x = _check_positions(x, num_nodes, "x")
-        f_ext = _check_positions(f_ext, num_nodes, "f_ext")
-        nodes = _check_nodes(nodes, num_nodes)
-        d = (x[nodes] @ self.normals.T) - np.einsum("ij,ij->i", self.points, self.normals)
-        # d(x) = scale·δ(x) − offset: the image is at 2δ, the wall at δ
-        scale = 2.0 if self.mirror else 1.0
-        offset = scale * 0.5 * self.params.thickness
-        passes = 2.0 if self.mirror and self.params.pairing == "two_pass" else 1.0
-        d = scale * d - offset
-        k, i = np.nonzero(d < self.params.cutoff)                 # (node, plane) candidates
-        node, normal = nodes[k], self.normals[i]
-        f, dfdd = _law(self.params, f_ext[node], normal, d[k, i])
-        f, dfdd = passes * f, passes * dfdd
-        a = f > 0.0
-        empty = np.empty((int(a.sum()), 0))
-        # dfdd enters the Jacobian as f'(d)·∂d/∂x with ∂d/∂x = n: carry the scale in it
-        contacts = _Contacts(node=node[a], support=empty.astype(np.int64), weights=empty,
-                             normal=normal[a], d=d[k, i][a], f=f[a], dfdd=scale * dfdd[a],
-                             partner=-1 - i[a], surface_offset=offset)
-        return contacts.result(num_nodes)
