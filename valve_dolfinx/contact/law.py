@@ -111,17 +111,9 @@ class ContactParameters:
         barrier :func:`crossing_barrier` leaves the SPEC law untouched wherever
         the mid-surfaces have not crossed -- every equilibrium of the normal
         valve -- and is C¹ (quadratic onset over ``crossing_width``).  0 (the
-        default, also in closure) is the SPEC law alone; docs/contact.md §3.11
-        says where it helped (graft valves) and where it stalled a run (a
-        transient free-edge scissors crossing of the normal valve).
+        default, also the closure's setting) is the SPEC law alone.
     crossing_width
         Width (mm) of the barrier's quadratic onset.
-    edge_row_fade_in
-        Fade an edge/vertex row in with the in-plane distance of the node's
-        projection from the triangle (over ``blend_distance``), so that it does
-        not appear with a finite weight where the projection leaves the
-        triangle (a jump in the force under the cut-off taper; docs/contact.md
-        §3.4).  On in closure too since session 6 (docs/closure.md).
     """
 
     stiffness: float = 10.0
@@ -135,7 +127,6 @@ class ContactParameters:
     thickness: float = 0.0
     crossing_stiffness: float = 0.0
     crossing_width: float = 0.02
-    edge_row_fade_in: bool = True
 
     def __post_init__(self) -> None:
         check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",

@@ -59,10 +59,10 @@ class PlaneContact:
         self.params = params
         self.mirror = bool(mirror)
 
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
-                 jacobian: bool = True) -> ContactResult:
-        """Contact forces of ``nodes`` (default: all) against the planes (``jacobian``: the
-        blocks are cheap here and always computed).
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
+                 ) -> ContactResult:
+        """Contact forces of ``nodes`` (default: all) against the planes, with their Jacobian
+        blocks.
 
         Arguments as in :meth:`~valve_dolfinx.contact.surface.SurfaceContact.evaluate`.
         """

@@ -63,14 +63,6 @@ class ContactResult:
     max_crossing: float = 0.0
 
     @classmethod
-    def empty(cls, num_nodes: int) -> ContactResult:
-        """No contact on a mesh of ``num_nodes`` nodes."""
-        ids = np.empty(0, dtype=np.int64)
-        return cls(forces=np.zeros((num_nodes, 3)), jac_rows=ids, jac_cols=ids.copy(),
-                   jac_blocks=np.empty((0, 3, 3)), n_active=0, max_penetration=0.0,
-                   total_force=0.0, pairs=np.empty((0, 2), dtype=np.int64))
-
-    @classmethod
     def combine(cls, results: Iterable[ContactResult]) -> ContactResult:
         """Sum of results on the same mesh (several surfaces/planes, or disjoint node sets)."""
         results = list(results)
@@ -189,13 +181,6 @@ class ContactRows:
         c = np.where(ones == 0, np.exp(total - log_slack),
                      np.where((ones == 1) & exact_one, np.exp(total), 0.0))
         return G, c
-
-    @property
-    def magnitude(self) -> np.ndarray:
-        """``s = w G f`` (mN) of every row."""
-        w = np.ones(len(self.node)) if self.blend is None else self.blend
-        G, _ = self._group_presence()
-        return w * G * self.f
 
     def result(self, num_nodes: int, clock: StepClock | None = None, jacobian: bool = True
                ) -> ContactResult:

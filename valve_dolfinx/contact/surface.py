@@ -6,15 +6,18 @@ Every call to :meth:`SurfaceContact.evaluate` searches the whole surface:
    prisms (the triangle swept ``±max(h, penetration_depth)`` along its
    normal; :func:`~valve_dolfinx.contact.broadphase.padded_bounds`), found
    with a uniform grid (:class:`~valve_dolfinx.contact.broadphase.CellIndex`);
-2. narrow phase — the node's projection on the triangle's plane falls inside
-   the triangle, the triangle is not in the node's own neighbourhood, and the
+2. narrow phase — the closest point of the triangle to the node (on its face,
+   or on an edge or vertex where the node's projection falls outside it) is
+   within reach, the triangle is not in the node's own neighbourhood, and the
    signed distance ``d`` w.r.t. the *sided* normal satisfies
    ``-penetration_depth < d < h``;
-3. one contact per (node, body): the candidate triangle with the smallest ``|d|``;
+3. one contact per (node, body): the rows of the triangles a node meets on one
+   body are blended by softmin weights of their distances, each row fading in
+   and out smoothly (:meth:`SurfaceContact._blend_weights`);
 4. the SPEC §5 law :func:`~valve_dolfinx.contact.law.contact_force` gives the
    magnitude ``f``; the node receives ``+f n``, the triangle's vertices
-   ``-λ_j f n`` (``λ`` the barycentric coordinates of the projection), so that
-   forces and moments balance.
+   ``-λ_j f n`` (``λ`` the barycentric coordinates of the closest point), so
+   that forces and moments balance.
 
 All of it is vectorised over the candidate pairs, processed in blocks of
 triangles so that temporaries stay cache-sized.  The work of one call is
@@ -52,7 +55,7 @@ from valve_dolfinx.contact.results import (
     check_nodes,
     check_positions,
 )
-from valve_dolfinx.exceptions import MeshError, ParameterError
+from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["FACE_BAND", "SurfaceContact"]
 
@@ -75,11 +78,6 @@ PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
 #: Safety margin (mm) of the lower bound on a node's distance to a triangle used to skip
 #: the exact closest-point computation; far above the bound's rounding error.
 _BOUND_MARGIN = 1e-6
-#: Verlet skin of the candidate pairs (mm): the search widens every distance test by
-#: this much, and the pairs found are reused while no node can have crossed the widened
-#: tests (:class:`_CandidatePairs`).  Off (0) by default: the rows are the same, in another
-#: order, so results differ in the last bits from a full search's.
-CANDIDATE_SKIN = 0.0
 #: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
 #: tell the side of a node; the pressure direction decides instead.
 SIDE_TOLERANCE = 1e-12
@@ -112,60 +110,8 @@ class _TriangleFrames:
                    altitudes=np.ascontiguousarray((1.0 / np.linalg.norm(grad, axis=2)).T))
 
 
-
-class _CandidatePairs:
-    """(node, triangle) pairs found with every test widened by ``margin``, and when they
-    may be reused (a Verlet list).
-
-    The tests of :meth:`SurfaceContact._near` compare distances of a node to a
-    triangle's plane and to the lines of its sides, ``(x_p − v)·e`` with ``e`` the unit
-    normal or an in-plane side normal and ``v`` a vertex.  If no node moved more than δ
-    and triangle t's ``e`` turned by at most θ_t, each such distance changed by at most
-    ``2δ + R_t·θ_t``, R_t bounding the distance from t's vertices of a node that passes
-    the tests (t's diameter plus its reach, fade band and the margin, grown by 2δ), and
-    the fade band, measured in barycentric units, by ``b_t·|Δaltitude|``.  While that sum
-    stays below the margin for every triangle, every pair that passes the exact tests
-    now passed the widened ones then: the exact tests, repeated on these pairs at every
-    evaluation, give the rows of a full search.
-    """
-
-    def __init__(self, x: np.ndarray, nodes: np.ndarray, frames: _TriangleFrames,
-                 node: np.ndarray, tri: np.ndarray, triangles: np.ndarray, band: np.ndarray,
-                 extent: np.ndarray, margin: float):
-        self.x, self.nodes, self.margin = x.copy(), nodes.copy(), margin
-        self.node, self.tri = node, tri
-        self.band = band  # (M,) widest fade band of each triangle (barycentric)
-        self.directions, self.altitudes = self._frame(frames)
-        p = x[triangles]
-        diameter = np.max(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2), axis=1)
-        self.radius = diameter + extent + margin  # (M,)
-
-    @staticmethod
-    def _frame(frames: _TriangleFrames) -> tuple[np.ndarray, np.ndarray]:
-        """Unit normal and in-plane side normals ``(4, 3, M)``, altitudes ``(3, M)``."""
-        alt = np.asarray(frames.altitudes)
-        g1, g2 = frames.grad1 * alt[1], frames.grad2 * alt[2]
-        g0 = -(frames.grad1 + frames.grad2) * alt[0]
-        return np.stack([frames.normal, g0, g1, g2]), alt.copy()
-
-    def hold(self, x: np.ndarray, nodes: np.ndarray, frames: _TriangleFrames) -> bool:
-        """True while every pair that passes the exact tests at ``x`` is among these."""
-        if x.shape != self.x.shape or not np.array_equal(nodes, self.nodes):
-            return False
-        delta = float(np.sqrt(np.max(np.sum((x - self.x) ** 2, axis=1), initial=0.0)))
-        if 2.0 * delta >= self.margin:
-            return False
-        directions, altitudes = self._frame(frames)
-        turn = np.sqrt(np.max(np.sum((directions - self.directions) ** 2, axis=1), axis=0))
-        band = self.band * np.abs(altitudes - self.altitudes).max(axis=0)
-        return bool(np.all(2.0 * delta + (self.radius + 2.0 * delta) * turn + band
-                           < self.margin))
-
-
-
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
-
 
 
 def _ramp(x: np.ndarray, width: float) -> np.ndarray:
@@ -178,7 +124,6 @@ def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
     """``d log(ramp(x))/dx`` where the ramp is positive (0 where it is 1)."""
     xi = np.clip(np.asarray(x, dtype=float) / width, 1e-300, 1.0)
     return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
-
 
 
 class SurfaceContact:
@@ -207,16 +152,15 @@ class SurfaceContact:
     external forces ``f_ext``: with :math:`B = [1, -λ_0, -λ_1, -λ_2]` over
     ``[node, t0, t1, t2]`` the distance term is
     :math:`\\partial f_p/\\partial x_q = B_p B_q\\,(\\partial f/\\partial d)\\,n\\otimes n`;
-    with ``geometric_stiffness`` (default) the blocks also hold the rotation of
-    ``n`` and the sliding of the contact point (``∂n/∂x``, ``∂λ/∂x``, of order
-    ``f/ℓ`` with ``ℓ`` the edge length; :mod:`~valve_dolfinx.contact.linearisation`),
-    the driving force ``F = -f_ext·n`` turning with ``n``, the blending
-    weights and the presence fades (checked against finite differences in
-    ``tests/test_contact_model.py``).  Only ``∂f_ext/∂x`` is not included:
-    the solver hook freezes ``f_ext`` within a step
-    (:mod:`~valve_dolfinx.solvers.contact_hook`).  Without the geometric
-    terms the Jacobian is exact only for flat, normally loaded contact, and
-    Newton's method converges linearly on curved contact.
+    the blocks also hold the rotation of ``n`` and the sliding of the contact
+    point (``∂n/∂x``, ``∂λ/∂x``, of order ``f/ℓ`` with ``ℓ`` the edge length;
+    :mod:`~valve_dolfinx.contact.linearisation`), the driving force
+    ``F = -f_ext·n`` turning with ``n``, the blending weights and the presence
+    fades (checked against finite differences in ``tests/test_contact_model.py``).
+    Only ``∂f_ext/∂x`` is not included: the solver hook freezes ``f_ext`` within
+    a step (:mod:`~valve_dolfinx.solvers.contact_hook`).  Without the geometric
+    terms the Jacobian would be exact only for flat, normally loaded contact, and
+    Newton's method would converge linearly on curved contact.
 
     Parameters
     ----------
@@ -259,10 +203,6 @@ class SurfaceContact:
         force appears and vanishes within that distance.  A band of about one
         triangle continues the neighbour's last row of faces as a plane (as
         the symmetry planes of the reference do).
-    geometric_stiffness
-        Include the Jacobian of the turning contact direction and the sliding
-        contact point (:mod:`~valve_dolfinx.contact.linearisation`); without
-        it the Jacobian is exact only for flat, normally loaded contact.
     """
 
     def __init__(self, triangles: np.ndarray, num_nodes: int,
@@ -270,11 +210,9 @@ class SurfaceContact:
                  triangle_body: np.ndarray | None = None,
                  reference: np.ndarray | None = None,
                  self_exclusion_radius: float = 0.0,
-                 geometric_stiffness: bool = True,
                  attached_reference: np.ndarray | None = None,
                  attached_exclusion_radius: float = 0.0,
-                 boundary_band: float = FACE_BAND,
-                 candidate_skin: float = CANDIDATE_SKIN) -> None:
+                 boundary_band: float = FACE_BAND) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
             raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
@@ -288,7 +226,6 @@ class SurfaceContact:
         self.triangles = triangles
         self.num_nodes = int(num_nodes)
         self.params = params
-        self.geometric_stiffness = bool(geometric_stiffness)
         #: padding of the search: the penetration window plus the contact thickness
         self.search_distance = max(params.search_distance,
                                    params.thickness + params.penetration_depth)
@@ -328,11 +265,6 @@ class SurfaceContact:
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
-        if not candidate_skin >= 0.0:
-            raise ParameterError(f"candidate_skin = {candidate_skin!r} mm: use >= 0 (0 searches "
-                                 "at every evaluation)")
-        self.candidate_skin = float(candidate_skin)
-        self._pairs: _CandidatePairs | None = None
         self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
         #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
@@ -391,7 +323,7 @@ class SurfaceContact:
 
     def _find_contacts(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray,
                        clock: StepClock | None = None, jacobian: bool = True) -> ContactRows:
-        """Candidates → sides → window ``-penetration_depth < d < h`` → nearest per body → law."""
+        """Candidates → sides → window ``-penetration_depth < d < h`` → blend per body → law."""
         p = self.params
         clock = StepClock() if clock is None else clock
         node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
@@ -416,12 +348,10 @@ class SurfaceContact:
         band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
         # edge/vertex rows also fade in with the in-plane distance of the node's projection
         # from the triangle, √(gap² − d0²): where the projection re-enters the triangle its
-        # face row takes over, and a row that vanished with a finite weight there made the
-        # blend (and the residual) jump -- Newton cycled (a graft node at a free edge)
+        # face row takes over, and a row vanishing with a finite weight there would make the
+        # blend (and the residual) jump, and Newton cycle (a graft node at a free edge)
         in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
-        edge_fade = _ramp(side_distance, eps)
-        if p.edge_row_fade_in:
-            edge_fade = edge_fade * _ramp(in_plane, eps)
+        edge_fade = _ramp(side_distance, eps) * _ramp(in_plane, eps)
         presence = np.where(edge, edge_fade, band_fade)
         if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
             presence *= _ramp(p.cutoff - d, eps)
@@ -466,7 +396,7 @@ class SurfaceContact:
             sided = (s[a][on_edge, None] * n_tri[a][on_edge])
             grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
                                    * plane_B[:, :, None] * sided[:, None, :])
-        if len(on_edge) and p.edge_row_fade_in:
+        if len(on_edge):
             # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
             # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
             rho = in_plane[a][on_edge]
@@ -481,46 +411,36 @@ class SurfaceContact:
             width = band[a][banded]
             slopes = _log_ramp_slope(lam[banded] + width, width)                      # (K, 3)
             grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
-        geometric = grad_f = None
-        if self.geometric_stiffness:
-            geometric = (dn, dlam)
-            if p.driving_force == "normal":
-                # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
-                F = -np.einsum("ij,ij->i", f_ext[node], normal)
-                slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
-                                                 p.stiffness, p.cutoff, p.taper)
-                slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
-                grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
+        grad_f = None
+        if p.driving_force == "normal":
+            # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
+            F = -np.einsum("ij,ij->i", f_ext[node], normal)
+            slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
+                                             p.stiffness, p.cutoff, p.taper)
+            slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
+            grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
         clock.add("jacobian")
-        return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f, geometric=geometric)
+        return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f,
+                       geometric=(dn, dlam))
 
     def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: StepClock
                     ) -> tuple[np.ndarray, ...]:
-        """All (node, triangle) pairs passing the geometric tests, in (node, triangle) order.
+        """All (node, triangle) pairs passing the geometric tests.
 
-        The pairs to test come from the last search while they may be reused
-        (:class:`_CandidatePairs`), else from a new one.  Returns ``node, tri``,
-        the unsided distance ``d0``, the barycentric coordinates ``(K, 3)`` and
-        the triangle normals ``(K, 3)``.
+        Returns ``node, tri``, the unsided distance ``d0``, the barycentric
+        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.
         """
         xt = np.ascontiguousarray(x.T)
         frames = _TriangleFrames.at(xt, self.triangles)
-        if self._pairs is not None and self._pairs.hold(x, nodes, frames):
-            clock.add("broad")
-            near = self._near(xt, frames, self._pairs.node, self._pairs.tri)
-        else:
-            near = self._search(x, xt, frames, nodes, clock)
+        near = self._search(xt, frames, nodes, clock)
         node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
         clock.add("narrow")
         return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
 
-    def _search(self, x: np.ndarray, xt: np.ndarray, frames: _TriangleFrames,
-                nodes: np.ndarray, clock: StepClock) -> tuple[np.ndarray, ...]:
-        """Box test, then :meth:`_near`, block by block of triangles, with every distance
-        widened by the skin; keeps the pairs for reuse and returns those of the exact tests
-        (:meth:`_near`'s arrays)."""
-        skin = self.candidate_skin
-        lo, hi = padded_bounds(xt, self.triangles, self.search_distance + skin, frames.normal,
+    def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
+                clock: StepClock) -> tuple[np.ndarray, ...]:
+        """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays)."""
+        lo, hi = padded_bounds(xt, self.triangles, self.search_distance, frames.normal,
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
@@ -528,7 +448,7 @@ class SurfaceContact:
         # wide beyond a free edge): widen by that too, or a large triangle's band is cut
         # off by the box and its row appears with a jump
         extent = self.side_band * np.asarray(frames.altitudes).T
-        width = np.maximum(self.params.reach, extent.max(axis=1)) + skin
+        width = np.maximum(self.params.reach, extent.max(axis=1))
         lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
@@ -540,35 +460,22 @@ class SurfaceContact:
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
-            found.append(self._near(xt, frames, node, tri + first, skin))
+            found.append(self._near(xt, frames, node, tri + first))
             clock.add("narrow")
-        near = [np.concatenate(parts) for parts in zip(*found, strict=True)]
-        self._pairs = None
-        if skin > 0.0:
-            # one order for a search and the reuses that follow it, whatever the blocks
-            order = np.lexsort((near[1], near[0]))
-            near = [v[order] for v in near]
-            band = np.maximum(self.side_band.max(axis=1), FACE_BAND)
-            reach = np.maximum(width - skin, self.params.reach) + self.search_distance
-            self._pairs = _CandidatePairs(x, nodes, frames, near[0], near[1], self.triangles,
-                                          band, reach, skin)
-            exact, in_band = self._within(*near[:7])  # the tests without the skin
-            near = [v[exact] for v in near[:7]] + [in_band[exact]]
-        return tuple(near)
+        return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
 
     def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-              tri: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, ...]:
-        """The cheap tests of :meth:`_narrow`, each distance widened by ``margin`` (mm):
-        near the plane, within reach of the triangle or in its fade band, and not in its
-        neighbourhood.  Returns ``node, tri``, the plane distance ``d0``, the barycentric
-        coordinates ``lam0, lam1, lam2`` of the projection, ``beyond``, a lower bound on
-        its in-plane distance from the triangle, and ``in_band`` (projection in the
-        triangle or its fade band, widened by ``margin``)."""
+              tri: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The cheap tests of :meth:`_narrow`: near the plane, within reach of the triangle
+        or in its fade band, and not in its neighbourhood.  Returns ``node, tri``, the plane
+        distance ``d0``, the barycentric coordinates ``lam0, lam1, lam2`` of the projection,
+        ``beyond``, a lower bound on its in-plane distance from the triangle, and
+        ``in_band`` (projection in the triangle or its fade band)."""
         o, g1, g2 = frames.origin, frames.grad1, frames.grad2
         r = [xt[i][node] - o[i][tri] for i in range(3)]
         n = frames.normal
         d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
-        near = np.flatnonzero(np.abs(d0) < self.search_distance + margin)
+        near = np.flatnonzero(np.abs(d0) < self.search_distance)
         node, tri, d0 = node[near], tri[near], d0[near]
         r = [ri[near] for ri in r]
         lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
@@ -580,30 +487,12 @@ class SurfaceContact:
         alt = frames.altitudes
         beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
                             -lam2 * alt[2][tri])
-        within, in_band = self._within(node, tri, d0, lam0, lam1, lam2, beyond, margin, alt)
-        reach = np.flatnonzero(within)
+        band = self._row_bands(node, tri)
+        in_band = (lam0 > -band[:, 0]) & (lam1 > -band[:, 1]) & (lam2 > -band[:, 2])
+        h = self.params.reach
+        reach = np.flatnonzero(in_band | ((beyond < h) & (np.abs(d0) < h)))
         keep = ~self._in_neighbourhood(node[reach], tri[reach])
         return tuple(v[reach][keep] for v in (node, tri, d0, lam0, lam1, lam2, beyond, in_band))
-
-    def _within(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray,
-                lam1: np.ndarray, lam2: np.ndarray, beyond: np.ndarray, margin: float = 0.0,
-                altitudes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(within, in_band): near the plane and in the fade band or within reach of the
-        triangle, with each distance widened by ``margin`` (mm; the band's through the
-        ``altitudes``, ``(3, M)``)."""
-        h = self.params.reach
-        band = self._row_bands(node, tri)
-        lam = (lam0, lam1, lam2)
-        if margin > 0.0:
-            widen = [margin / altitudes[j][tri] for j in range(3)]
-        else:
-            widen = [0.0] * 3
-        in_band = (lam[0] > -band[:, 0] - widen[0]) & (lam[1] > -band[:, 1] - widen[1]) \
-            & (lam[2] > -band[:, 2] - widen[2])
-        close = np.abs(d0) < h + margin
-        within = (np.abs(d0) < self.search_distance + margin) \
-            & (in_band | ((beyond < h + margin) & close))
-        return within, in_band
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
                 tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray, lam1: np.ndarray,
@@ -727,11 +616,11 @@ class SurfaceContact:
         (``h`` the cut-off), i.e. ``w ∝ p·e^{p(h − d)/ε}``: as a row fades out it
         also recedes towards the cut-off.  With ``p e^{-d/ε}`` alone a deep row
         that is fading out (a node far behind the extended plane of a neighbour's
-        triangle it has slid past) outweighed the present rows by ``e^{Δd/ε}``
-        until its presence was ~1e-8 and then vanished within ~1e-5 mm: a jump of
-        6 mN in the force of a node at the triple point of the 0.8 mm valve, and
-        of 10 mN on a graft, which no solver could settle (docs/contact.md §3.4).
-        Fully present rows (``p = 1``) blend exactly as before.
+        triangle it has slid past) would outweigh the present rows by ``e^{Δd/ε}``
+        until its presence is ~1e-8 and then vanish within ~1e-5 mm: a jump of
+        several mN in the node's force (6 mN at the triple point of the normal
+        valve meshed at 0.8 mm, 10 mN on a graft) that no solver settles.  Fully
+        present rows (``p = 1``) blend as ``e^{-d/ε}``.
         """
         group = node * len(self.body_labels) + self.triangle_body[tri]
         _, inverse = np.unique(group, return_inverse=True)
@@ -747,19 +636,3 @@ class SurfaceContact:
             w = w * presence
         total = np.bincount(inverse, w)[inverse]
         return np.divide(w, total, out=np.zeros_like(w), where=total > 0.0)
-
-    def _nearest_per_body(self, node: np.ndarray, tri: np.ndarray, d: np.ndarray
-                          ) -> np.ndarray:
-        """Mask keeping, for each (node, body), the triangle with the smallest ``|d|``.
-
-        Ties go to the lowest triangle id, so the choice does not depend on the
-        other nodes being processed.
-        """
-        group = node * len(self.body_labels) + self.triangle_body[tri]
-        order = np.lexsort((tri, np.abs(d), group))
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = group[order[1:]] != group[order[:-1]]
-        keep = np.zeros(len(order), dtype=bool)
-        keep[order[first]] = True
-        return keep
-
