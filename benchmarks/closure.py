@@ -1,4 +1,4 @@
-"""Speed of one closure (issue 18, deliverable 6): where the wall time of a case goes.
+"""Speed of one closure: where the wall time of a case goes.
 
 Runs the normal valve, W0/H0, W27/H0 and W21/H27 (``--cases``; default 0.8 mm mesh,
 ``--mesh-size``) one after the other, each in a fresh single-process subprocess, through
@@ -15,8 +15,9 @@ the solver's post-step (step control, diagnostics), ``analyse_case`` (coaptation
 analysis), ``output.write_case``/``write_result`` (output); what is left of the solve is
 "linear solve + PETSc" (LU factorisation and solves, TS/SNES), what is left of the run is
 "mesh, root, setup" (Gmsh, distribution, root step, function spaces, sparsity).  Peak
-memory is the subprocess's ``ru_maxrss`` after the run.  The targets of the issue (warm
-run, one core): normal valve <= 30 s, each graft case <= 60 s, contact <= 25 % of the solve.
+memory is the subprocess's ``ru_maxrss`` after the run.  The speed targets checked below
+(warm run, one core): normal valve <= 30 s, each graft case <= 60 s, contact <= 25 % of the
+solve.
 
 Run: ``.venv/bin/python benchmarks/closure.py`` (``--mesh-size 1.6 --cases normal`` for a
 quick look; ``--json FILE`` keeps the measured figures).
@@ -26,16 +27,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 import time
 
-from cases import parse_case  # benchmarks/cases.py, beside this script
+# benchmarks/cases.py, beside this script
+from cases import (
+    WorkerFailed,
+    add_common_arguments,
+    cell,
+    parse_arguments,
+    parse_case,
+    report,
+    run_worker,
+)
 
 CASES = ("normal", "W0/H0", "W27/H0", "W21/H27")
-MARK = "BENCHMARK-RESULT "
 #: rows of the table: (label, key of a run's figures, format)
 ROWS = [("converged", "converged", "s"), ("TS steps", "time_steps", "d"),
         ("rejected steps", "rejected_steps", "d"), ("Newton iterations", "newton_iterations", "d"),
@@ -145,21 +152,11 @@ def case_label(case: tuple[float, float] | None) -> str:
 
 
 def run_in_subprocess(case, args) -> list[dict]:
-    command = [sys.executable, os.path.abspath(__file__), "--worker", "--cases",
-               case_label(case), "--mesh-size", str(args.mesh_size), "--repeat",
-               str(args.repeat)] + (["--user-cache"] if args.user_cache else [])
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run(command, stdout=subprocess.PIPE, text=True, env=env)
-    for line in done.stdout.splitlines():
-        if line.startswith(MARK):
-            return json.loads(line[len(MARK):])
-    raise RuntimeError(f"{case_label(case)}: worker exited with {done.returncode} and no result")
-
-
-def _cell(value, fmt: str) -> str:
-    if value is None:
-        return "-"
-    return str(value) if fmt == "s" else format(value, fmt)
+    options = ["--repeat", str(args.repeat)] + (["--user-cache"] if args.user_cache else [])
+    try:
+        return run_worker(__file__, case_label(case), args.mesh_size, options)
+    except WorkerFailed as error:
+        raise RuntimeError(f"{case_label(case)}: {error}") from error
 
 
 def print_tables(measured: dict[str, list[dict]]) -> None:
@@ -171,7 +168,7 @@ def print_tables(measured: dict[str, list[dict]]) -> None:
             columns[f"{label} warm"] = warm[(len(warm) - 1) // 2]
     print(f"{'':<24}" + "".join(f"{name:>15}" for name in columns))
     for label, key, fmt in ROWS:
-        print(f"{label:<24}" + "".join(f"{_cell(run.get(key, 0.0), fmt):>15}"
+        print(f"{label:<24}" + "".join(f"{cell(run.get(key, 0.0), fmt):>15}"
                                        for run in columns.values()))
     print(f"\n{'target (warm run, one core)':<40} {'measured':>10}  result")
     for label, runs in measured.items():
@@ -187,23 +184,13 @@ def print_tables(measured: dict[str, list[dict]]) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=lambda s: [parse_case(c) for c in s.split(",")],
-                        default=[parse_case(c) for c in CASES],
-                        help="comma-separated, e.g. normal,W27/H0 (default: %(default)s)")
-    parser.add_argument("--mesh-size", type=float, default=None,
-                        help="mesh size (mm); default: the package's (0.8 mm)")
+    add_common_arguments(parser, [parse_case(c) for c in CASES])
     parser.add_argument("--repeat", type=int, default=2, help="runs per case and process")
     parser.add_argument("--user-cache", action="store_true",
                         help="compile into the user's FFCx cache instead of an empty one")
-    parser.add_argument("--json", type=str, default=None, help="write the figures to FILE")
-    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.mesh_size is None:
-        from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
-        args.mesh_size = DEFAULT_MESH_SIZE
+    args = parse_arguments(parser, argv)
     if args.worker:
-        runs = worker(args.cases[0], args.mesh_size, args.repeat, args.user_cache)
-        print(MARK + json.dumps(runs), flush=True)
+        report(worker(args.cases[0], args.mesh_size, args.repeat, args.user_cache))
         return 0
     measured = {}
     for case in args.cases:

@@ -18,11 +18,7 @@ point–triangle tests, sides, penetration window), forces (blending, the SPEC
 §5 law, nodal forces and reactions) — the two together are the figure the
 target applies to — then the Jacobian blocks and the whole evaluation, the
 number of 3×3 Jacobian blocks and the peak memory traced during one
-evaluation.  These search for candidate pairs at every evaluation
-(``candidate_skin=0``); the last column, "reuse", is a whole forces-only
-evaluation after every node moved by 1 µm, which reuses the pairs of the last
-search (a Verlet skin of 0.2 mm, what an explicit relaxation iteration would pay).
-Times are wall-clock, the fastest of ``--repeats`` runs; the "CPU"
+evaluation.  Times are wall-clock, the fastest of ``--repeats`` runs; the "CPU"
 columns are the same in process time (which leaves out waiting for a core on a
 loaded machine, but counts the kernel's page-fault work); below each table the
 growth exponent ``α`` of ``time ∝ N^α`` fitted by least squares over the sizes
@@ -95,8 +91,7 @@ def fastest(fn, repeats: int):
 def measure(cells: int, length: float, repeats: int) -> dict[str, float]:
     x, tris, body, fext = stacked_sheets(cells, length)
     params = ContactParameters()
-    # a full search at every evaluation (the default, candidate_skin 0)
-    contact = SurfaceContact(tris, len(x), params, triangle_body=body, candidate_skin=0.0)
+    contact = SurfaceContact(tris, len(x), params, triangle_body=body)
     contact.record_cpu_time = True
     contact.update_history(x)
     pad = params.search_distance
@@ -115,19 +110,13 @@ def measure(cells: int, length: float, repeats: int) -> dict[str, float]:
                "total": total, "cpu total": cpu_total,
                "cpu detect+forces": cpu["broad"] + cpu["narrow"] + cpu["forces"]}
         best = {key: min(best[key], run[key]) for key in best}
-    # an explicit solver's iteration: nodes moved by a micrometre, candidate pairs reused
-    reusing = SurfaceContact(tris, len(x), params, triangle_body=body, candidate_skin=0.2)
-    reusing.update_history(x)
-    reusing.evaluate(x, fext, jacobian=False)
-    moved = x + 1e-3 * np.random.default_rng(1).uniform(-1.0, 1.0, x.shape) / np.sqrt(3.0)
-    _, t_reuse = fastest(lambda: reusing.evaluate(moved, fext, jacobian=False), repeats)
     tracemalloc.start()
     contact.evaluate(x, fext)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return {"triangles": len(tris), "nodes": len(x), "aabb": len(aabb), "prism": len(prism),
             "active": result.n_active, "t_aabb": t_aabb, "blocks": len(result.jac_blocks),
-            "peak": peak / 2**20, "reuse": t_reuse, **best}
+            "peak": peak / 2**20, **best}
 
 
 def growth_exponent(rows: list[dict[str, float]], key: str) -> float:
@@ -141,7 +130,7 @@ def print_table(title: str, rows: list[dict[str, float]]) -> None:
     head = (f"{'triangles':>9} {'nodes':>6} {'AABB pairs':>10} {'AABB s':>7} {'prism pairs':>11} "
             f"{'active':>6} {'detect s':>8} {'forces s':>8} {'det+f s':>7} {'µs/tri':>6} "
             f"{'Jacob. s':>8} {'total s':>7} {'CPU d+f':>7} {'CPU tot':>7} {'blocks':>8} "
-            f"{'peak MiB':>8} {'reuse s':>7}")
+            f"{'peak MiB':>8}")
     print(head)
     print("-" * len(head))
     for r in rows:
@@ -149,7 +138,7 @@ def print_table(title: str, rows: list[dict[str, float]]) -> None:
               f"{r['prism']:>11d} {r['active']:>6d} {r['detection']:>8.4f} {r['forces']:>8.4f} "
               f"{r['detect+forces']:>7.4f} {1e6 * r['detect+forces'] / r['triangles']:>6.2f} "
               f"{r['jacobian']:>8.4f} {r['total']:>7.4f} {r['cpu detect+forces']:>7.4f} "
-              f"{r['cpu total']:>7.4f} {r['blocks']:>8d} {r['peak']:>8.1f} {r['reuse']:>7.4f}")
+              f"{r['cpu total']:>7.4f} {r['blocks']:>8d} {r['peak']:>8.1f}")
     for small, large in zip(rows[:-1], rows[1:], strict=True):
         ratio = large["triangles"] / small["triangles"]
         nlogn = ratio * np.log(large["triangles"]) / np.log(small["triangles"])

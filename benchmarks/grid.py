@@ -1,4 +1,4 @@
-"""Every case of the study grid, one process each (issue 18, deliverable 7).
+"""Every case of the study grid, one process each: the results and wall time of each case.
 
 Runs the normal valve and every graft of the study grid (widths 0, 7, 14, 21, 27 % x
 heights 0, 13, 27, 40 %; ``--cases`` for a subset) at the default mesh (``--mesh-size``),
@@ -20,18 +20,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
-from cases import parse_case  # benchmarks/cases.py, beside this script
+# benchmarks/cases.py, beside this script
+from cases import WorkerFailed, add_common_arguments, cell, parse_arguments, report, run_worker
 
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
 
-MARK = "BENCHMARK-RESULT "
 #: columns of the table: (header, result key, format)
 COLUMNS = [("converged", "converged", "s"), ("residual mN", "equilibrium_residual_mN", ".3g"),
            ("penetration mm", "max_penetration_mm", ".3f"),
@@ -69,38 +67,23 @@ def worker(case, mesh_size: float, limit: float | None, out: str) -> dict:
 
 def run_in_subprocess(case, args, root: str) -> dict:
     name = case_name(*(case or (None, None)))
-    command = [sys.executable, os.path.abspath(__file__), "--worker", "--cases", name,
-               "--keep", os.path.join(root, name), "--mesh-size", str(args.mesh_size)]
-    command += [] if args.wall_time_limit is None else ["--wall-time-limit",
+    options = ["--keep", os.path.join(root, name)]
+    options += [] if args.wall_time_limit is None else ["--wall-time-limit",
                                                         str(args.wall_time_limit)]
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     # a hard stop beyond the solver's own limit (mesh, analysis, output)
     timeout = None if args.wall_time_limit is None else args.wall_time_limit + 600.0
     t0 = time.perf_counter()
     try:
-        done = subprocess.run(command, stdout=subprocess.PIPE, text=True, env=env,
-                              timeout=timeout)
-    except subprocess.TimeoutExpired:
+        return {"case": name, **run_worker(__file__, name, args.mesh_size, options, timeout)}
+    except WorkerFailed as error:
         return {"case": name, "converged": False, "wall_time_s": time.perf_counter() - t0,
-                "solver_message": f"killed after {timeout:g} s"}
-    for line in done.stdout.splitlines():
-        if line.startswith(MARK):
-            return {"case": name, **json.loads(line[len(MARK):])}
-    return {"case": name, "converged": False, "wall_time_s": time.perf_counter() - t0,
-            "solver_message": f"worker exited with {done.returncode} and no result"}
-
-
-def _cell(row: dict, key: str, fmt: str) -> str:
-    value = row.get(key)
-    if value is None or (isinstance(value, float) and value != value):
-        return "-"
-    return str(value) if fmt == "s" else format(value, fmt)
+                "solver_message": str(error)}
 
 
 def markdown(rows: list[dict]) -> str:
     lines = ["| case | " + " | ".join(h for h, _, _ in COLUMNS) + " |",
              "|---|" + "---:|" * len(COLUMNS)]
-    lines += [f"| {r['case']} | " + " | ".join(_cell(r, k, f) for _, k, f in COLUMNS) + " |"
+    lines += [f"| {r['case']} | " + " | ".join(cell(r.get(k), f) for _, k, f in COLUMNS) + " |"
               for r in rows]
     failed = [r for r in rows if not r.get("converged")]
     lines += [""] + [f"- {r['case']}: {r.get('solver_message', '')}" for r in failed]
@@ -109,22 +92,14 @@ def markdown(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=lambda s: [parse_case(c) for c in s.split(",")],
-                        default=study_grid(), help="comma-separated subset, e.g. normal,W21/H27")
-    parser.add_argument("--mesh-size", type=float, default=None, help="mm (default 0.8)")
+    add_common_arguments(parser, study_grid())
     parser.add_argument("--jobs", type=int, default=1, help="cases run at a time")
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
     parser.add_argument("--keep", type=str, default=None, help="keep the case folders in DIR")
     parser.add_argument("--out", type=Path, default=None, help="write the table to FILE.md")
-    parser.add_argument("--json", type=Path, default=None, help="write the figures to FILE")
-    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.mesh_size is None:
-        from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
-        args.mesh_size = DEFAULT_MESH_SIZE
+    args = parse_arguments(parser, argv)
     if args.worker:
-        row = worker(args.cases[0], args.mesh_size, args.wall_time_limit, args.keep)
-        print(MARK + json.dumps(row), flush=True)
+        report(worker(args.cases[0], args.mesh_size, args.wall_time_limit, args.keep))
         return 0
     scratch = tempfile.TemporaryDirectory(prefix="grid-benchmark-")
     root = args.keep or scratch.name
@@ -135,9 +110,9 @@ def main(argv=None) -> int:
         for future in as_completed(futures):
             row = future.result()
             rows[futures[future]] = row
-            print(f"{row['case']:<8} " + " ".join(f"{h} {_cell(row, k, f)}" for h, k, f in COLUMNS)
-                  + ("" if row.get("converged") else f"  ({row.get('solver_message', '')})"),
-                  flush=True)
+            figures = " ".join(f"{h} {cell(row.get(k), f)}" for h, k, f in COLUMNS)
+            failure = "" if row.get("converged") else f"  ({row.get('solver_message', '')})"
+            print(f"{row['case']:<8} {figures}{failure}", flush=True)
     elapsed = time.perf_counter() - t0
     scratch.cleanup()
     ordered = [rows[case] for case in args.cases]

@@ -154,11 +154,11 @@ def test_contact_reactions_balance_the_pressure_on_the_flat_patch(pressed_sheets
 def test_newton_converges_quadratically_with_contact_active(pressed_sheets):
     """The contact Jacobian is exact (turning normal, sliding point, blending; the driving
     force frozen within a pseudo-time step), so Newton's method converges quadratically on
-    the curved, ballooned contact patch.  Dropping the geometric terms
-    (``SurfaceContact(geometric_stiffness=False)``) gives linear convergence here (order
-    1.0 in all 14 such solves, 325 Newton iterations instead of 52), which this test
-    rejects.  The order is read from the last three norms of each Newton
-    solve with the patch formed throughout, above 1e-12 mN (round-off is ~4e-14 mN here)."""
+    the curved, ballooned contact patch.  Without the geometric terms (turning normal,
+    sliding point) Newton converges linearly here (order 1.0 in all 14 such solves, 325
+    Newton iterations instead of 52), which this test rejects.  The order is read from the
+    last three norms of each Newton solve with the patch formed throughout, above 1e-12 mN
+    (round-off is ~4e-14 mN here)."""
     *_, histories = pressed_sheets
     orders = []
     for history in histories:

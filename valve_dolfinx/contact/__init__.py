@@ -1,4 +1,5 @@
-"""Leaflet contact (SPEC §5): force law, broad phase and node-to-surface penalty model."""
+"""Leaflet contact (SPEC §5): force law, broad phase, node-to-surface and node-to-plane
+penalty models."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from valve_dolfinx.contact.broadphase import (
     candidate_pairs,
     padded_bounds,
 )
+from valve_dolfinx.contact.exclusions import triangle_halo, vertex_adjacency
 from valve_dolfinx.contact.geometry import (
     barycentric_gradients,
     closest_point_on_triangles,
@@ -20,13 +22,9 @@ from valve_dolfinx.contact.law import (
     contact_force,
     driving_force,
 )
-from valve_dolfinx.contact.model import (
-    ContactResult,
-    PlaneContact,
-    SurfaceContact,
-    triangle_halo,
-    vertex_adjacency,
-)
+from valve_dolfinx.contact.planes import PlaneContact
+from valve_dolfinx.contact.results import ContactResult
+from valve_dolfinx.contact.surface import SurfaceContact
 
 __all__ = [
     "DRIVING_FORCE_MODES",

@@ -231,15 +231,14 @@ class CellIndex:
         keep = np.flatnonzero(inside)
         return self.sorted_nodes[position[keep]], box[keep]
 
-    def blocks(self, lo: np.ndarray, hi: np.ndarray, block_size: int = BLOCK_SIZE
-               ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    def blocks(self, lo: np.ndarray, hi: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """:meth:`box_pairs` for consecutive blocks of boxes; box ids are global.
 
-        Blocking bounds the temporaries at ``O(block_size)`` whatever the mesh
+        Blocking bounds the temporaries at ``O(BLOCK_SIZE)`` whatever the mesh
         size, which keeps them in cache and avoids page faults on large meshes.
         """
-        for first in range(0, lo.shape[1], block_size):
-            block = slice(first, first + block_size)
+        for first in range(0, lo.shape[1], BLOCK_SIZE):
+            block = slice(first, first + BLOCK_SIZE)
             node, box = self.box_pairs(lo[:, block], hi[:, block])
             yield node, box + first
 

@@ -27,7 +27,8 @@ from valve_dolfinx.exceptions import ParameterError, check_range
 
 __all__ = [
     "ContactParameters", "DRIVING_FORCE_MODES", "PAIRINGS", "contact_force",
-    "contact_force_slope_in_F", "crossing_barrier", "law_force", "driving_force",
+    "DEFAULT_PARAMETERS", "contact_force_slope_in_F", "crossing_barrier", "law_force",
+    "driving_force", "law_force_from_load",
 ]
 
 log = logging.getLogger(__name__)
@@ -110,17 +111,9 @@ class ContactParameters:
         barrier :func:`crossing_barrier` leaves the SPEC law untouched wherever
         the mid-surfaces have not crossed -- every equilibrium of the normal
         valve -- and is C¹ (quadratic onset over ``crossing_width``).  0 (the
-        default, also in closure) is the SPEC law alone; docs/contact.md §3.11
-        says where it helped (graft valves) and where it stalled a run (a
-        transient free-edge scissors crossing of the normal valve).
+        default, also the closure's setting) is the SPEC law alone.
     crossing_width
         Width (mm) of the barrier's quadratic onset.
-    edge_row_fade_in
-        Fade an edge/vertex row in with the in-plane distance of the node's
-        projection from the triangle (over ``blend_distance``), so that it does
-        not appear with a finite weight where the projection leaves the
-        triangle (a jump in the force under the cut-off taper; docs/contact.md
-        §3.4).  On in closure too since session 6 (docs/closure.md).
     """
 
     stiffness: float = 10.0
@@ -134,7 +127,6 @@ class ContactParameters:
     thickness: float = 0.0
     crossing_stiffness: float = 0.0
     crossing_width: float = 0.02
-    edge_row_fade_in: bool = True
 
     def __post_init__(self) -> None:
         check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
@@ -166,6 +158,10 @@ class ContactParameters:
     def reach(self) -> float:
         """Largest raw distance (mm) at which a surface pushes: ``thickness + cutoff``."""
         return self.thickness + self.cutoff
+
+
+#: The SPEC §5 parameters (frozen, so safe as a default argument).
+DEFAULT_PARAMETERS = ContactParameters()
 
 
 def contact_force(d: np.ndarray, F: np.ndarray, k: float, h: float, taper: float = 0.0
@@ -295,3 +291,11 @@ def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParamete
     else:
         F = np.linalg.norm(f_ext, axis=1)
     return np.maximum(F, params.min_driving_force)
+
+
+def law_force_from_load(d: np.ndarray, f_ext: np.ndarray, normal: np.ndarray,
+                        params: ContactParameters) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`law_force` and its slope in ``d`` with ``F`` the :func:`driving_force` of the
+    external nodal forces ``f_ext`` ``(K, 3)`` against the sided normals ``normal``."""
+    F = driving_force(f_ext, normal, params)
+    return law_force(d, F, params)

@@ -14,7 +14,7 @@ barycentric coordinates of the contact point).  With ``B = [1, -λ_a, -λ_b,
       + φ\, n \otimes \frac{\partial B_r}{\partial x_m}.
 
 The first term (the distance ``d`` changing, ``∂d/∂x_m = B_m n`` exactly) is
-built in :meth:`valve_dolfinx.contact.model._Contacts.result`.  This module
+built in :meth:`valve_dolfinx.contact.results.ContactRows.result`.  This module
 adds the other two:
 
 * **the direction turns.**  Face contact: ``n = s N/|N|``, ``N = e₁ × e₂``
@@ -43,14 +43,14 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import barycentric_gradients
 
-__all__ = ["direction_derivatives", "geometric_blocks", "geometric_stiffness", "skew"]
+__all__ = ["direction_derivatives"]
 
 #: Barycentric coordinates below this count as zero when telling an edge contact
 #: (two vertices carry the contact point) from a vertex contact (one does).
 _ON_FEATURE = 1e-12
 
 
-def skew(v: np.ndarray) -> np.ndarray:
+def _skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrices ``[v]×`` of ``(K, 3)`` vectors, ``(K, 3, 3)``: ``[v]×·u = v × u``."""
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
@@ -68,7 +68,7 @@ def _face_terms(x, node, support, lam, normal):
     nhat = N / length[:, None]
     side = np.sign(np.einsum("ij,ij->i", nhat, normal))
     P = np.eye(3) - nhat[:, :, None] * nhat[:, None, :]
-    K = np.stack([skew(e2 - e1), -skew(e2), skew(e1)], axis=1)          # (F, 3k, 3, 3)
+    K = np.stack([_skew(e2 - e1), -_skew(e2), _skew(e1)], axis=1)          # (F, 3k, 3, 3)
     dnhat = np.einsum("fij,fkjl->fkil", P, K) / length[:, None, None, None]
     dn = np.zeros((len(node), 4, 3, 3))
     dn[:, 1:] = side[:, None, None, None] * dnhat
@@ -140,39 +140,3 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
         if mask.any():
             dn[mask], dlam[mask] = terms(x, node[mask], support[mask], lam[mask], normal[mask])
     return dn, dlam
-
-
-def geometric_blocks(lam: np.ndarray, normal: np.ndarray, force: np.ndarray, dn: np.ndarray,
-                     dlam: np.ndarray) -> np.ndarray:
-    """Blocks of the turning direction and sliding contact point, ``(A, 4, 4, 3, 3)``.
-
-    ``blocks[a, r, m]`` is ``∂force[ids[a, r]]/∂x[ids[a, m]]`` (mN/mm) with
-    ``ids = [node, support...]`` of contact ``a``; the other arguments are as in
-    :func:`geometric_stiffness`.
-    """
-    count = len(force)
-    B = np.concatenate([np.ones((count, 1)), -lam], axis=1)
-    phi = force[:, None, None, None, None]
-    blocks = B[:, :, None, None, None] * phi * dn[:, None]                # (A, 4r, 4m, 3, 3)
-    blocks[:, 1:] -= phi * normal[:, None, None, :, None] * dlam[:, :, :, None, :]
-    return blocks
-
-
-def geometric_stiffness(node: np.ndarray, support: np.ndarray, lam: np.ndarray,
-                        normal: np.ndarray, force: np.ndarray, dn: np.ndarray, dlam: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Jacobian blocks of the turning direction and sliding contact point (module docstring).
-
-    ``force`` holds the magnitudes φ (mN, blending weights included); ``dn`` and
-    ``dlam`` come from :func:`direction_derivatives`.
-
-    Returns
-    -------
-    rows, cols, blocks
-        Node ids and ``(16 A, 3, 3)`` blocks ``∂force[row]/∂x[col]`` (mN/mm).
-    """
-    ids = np.concatenate([node[:, None], support], axis=1)               # (A, 4)
-    blocks = geometric_blocks(lam, normal, force, dn, dlam)
-    rows = np.repeat(ids, 4, axis=1).ravel()
-    cols = np.tile(ids, (1, 4)).ravel()
-    return rows, cols, blocks.reshape(-1, 3, 3)

@@ -72,7 +72,6 @@ class ContactHook:
         self.side = float(pressure_side)
         self._key: np.ndarray | None = None
         self._results: list = []
-        self.last_positions: np.ndarray | None = None
         self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
 
     def _evaluate(self, state: dolfinx.fem.Function) -> list:
@@ -86,7 +85,6 @@ class ContactHook:
         nodes = self.contact_nodes
         self._results = [m.evaluate(x, f_ext, nodes) for m in self.models]
         self._key, self._pressure_key = x, p
-        self.last_positions = x
         return self._results
 
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:

@@ -1,0 +1,90 @@
+"""The nodes that never contact each triangle of a surface: its mesh neighbourhood and,
+optionally, the nodes near it in a reference state."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["merge_exclusions", "reference_neighbours", "triangle_halo", "vertex_adjacency"]
+
+
+def vertex_adjacency(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
+    """Closed edge neighbourhoods of the nodes as a padded table.
+
+    Returns an ``(N, W)`` integer array whose row ``p`` holds ``p`` itself, then
+    the nodes sharing an edge with ``p`` (ascending), then ``-1`` padding;
+    ``W - 1`` is the largest vertex degree.
+    """
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    edges = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    edges = np.concatenate([edges, edges[:, ::-1]])
+    keys = np.unique(edges[:, 0] * num_nodes + edges[:, 1])
+    row, col = np.divmod(keys, num_nodes)
+    degree = np.bincount(row, minlength=num_nodes)
+    table = np.full((num_nodes, int(degree.max(initial=0)) + 1), -1, dtype=np.int64)
+    table[:, 0] = np.arange(num_nodes)
+    rank = np.arange(len(row)) - (np.cumsum(degree) - degree)[row]
+    table[row, 1 + rank] = col
+    return table
+
+
+
+def triangle_halo(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
+    """Nodes that never contact each triangle: its vertices and their edge-neighbours.
+
+    Returns an ``(M, U)`` table, ascending ids per row padded with ``-1``
+    (``U`` = 12 for a regular mesh of degree-6 vertices).
+    """
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    around = vertex_adjacency(triangles, num_nodes)[triangles].reshape(len(triangles), -1)
+    around = np.where(around < 0, num_nodes, around)
+    around.sort(axis=1)
+    repeated = np.zeros(around.shape, dtype=bool)
+    repeated[:, 1:] = around[:, 1:] == around[:, :-1]
+    around[repeated] = num_nodes
+    around.sort(axis=1)
+    width = int((around < num_nodes).sum(axis=1).max(initial=0))
+    halo = around[:, :width]
+    halo[halo == num_nodes] = -1
+    return halo
+
+
+
+def reference_neighbours(triangles: np.ndarray, reference: np.ndarray, body: np.ndarray,
+                         radius: float) -> list[np.ndarray]:
+    """For each triangle, the nodes of its own body within ``radius`` of it in the reference state.
+
+    ``reference`` holds each triangle's vertex coordinates in the stress-free
+    state, ``(M, 3, D)`` (the flat leaflet, D = 2; a node shared by two bodies may
+    have different coordinates in each).  A node counts if its reference
+    distance to the triangle's centroid is below ``radius`` plus the
+    triangle's centroid-to-vertex radius (a cheap superset of "within
+    ``radius`` of the triangle").
+    """
+    from scipy.spatial import cKDTree
+
+    out: list[np.ndarray] = [np.empty(0, dtype=np.int64)] * len(triangles)
+    centroid = reference.mean(axis=1)
+    size = np.linalg.norm(reference - centroid[:, None], axis=2).max(axis=1)
+    for b in np.unique(body):
+        cells = np.flatnonzero(body == b)
+        nodes = triangles[cells].ravel()
+        coords = reference[cells].reshape(-1, reference.shape[2])
+        nodes, first = np.unique(nodes, return_index=True)
+        tree = cKDTree(coords[first])
+        hits = tree.query_ball_point(centroid[cells], radius + size[cells])
+        for cell, found in zip(cells, hits, strict=True):
+            out[cell] = nodes[np.asarray(found, dtype=np.int64)]
+    return out
+
+
+
+def merge_exclusions(halo: np.ndarray, extra: list[np.ndarray]) -> np.ndarray:
+    """Padded table of the union, per row, of ``halo`` (padded with -1) and ``extra``."""
+    rows = [np.union1d(h[h >= 0], e) for h, e in zip(halo, extra, strict=True)]
+    width = max((len(r) for r in rows), default=0)
+    table = np.full((len(rows), width), -1, dtype=np.int64)
+    for i, r in enumerate(rows):
+        table[i, :len(r)] = r
+    return table
+

@@ -1,0 +1,356 @@
+"""Contact rows and their nodal forces, Jacobian blocks and diagnostics (SPEC §5).
+
+A contact model (:class:`~valve_dolfinx.contact.surface.SurfaceContact`,
+:class:`~valve_dolfinx.contact.planes.PlaneContact`) finds its contacts as
+:class:`ContactRows` -- a node, the nodes taking the reaction, the law's force and
+what its derivative needs -- and :meth:`ContactRows.result` turns them into the
+:class:`ContactResult` the solver hook adds to the residual and the Jacobian.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from valve_dolfinx.exceptions import MeshError, ParameterError
+
+__all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
+
+
+@dataclass
+class ContactResult:
+    """Contact forces, their Jacobian blocks and diagnostics of one evaluation.
+
+    Attributes
+    ----------
+    forces
+        ``(N, 3)`` nodal contact forces (mN): on the contacting nodes and the
+        reactions on the vertices of the triangles they touch.
+    jac_rows, jac_cols
+        ``(K,)`` node ids of the Jacobian blocks (duplicates allowed: sum them).
+    jac_blocks
+        ``(K, 3, 3)`` blocks :math:`\\partial\\,\\mathrm{forces}[row] / \\partial x[col]`
+        (mN/mm); for a residual ``R = R_int - f_ext - forces`` subtract them from
+        the Jacobian.
+    n_active
+        Number of contacts (node–triangle or node–plane) with ``f > 0``.
+    max_penetration
+        ``max(-d, 0)`` over the active contacts whose node is over the surface
+        (mm; contacts fading out beyond a boundary, presence < 1/2, are not
+        counted), 0.0 if none.
+    total_force
+        Sum of the contact force magnitudes ``f`` (mN).
+    max_crossing
+        How far the mid-surfaces themselves have passed through each other
+        (mm): the penetration without the contact thickness, 0 while the
+        contact layers only overlap (see ``ContactParameters.thickness``).
+    pairs
+        ``(n_active, 2)`` ``[node, triangle]`` of the active contacts;
+        ``triangle = -1 - i`` for plane ``i``.
+    """
+
+    forces: np.ndarray
+    jac_rows: np.ndarray
+    jac_cols: np.ndarray
+    jac_blocks: np.ndarray
+    n_active: int
+    max_penetration: float
+    total_force: float
+    pairs: np.ndarray
+    max_crossing: float = 0.0
+
+    @classmethod
+    def combine(cls, results: Iterable[ContactResult]) -> ContactResult:
+        """Sum of results on the same mesh (several surfaces/planes, or disjoint node sets)."""
+        results = list(results)
+        if not results:
+            raise ParameterError("ContactResult.combine needs at least one result")
+        return cls(
+            forces=np.sum([r.forces for r in results], axis=0),
+            jac_rows=np.concatenate([r.jac_rows for r in results]),
+            jac_cols=np.concatenate([r.jac_cols for r in results]),
+            jac_blocks=np.concatenate([r.jac_blocks for r in results]),
+            n_active=sum(r.n_active for r in results),
+            max_penetration=max(r.max_penetration for r in results),
+            total_force=float(sum(r.total_force for r in results)),
+            pairs=np.concatenate([r.pairs for r in results]),
+            max_crossing=max(r.max_crossing for r in results),
+        )
+
+
+
+class StepClock:
+    """Wall-clock and CPU (process) laps (s) of the steps of an evaluation, for benchmarks.
+
+    On a loaded machine the wall-clock laps include the time spent waiting for a
+    core; the CPU laps do not (they do include the kernel's page-fault work).
+    """
+
+    def __init__(self, cpu: bool = False) -> None:
+        self.laps: dict[str, float] = {}
+        self.cpu_laps: dict[str, float] = {}
+        # process_time() is a system call (~0.1-1 ms here): only when asked for
+        self._cpu = time.process_time if cpu else (lambda: 0.0)
+        self._last = time.perf_counter()
+        self._last_cpu = self._cpu()
+
+    def add(self, name: str) -> None:
+        """Add the time since the previous call to lap ``name``."""
+        now, now_cpu = time.perf_counter(), self._cpu()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self._last
+        self.cpu_laps[name] = self.cpu_laps.get(name, 0.0) + now_cpu - self._last_cpu
+        self._last, self._last_cpu = now, now_cpu
+
+
+
+def check_positions(x: np.ndarray, num_nodes: int, name: str) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    if x.shape != (num_nodes, 3):
+        raise MeshError(f"{name} has shape {x.shape}; expected ({num_nodes}, 3), "
+                        "one row per node of the contact surface")
+    if not np.isfinite(x).all():
+        raise MeshError(f"{name} has non-finite entries (a diverged solve?)")
+    return x
+
+
+def check_nodes(nodes: np.ndarray | None, num_nodes: int) -> np.ndarray:
+    if nodes is None:
+        return np.arange(num_nodes, dtype=np.int64)
+    nodes = np.asarray(nodes, dtype=np.int64).ravel()
+    if nodes.size and (nodes.min() < 0 or nodes.max() >= num_nodes):
+        raise MeshError(f"contact nodes must be ids in [0, {num_nodes}); got "
+                        f"[{nodes.min()}, {nodes.max()}]")
+    return nodes
+
+
+
+@dataclass(frozen=True)
+class ContactRows:
+    """Contact rows: a node, the nodes taking the reaction, and everything the Jacobian needs.
+
+    Row ``i`` pushes its node with ``s_i = w_i p_i f_i`` along ``n_i`` and its
+    support nodes with ``-λ_j s_i n_i``: ``f`` is the law's force (pairing
+    weight included), ``p`` the row's presence (its smooth fade-in/out) and
+    ``w`` the softmin blending weight of the rows of one (node, body) group,
+    ``w_i ∝ p_i exp(-d_i/ε)``.
+    """
+
+    node: np.ndarray        # (A,) contacting node
+    support: np.ndarray     # (A, s) nodes taking the reaction (triangle vertices; none for planes)
+    weights: np.ndarray     # (A, s) reaction weights λ (barycentric coordinates)
+    normal: np.ndarray      # (A, 3) unit force direction on the node
+    d: np.ndarray           # (A,) signed distance (mm)
+    f: np.ndarray           # (A,) law force (mN), before presence and blending
+    dfdd: np.ndarray        # (A,) derivative of f w.r.t. d (mN/mm)
+    partner: np.ndarray     # (A,) triangle id, or -1 - plane index
+    group: np.ndarray | None = None  # (A,) contact id: blended rows of one contact share it
+    blend: np.ndarray | None = None  # (A,) blending weights w (sum to 1 per group)
+    blend_scale: float = 1.0         # ε of the softmin (mm)
+    blend_cutoff: float = np.inf     # h (with blend): a row of presence p blends at h - p(h - d)
+    presence: np.ndarray | None = None         # (A,) p in (0, 1]
+    grad_log_presence: np.ndarray | None = None  # (A, 1+s, 3) ∂log p/∂x over [node, support]
+    grad_f: np.ndarray | None = None  # (A, 1+s, 3) ∂f/∂x beyond f'·∇d (the driving force turning)
+    #: ``(∂n/∂x_m (A, 4, 3, 3), ∂λ_j/∂x_m (A, 3, 4, 3))`` over ``[node, support]``
+    #: (:func:`~valve_dolfinx.contact.linearisation.direction_derivatives`): the turning
+    #: direction and the sliding contact point, for the geometric Jacobian blocks
+    geometric: tuple[np.ndarray, np.ndarray] | None = None
+    #: distance of the contact surface from the mid-surface (mm): d + offset is the gap
+    #: between the mid-surfaces
+    surface_offset: float = 0.0
+
+    def _group_presence(self) -> tuple[np.ndarray, np.ndarray]:
+        """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``).
+
+        ``G = 1 - Π_j (1 - p_j)`` over the rows of a group: 1 as soon as one row
+        is fully present (a node over the shared edge of two coplanar faces gets
+        the full force), ``p`` for a lone row (a node sliding off a free edge
+        loses its force smoothly).
+        """
+        p = np.ones(len(self.node)) if self.presence is None else self.presence
+        if self.group is None:
+            return p, np.ones(len(p))
+        _, inverse = np.unique(self.group, return_inverse=True)
+        exact_one = p >= 1.0
+        log_slack = np.where(exact_one, 0.0, np.log(np.maximum(1.0 - p, 1e-300)))
+        total = np.bincount(inverse, log_slack)[inverse]       # Σ log(1-p) over p < 1
+        ones = np.bincount(inverse, exact_one.astype(float))[inverse]
+        G = np.where(ones > 0, 1.0, 1.0 - np.exp(total))
+        c = np.where(ones == 0, np.exp(total - log_slack),
+                     np.where((ones == 1) & exact_one, np.exp(total), 0.0))
+        return G, c
+
+    def result(self, num_nodes: int, clock: StepClock | None = None, jacobian: bool = True
+               ) -> ContactResult:
+        """Nodal forces and their Jacobian blocks (``clock``: laps "forces" and "jacobian").
+
+        ``jacobian=False``: the forces and diagnostics only (no blocks).
+
+        Row ``i`` pushes with ``s_i = w_i G f_i``: ``f`` the law's force,
+        ``w_i = p_i e^{-d_i/ε}/Σ_k p_k e^{-d_k/ε}`` the blending weight of the
+        rows of its (node, body) group and ``G`` the group's presence
+        (:meth:`_group_presence`).  With ``B = [1, -λ...]`` over
+        ``ids = [node, support...]``, ``∇d = B⊗n`` (exact: the distance to a
+        triangle's plane moves with its vertices as ``-λ_j n``),
+        ``∇L = ∇log p - ∇d/ε`` and ``∇f = f'∇d + (∂f/∂F)∇F``:
+
+        * over the row's own nodes: ``G f w(1-w) ∇L + w f c_i ∇p_i + w G ∇f``,
+        * over the nodes of another row ``k`` of the group:
+          ``-G f_i w_i w_k ∇L_k + w_i f_i c_k ∇p_k``,
+
+        and the force on ``ids[r]`` is ``B_r s n``: its blocks are
+        ``B_r n ⊗ ∂s/∂x_m``, plus the turning of ``n`` and the sliding of ``λ``
+        (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).  The
+        couplings between the rows of a group are summed per group over the
+        distinct nodes it touches (:func:`_group_outer_blocks`), not pair by
+        pair; the blocks may repeat a (row, col) pair and are to be summed.
+        """
+        count = len(self.node)
+        w = np.ones(count) if self.blend is None else self.blend
+        p = np.ones(count) if self.presence is None else self.presence
+        G, c = self._group_presence()
+        f = self.f
+        magnitude = w * G * f
+        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
+        B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
+        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
+        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
+                                       minlength=num_nodes) for i in range(3)], axis=1)
+        if clock is not None:
+            clock.add("forces")
+        if not jacobian:
+            return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
+                                     np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
+        grad_d = B[:, :, None] * self.normal[:, None, :]                           # (A, m, 3)
+        grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
+            else self.grad_log_presence
+        grad_p = p[:, None, None] * grad_logp
+        grad_f = self.dfdd[:, None, None] * grad_d
+        if self.grad_f is not None:
+            grad_f = grad_f + self.grad_f
+        own = (w * G)[:, None, None] * grad_f + (w * f * c)[:, None, None] * grad_p
+        if self.blend is not None:
+            # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
+            depth = (self.blend_cutoff - self.d) / self.blend_scale
+            grad_L = (grad_logp * (1.0 + p * depth)[:, None, None]
+                      - (p / self.blend_scale)[:, None, None] * grad_d)
+            own += (G * f * w * (1.0 - w))[:, None, None] * grad_L
+        m = ids.shape[1]
+        Bn = B[:, :, None] * self.normal[:, None, :]                               # (A, m, 3)
+        multi = None
+        if self.blend is not None and self.group is not None:
+            _, inverse, group_size = np.unique(self.group, return_inverse=True,
+                                               return_counts=True)
+            multi = np.flatnonzero(group_size[inverse] > 1)
+            # the pair sum below includes i = k: take that term out of the row's own part
+            own[multi] += ((G * f * w * w)[multi, None, None] * grad_L[multi]
+                           - (w * f * c)[multi, None, None] * grad_p[multi])
+        outer = None
+        if multi is not None and len(multi):
+            outer = _group_outer_blocks(
+                inverse[multi], ids[multi], Bn[multi], num_nodes,
+                left=(-(G * f * w)[multi], (w * f)[multi]),
+                right=(w[multi, None, None] * grad_L[multi],
+                       c[multi, None, None] * grad_p[multi]))
+        # one allocation for all blocks: at 10^5 triangles they take hundreds of MB
+        size = count * m * m
+        total = size + (0 if outer is None else len(outer[0]))
+        rows = np.empty(total, dtype=np.int64)
+        cols = np.empty(total, dtype=np.int64)
+        blocks = np.empty((total, 3, 3))
+        row_blocks = blocks[:size].reshape(count, m, m, 3, 3)
+        if self.geometric is None:
+            np.multiply(Bn[:, :, None, :, None], own[:, None, :, None, :], out=row_blocks)
+        else:
+            # with the turning direction and the sliding point (linearisation module):
+            # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m
+            dn, dlam = self.geometric
+            T = B[:, :, None, None] * own[:, None, :, :]                           # (A, m, m, 3)
+            T[:, 1:] -= magnitude[:, None, None, None] * dlam
+            np.multiply(self.normal[:, None, None, :, None], T[:, :, :, None, :], out=row_blocks)
+            scratch = np.empty((count, m, 3, 3))
+            for r in range(m):  # one row node at a time: a temporary of a quarter of the size
+                np.multiply((B[:, r] * magnitude)[:, None, None, None], dn, out=scratch)
+                row_blocks[:, r] += scratch
+        rows[:size] = np.repeat(ids, m, axis=1).ravel()
+        cols[:size] = np.tile(ids, (1, m)).ravel()
+        if outer is not None:
+            rows[size:], cols[size:], blocks[size:] = outer
+        if clock is not None:
+            clock.add("jacobian")
+        return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
+
+    def _diagnostics(self, forces: np.ndarray, magnitude: np.ndarray, p: np.ndarray,
+                     rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray) -> ContactResult:
+        """The result: forces, blocks and the counts and depths of the active contacts."""
+        active = magnitude > 0.0
+        groups = self.group[active] if self.group is not None else None
+        # a penetration is measured where the node is over the surface: rows fading out
+        # beyond a boundary (presence p < 1/2, e.g. a node that has slid past a
+        # neighbour's free edge) push a little but are not a crossing of that surface
+        over = active & (p >= 0.5)
+        return ContactResult(
+            forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
+            n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
+            max_penetration=float(np.max(-self.d[over], initial=0.0)),
+            total_force=float(magnitude.sum()),
+            pairs=np.stack([self.node[active], self.partner[active]], axis=1),
+            max_crossing=float(np.max(-(self.d[over] + self.surface_offset), initial=0.0)),
+        )
+
+
+
+def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_nodes: int,
+                        left: tuple[np.ndarray, np.ndarray],
+                        right: tuple[np.ndarray, np.ndarray]
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""Blocks coupling the rows of each group: ``Σ_{i,k} Bn_i[r] ⊗ (α_i U_k[m] + β_i V_k[m])``.
+
+    The sum runs over all ordered pairs of rows ``(i, k)`` with the same
+    ``group`` label, ``i = k`` included, and puts the block at
+    ``(ids[i, r], ids[k, m])``.  It factorises into
+    :math:`P\otimes Q + P'\otimes Q'` over the distinct nodes the group's rows
+    touch, with :math:`P_a = Σ_{(i,r): ids[i,r]=a} α_i Bn_i[r]`,
+    :math:`Q_b = Σ_{(k,m): ids[k,m]=b} U_k[m]` (and β, V for the primed
+    vectors), so a group of ``r`` rows over ``u`` distinct nodes costs ``u²``
+    blocks instead of the ``16 r²`` of the pair-by-pair sum (about 12 times
+    fewer on the meshes of ``benchmarks/contact.py``).
+
+    Parameters
+    ----------
+    group
+        ``(A,)`` group index of every row.
+    ids, Bn
+        ``(A, m)`` node ids of each row and ``(A, m, 3)`` the row vectors ``Bn_i[r]``.
+    left, right
+        ``(α, β)``, each ``(A,)``, and ``(U, V)``, each ``(A, m, 3)``.
+
+    Returns
+    -------
+    rows, cols, blocks
+        Node ids and ``(K, 3, 3)`` blocks.
+    """
+    alpha, beta = left
+    U, V = right
+    key = group[:, None] * np.int64(num_nodes) + ids
+    entry_key, entry = np.unique(key.ravel(), return_inverse=True)
+    count = len(entry_key)
+
+    def gather(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(-1, 3)
+        return np.stack([np.bincount(entry, flat[:, j], minlength=count) for j in range(3)],
+                        axis=1)
+
+    P, P2 = gather(alpha[:, None, None] * Bn), gather(beta[:, None, None] * Bn)
+    Q, Q2 = gather(U), gather(V)
+    entry_group, entry_node = np.divmod(entry_key, num_nodes)
+    # entries are sorted by key, so those of one group are contiguous
+    start = np.searchsorted(entry_group, entry_group, side="left")
+    size = np.bincount(entry_group)[entry_group]
+    a = np.repeat(np.arange(count), size)
+    b = np.repeat(start, size) + np.arange(len(a)) - np.repeat(np.cumsum(size) - size, size)
+    blocks = P[a, :, None] * Q[b, None, :] + P2[a, :, None] * Q2[b, None, :]
+    return entry_node[a], entry_node[b], blocks
+

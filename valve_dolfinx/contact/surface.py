@@ -1,0 +1,638 @@
+"""Node-to-surface penalty contact between membrane triangles (SPEC §5).
+
+Every call to :meth:`SurfaceContact.evaluate` searches the whole surface:
+
+1. broad phase — nodes inside the bounding boxes of the triangles' contact
+   prisms (the triangle swept ``±max(h, penetration_depth)`` along its
+   normal; :func:`~valve_dolfinx.contact.broadphase.padded_bounds`), found
+   with a uniform grid (:class:`~valve_dolfinx.contact.broadphase.CellIndex`);
+2. narrow phase — the closest point of the triangle to the node (on its face,
+   or on an edge or vertex where the node's projection falls outside it) is
+   within reach, the triangle is not in the node's own neighbourhood, and the
+   signed distance ``d`` w.r.t. the *sided* normal satisfies
+   ``-penetration_depth < d < h``;
+3. one contact per (node, body): the rows of the triangles a node meets on one
+   body are blended by softmin weights of their distances, each row fading in
+   and out smoothly (:meth:`SurfaceContact._blend_weights`);
+4. the SPEC §5 law :func:`~valve_dolfinx.contact.law.contact_force` gives the
+   magnitude ``f``; the node receives ``+f n``, the triangle's vertices
+   ``-λ_j f n`` (``λ`` the barycentric coordinates of the closest point), so
+   that forces and moments balance.
+
+All of it is vectorised over the candidate pairs, processed in blocks of
+triangles so that temporaries stay cache-sized.  The work of one call is
+linear in the number of candidate pairs (plus an ``S log S`` sort of the
+queried nodes), and the pairs of a node depend only on that node, so the sum
+of the results for disjoint node sets (one per MPI rank) is the result for
+their union.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
+from valve_dolfinx.contact.exclusions import merge_exclusions, reference_neighbours, triangle_halo
+from valve_dolfinx.contact.geometry import (
+    barycentric_gradients,
+    closest_point_on_triangles,
+    triangle_normals,
+)
+from valve_dolfinx.contact.law import (
+    DEFAULT_PARAMETERS,
+    ContactParameters,
+    contact_force_slope_in_F,
+    law_force_from_load,
+)
+from valve_dolfinx.contact.linearisation import direction_derivatives
+from valve_dolfinx.contact.results import (
+    ContactResult,
+    ContactRows,
+    StepClock,
+    check_nodes,
+    check_positions,
+)
+from valve_dolfinx.exceptions import MeshError
+
+__all__ = ["FACE_BAND", "SurfaceContact"]
+
+log = logging.getLogger(__name__)
+
+#: A projection counts as inside a triangle when all its barycentric
+#: coordinates are >= -INSIDE_TOLERANCE.  Rounding of λ is ~1e-16·|x|/edge
+#: (< 1e-13 for a 25 mm valve meshed at 0.05 mm), so 1e-10 guarantees that a
+#: node right above a shared edge or vertex is caught by at least one of the
+#: triangles around it, while enlarging each triangle by only 1e-10 of its size.
+INSIDE_TOLERANCE = 1e-10
+#: Face rows extend this far outside their triangle, in barycentric coordinates, and fade
+#: out across the band: a node pressed through a sheet near its boundary then loses its
+#: contact force smoothly instead of at once (a jump that makes Newton's method cycle).
+FACE_BAND = 0.1
+#: Slack of the contact-prism boxes of the broad phase: a point accepted with
+#: barycentric coordinates >= -INSIDE_TOLERANCE lies within 2·√3·INSIDE_TOLERANCE
+#: times the box size of the triangle, so 10·INSIDE_TOLERANCE keeps it in the box.
+PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
+#: Safety margin (mm) of the lower bound on a node's distance to a triangle used to skip
+#: the exact closest-point computation; far above the bound's rounding error.
+_BOUND_MARGIN = 1e-6
+#: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
+#: tell the side of a node; the pressure direction decides instead.
+SIDE_TOLERANCE = 1e-12
+
+
+@dataclass(frozen=True)
+class _TriangleFrames:
+    """Per-triangle data of the projection test, by axis ``(3, M)``.
+
+    ``origin`` is vertex 0, ``normal`` the unit normal and ``grad1``, ``grad2``
+    the in-plane gradients of the barycentric coordinates λ1, λ2
+    (:func:`~valve_dolfinx.contact.geometry.barycentric_gradients`), so that a
+    point ``p`` projects to ``λ_j = grad_j·(p - origin)`` at distance
+    ``normal·(p - origin)``.
+    """
+
+    origin: np.ndarray
+    normal: np.ndarray
+    grad1: np.ndarray
+    grad2: np.ndarray
+    altitudes: np.ndarray  # (3, M): 1/|∇λ_j|, the altitude of the triangle at vertex j
+
+    @classmethod
+    def at(cls, xt: np.ndarray, triangles: np.ndarray) -> _TriangleFrames:
+        a, b, c = (xt[:, triangles[:, j]] for j in range(3))
+        normal, grad = barycentric_gradients(a.T, b.T, c.T)
+        return cls(origin=a, normal=np.ascontiguousarray(normal.T),
+                   grad1=np.ascontiguousarray(grad[:, 1].T),
+                   grad2=np.ascontiguousarray(grad[:, 2].T),
+                   altitudes=np.ascontiguousarray((1.0 / np.linalg.norm(grad, axis=2)).T))
+
+
+def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _ramp(x: np.ndarray, width: float) -> np.ndarray:
+    """C¹ smoothstep: 0 for ``x <= 0``, 1 for ``x >= width``."""
+    xi = np.clip(np.asarray(x, dtype=float) / width, 0.0, 1.0)
+    return xi * xi * (3.0 - 2.0 * xi)
+
+
+def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
+    """``d log(ramp(x))/dx`` where the ramp is positive (0 where it is 1)."""
+    xi = np.clip(np.asarray(x, dtype=float) / width, 1e-300, 1.0)
+    return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
+
+
+class SurfaceContact:
+    """Penalty contact of the nodes of a triangulated surface with its own triangles.
+
+    Covers self-contact of one body and contact between bodies (leaflets):
+    each node is tested against every triangle of the mesh except those in
+    its closed edge neighbourhood (the triangles containing the node or one
+    of the nodes it shares an edge with).
+
+    **Sidedness.**  Contact only makes sense on one side of a triangle: the
+    side the node comes from.  With a recorded state (:meth:`update_history`),
+    :math:`s = \\operatorname{sign}((x^{prev}_p - x^{prev}_{t_0})\\cdot n^{prev}_t)`;
+    without one, or when that is below 1e-12 mm, the node comes from the side
+    opposite to where its pressure force pushes it,
+    :math:`s = -\\operatorname{sign}(f_{ext,p}\\cdot n_t)`; when that too is
+    zero, the node's current side.  The sided normal is :math:`n = s\\,n_t` and
+    :math:`d = (x_p - x_{t_0})\\cdot n`.
+    The rule is the same within a leaflet and between leaflets, on either face
+    of a triangle (a graft sliding below its neighbours meets their aortic
+    faces): the force acts along :math:`s\\,n_t` with a non-negative
+    magnitude, so a node that has not passed through a triangle is only ever
+    pushed away from it, and one that has passed through is pushed back.
+
+    **Jacobian.**  The blocks are the exact derivative of the forces for given
+    external forces ``f_ext``: with :math:`B = [1, -λ_0, -λ_1, -λ_2]` over
+    ``[node, t0, t1, t2]`` the distance term is
+    :math:`\\partial f_p/\\partial x_q = B_p B_q\\,(\\partial f/\\partial d)\\,n\\otimes n`;
+    the blocks also hold the rotation of ``n`` and the sliding of the contact
+    point (``∂n/∂x``, ``∂λ/∂x``, of order ``f/ℓ`` with ``ℓ`` the edge length;
+    :mod:`~valve_dolfinx.contact.linearisation`), the driving force
+    ``F = -f_ext·n`` turning with ``n``, the blending weights and the presence
+    fades (checked against finite differences in ``tests/test_contact_model.py``).
+    Only ``∂f_ext/∂x`` is not included: the solver hook freezes ``f_ext`` within
+    a step (:mod:`~valve_dolfinx.solvers.contact_hook`).  Without the geometric
+    terms the Jacobian would be exact only for flat, normally loaded contact, and
+    Newton's method would converge linearly on curved contact.
+
+    Parameters
+    ----------
+    triangles
+        ``(M, 3)`` node ids; the normal is :math:`(x_1 - x_0)\\times(x_2 - x_0)`.
+    num_nodes
+        Number of nodes ``N`` of the positions passed to :meth:`evaluate`.
+    params
+        Contact law and search parameters.
+    triangle_body
+        ``(M,)`` body label (leaflet tag) of each triangle (default: one body).
+        A node keeps at most one contact per body, so it touches a neighbour
+        leaflet once even above a shared edge, but can touch two leaflets at
+        once.  Nodes shared by bodies (commissures) need no special care: the
+        exclusion is topological and the grouping is by the triangle's body.
+    reference, self_exclusion_radius
+        ``(M, 3, D)`` vertex coordinates of every triangle in the stress-free
+        state, and a radius (mm): a node never contacts the triangles of its
+        own body that lie within that radius of it in the reference state.
+        A sheet folded back on itself with a fold radius ρ meets itself at
+        distance 2ρ across material that is πρ long, so nodes closer than
+        about 1.5× the contact reach in the reference state cannot be in
+        genuine self-contact; near a crease (a leaflet's V-shaped tip at the
+        valve centre) they are within reach across the crease, and treating
+        them as contacts makes the two sides of the crease fight.
+    attached_reference, attached_exclusion_radius
+        ``(N, 3)`` node positions of the assembled, unloaded structure (the
+        leaflets wrapped on the root) and a radius (mm): a node never contacts
+        another body's triangles within that radius of it there.  Leaflets
+        sewn together at a commissure share its nodes; next to it they close
+        like the pages of a book, closer than the contact thickness however
+        they deform, so the layers would fight the suture line.
+    boundary_band
+        Width (barycentric, i.e. in triangle heights) of the band beyond the
+        surface's boundary edges over which face contacts with *other* bodies
+        fade out (``FACE_BAND`` = 0.1 elsewhere).  Two leaflets coapt up to
+        their free edges, which lie level with each other: with a narrow band
+        a node at one free edge slides on and off the edge of its neighbour's
+        surface as the edges move by a few hundredths of a millimetre, and the
+        force appears and vanishes within that distance.  A band of about one
+        triangle continues the neighbour's last row of faces as a plane (as
+        the symmetry planes of the reference do).
+    """
+
+    def __init__(self, triangles: np.ndarray, num_nodes: int,
+                 params: ContactParameters = DEFAULT_PARAMETERS, *,
+                 triangle_body: np.ndarray | None = None,
+                 reference: np.ndarray | None = None,
+                 self_exclusion_radius: float = 0.0,
+                 attached_reference: np.ndarray | None = None,
+                 attached_exclusion_radius: float = 0.0,
+                 boundary_band: float = FACE_BAND) -> None:
+        triangles = np.asarray(triangles, dtype=np.int64)
+        if triangles.ndim != 2 or triangles.shape[1] != 3:
+            raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
+        if triangles.size and (triangles.min() < 0 or triangles.max() >= num_nodes):
+            raise MeshError(f"triangle node ids must lie in [0, {num_nodes}); got "
+                            f"[{triangles.min()}, {triangles.max()}]")
+        body = np.zeros(len(triangles), dtype=np.int64) if triangle_body is None \
+            else np.asarray(triangle_body).ravel()
+        if body.shape != (len(triangles),):
+            raise MeshError(f"triangle_body has {body.size} labels for {len(triangles)} triangles")
+        self.triangles = triangles
+        self.num_nodes = int(num_nodes)
+        self.params = params
+        #: padding of the search: the penetration window plus the contact thickness
+        self.search_distance = max(params.search_distance,
+                                   params.thickness + params.penetration_depth)
+        self.body_labels, self.triangle_body = np.unique(body, return_inverse=True)
+        #: body of each node: the lowest body among its triangles (commissure nodes are shared)
+        self.node_body = np.full(self.num_nodes, np.iinfo(np.int64).max, dtype=np.int64)
+        for k in range(3):
+            np.minimum.at(self.node_body, triangles[:, k], self.triangle_body)
+        #: ``(M, U)`` nodes that never contact triangle ``t``
+        #: (:func:`~valve_dolfinx.contact.exclusions.triangle_halo`).
+        self.excluded_nodes = triangle_halo(triangles, self.num_nodes)
+        if reference is not None and self_exclusion_radius > 0.0:
+            reference = np.asarray(reference, dtype=float)
+            if reference.shape[:2] != (len(triangles), 3):
+                raise MeshError(f"reference has shape {reference.shape}; expected "
+                                f"({len(triangles)}, 3, D), the vertices of every triangle")
+            extra = reference_neighbours(triangles, reference, self.triangle_body,
+                                         self_exclusion_radius)
+            self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
+        if attached_reference is not None and attached_exclusion_radius > 0.0:
+            placed = check_positions(attached_reference, self.num_nodes, "attached_reference")
+            extra = reference_neighbours(triangles, placed[triangles],
+                                         np.zeros(len(triangles), dtype=np.int64),
+                                         attached_exclusion_radius)
+            # other bodies only: self-contact keeps its own (flat reference) rule
+            extra = [e[self.node_body[e] != self.triangle_body[t]] for t, e in enumerate(extra)]
+            self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
+        #: ``(M, 3)`` band (barycentric) beyond the side opposite each vertex over which face
+        #: rows of *other* bodies fade out: ``boundary_band`` on the surface's boundary
+        #: (free edges), ``FACE_BAND`` on interior sides (the neighbour takes over there)
+        self.side_band = np.full((len(triangles), 3), FACE_BAND)
+        if boundary_band != FACE_BAND:
+            sides = np.stack([triangles[:, [1, 2]], triangles[:, [2, 0]], triangles[:, [0, 1]]],
+                             axis=1).reshape(-1, 2)
+            _, inverse, counts = np.unique(np.sort(sides, axis=1), axis=0, return_inverse=True,
+                                           return_counts=True)
+            boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
+            self.side_band[boundary] = float(boundary_band)
+        self._history: tuple[np.ndarray, np.ndarray] | None = None
+        self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
+        #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
+        #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
+        #: the law, nodal forces) and "jacobian" (all derivative blocks).
+        self.timings: dict[str, float] = {}
+        #: The same steps in CPU (process) time, s.
+        self.cpu_timings: dict[str, float] = {}
+        log.debug("surface contact: %d triangles, %d nodes, %d bodies, halo width %d",
+                  len(triangles), self.num_nodes, len(self.body_labels),
+                  self.excluded_nodes.shape[1])
+
+    def update_history(self, x: np.ndarray) -> None:
+        """Record the positions of the last accepted state; they fix each node's side."""
+        x = check_positions(x, self.num_nodes, "x").copy()
+        t = self.triangles
+        normals, _ = triangle_normals(x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
+        self._history = (x, normals)
+
+    def clear_history(self) -> None:
+        """Forget the recorded state (sides then follow the pressure direction)."""
+        self._history = None
+
+    #: Record CPU (process) time laps in :attr:`cpu_timings` too (for benchmarks: each
+    #: reading is a system call)
+    record_cpu_time = False
+
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
+                 jacobian: bool = True) -> ContactResult:
+        """Contact forces of ``nodes`` (default: all) against the whole surface.
+
+        Parameters
+        ----------
+        x, f_ext
+            ``(N, 3)`` current positions (mm) and external (pressure) nodal
+            forces (mN) of all nodes.
+        nodes
+            Distinct ids of the contacting nodes to process.  Results for
+            disjoint sets sum to the result for their union: reactions on
+            triangle vertices belong to the result of the contacting node.
+        jacobian
+            False: forces and diagnostics only, no Jacobian blocks (an explicit
+            solver needs no more; about three times cheaper).
+        """
+        x = check_positions(x, self.num_nodes, "x")
+        f_ext = check_positions(f_ext, self.num_nodes, "f_ext")
+        nodes = check_nodes(nodes, self.num_nodes)
+        clock = StepClock(cpu=self.record_cpu_time)
+        contacts = self._find_contacts(x, f_ext, nodes, clock, jacobian=jacobian)
+        result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
+        self.timings, self.cpu_timings = clock.laps, clock.cpu_laps
+        log.debug("surface contact: %d active, max penetration %.3g mm, total force %.4g mN",
+                  result.n_active, result.max_penetration, result.total_force)
+        return result
+
+    # -- steps of evaluate -------------------------------------------------------------------
+
+    def _find_contacts(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray,
+                       clock: StepClock | None = None, jacobian: bool = True) -> ContactRows:
+        """Candidates → sides → window ``-penetration_depth < d < h`` → blend per body → law."""
+        p = self.params
+        clock = StepClock() if clock is None else clock
+        node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
+        s = self._side(node, tri, d0, f_ext, n_tri)
+        edge = ~np.isnan(gap)
+        # face contacts: signed plane distance; edge/vertex contacts: distance to the
+        # closest point, only for nodes on their own side of the triangle's plane
+        d = np.where(edge, gap, s * d0) - p.thickness
+        normal = s[:, None] * n_tri
+        edge_normal = offset[edge] / np.maximum(gap[edge], 1e-300)[:, None]
+        normal[edge] = edge_normal
+        # presence of each row, faded smoothly to 0 where it appears or vanishes, so that
+        # no row enters or leaves the blend with a finite weight (a jump in the residual):
+        # edge/vertex rows fade out as the node reaches the triangle's plane (behind it
+        # the neighbouring face takes over), every row as d reaches the cut-off
+        eps = p.blend_distance
+        side_distance = s * d0
+        face_lam_min = np.minimum(np.minimum(plane_lam[:, 0], plane_lam[:, 1]), plane_lam[:, 2])
+        # face rows: Π_j ramp(λ_j + band), smooth also near the vertices (a min would kink)
+        band = self._row_bands(node, tri)
+        fades = _ramp(plane_lam + band, band)
+        band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
+        # edge/vertex rows also fade in with the in-plane distance of the node's projection
+        # from the triangle, √(gap² − d0²): where the projection re-enters the triangle its
+        # face row takes over, and a row vanishing with a finite weight there would make the
+        # blend (and the residual) jump, and Newton cycle (a graft node at a free edge)
+        in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
+        edge_fade = _ramp(side_distance, eps) * _ramp(in_plane, eps)
+        presence = np.where(edge, edge_fade, band_fade)
+        if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
+            presence *= _ramp(p.cutoff - d, eps)
+        else:
+            presence *= d < p.cutoff
+        keep = (d > -p.penetration_depth) & (presence > 0.0)
+        weight = self._pair_weight(node, tri)
+        keep &= weight > 0.0
+        node, tri, d, lam, weight, presence, normal, edge, side_distance = (
+            v[keep] for v in (node, tri, d, lam, weight, presence, normal, edge, side_distance))
+        in_plane, offset, d0 = in_plane[keep], offset[keep], d0[keep]
+        plane_lam, s, n_tri, face_lam_min = plane_lam[keep], s[keep], n_tri[keep], \
+            face_lam_min[keep]
+        band = band[keep]
+        clock.add("narrow")
+        blend = self._blend_weights(node, tri, d, presence)
+        f, dfdd = law_force_from_load(d, f_ext[node], normal, p)
+        f, dfdd = weight * f, weight * dfdd
+        # rows with no force stay: their distance still moves the blending weights
+        a = (f > 0.0) | (dfdd != 0.0) | (blend < 1.0)
+        node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight = (
+            v[a] for v in (node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight))
+        clock.add("forces")
+        group = node * len(self.body_labels) + self.triangle_body[tri]
+        support = self.triangles[tri]
+        contacts = ContactRows(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
+                             dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
+                             blend_cutoff=p.cutoff, presence=presence,
+                             surface_offset=p.thickness)
+        if not jacobian:
+            return contacts
+        # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
+        # the vertices through the barycentric coordinates of the plane projection
+        B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
+        grad_d = B[:, :, None] * normal[:, None, :]
+        grad_logp = np.zeros_like(grad_d)
+        if p.taper > 0.0:
+            grad_logp -= (_log_ramp_slope(p.cutoff - d, eps))[:, None, None] * grad_d
+        on_edge = np.flatnonzero(edge)
+        if len(on_edge):
+            plane_B = np.concatenate([np.ones((len(on_edge), 1)), -plane_lam[a][on_edge]], axis=1)
+            sided = (s[a][on_edge, None] * n_tri[a][on_edge])
+            grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
+                                   * plane_B[:, :, None] * sided[:, None, :])
+        if len(on_edge):
+            # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
+            # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
+            rho = in_plane[a][on_edge]
+            grad_rho = (B[on_edge][:, :, None] * offset[a][on_edge][:, None, :]
+                        - (d0[a][on_edge, None, None] * plane_B[:, :, None]
+                           * n_tri[a][on_edge][:, None, :]))
+            grad_logp[on_edge] += ((_log_ramp_slope(rho, eps) / np.maximum(rho, 1e-300))
+                                   [:, None, None] * grad_rho)
+        dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
+        banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
+        if len(banded):  # face rows fading out beyond their triangle's boundary
+            width = band[a][banded]
+            slopes = _log_ramp_slope(lam[banded] + width, width)                      # (K, 3)
+            grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
+        grad_f = None
+        if p.driving_force == "normal":
+            # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
+            F = -np.einsum("ij,ij->i", f_ext[node], normal)
+            slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
+                                             p.stiffness, p.cutoff, p.taper)
+            slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
+            grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
+        clock.add("jacobian")
+        return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f,
+                       geometric=(dn, dlam))
+
+    def _candidates(self, x: np.ndarray, nodes: np.ndarray, clock: StepClock
+                    ) -> tuple[np.ndarray, ...]:
+        """All (node, triangle) pairs passing the geometric tests.
+
+        Returns ``node, tri``, the unsided distance ``d0``, the barycentric
+        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.
+        """
+        xt = np.ascontiguousarray(x.T)
+        frames = _TriangleFrames.at(xt, self.triangles)
+        near = self._search(xt, frames, nodes, clock)
+        node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
+        clock.add("narrow")
+        return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+
+    def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
+                clock: StepClock) -> tuple[np.ndarray, ...]:
+        """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays)."""
+        lo, hi = padded_bounds(xt, self.triangles, self.search_distance, frames.normal,
+                               slack=PRISM_SLACK)
+        # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
+        # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
+        # face rows reach their band beyond the sides (a fraction of the triangle's height,
+        # wide beyond a free edge): widen by that too, or a large triangle's band is cut
+        # off by the box and its row appears with a jump
+        extent = self.side_band * np.asarray(frames.altitudes).T
+        width = np.maximum(self.params.reach, extent.max(axis=1))
+        lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
+        lo -= lateral
+        hi += lateral
+        index = CellIndex(xt, lo, hi, nodes)
+        clock.add("broad")
+        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 5
+                 + (np.empty(0, dtype=bool),)]
+        for first in range(0, len(self.triangles), BLOCK_SIZE):
+            block = slice(first, first + BLOCK_SIZE)
+            node, tri = index.box_pairs(lo[:, block], hi[:, block])
+            clock.add("broad")
+            found.append(self._near(xt, frames, node, tri + first))
+            clock.add("narrow")
+        return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
+
+    def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
+              tri: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The cheap tests of :meth:`_narrow`: near the plane, within reach of the triangle
+        or in its fade band, and not in its neighbourhood.  Returns ``node, tri``, the plane
+        distance ``d0``, the barycentric coordinates ``lam0, lam1, lam2`` of the projection,
+        ``beyond``, a lower bound on its in-plane distance from the triangle, and
+        ``in_band`` (projection in the triangle or its fade band)."""
+        o, g1, g2 = frames.origin, frames.grad1, frames.grad2
+        r = [xt[i][node] - o[i][tri] for i in range(3)]
+        n = frames.normal
+        d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
+        near = np.flatnonzero(np.abs(d0) < self.search_distance)
+        node, tri, d0 = node[near], tri[near], d0[near]
+        r = [ri[near] for ri in r]
+        lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
+        lam2 = r[0] * g2[0][tri] + r[1] * g2[1][tri] + r[2] * g2[2][tri]
+        lam0 = 1.0 - lam1 - lam2
+        # in the plane, the projection lies at least -λ_j/|∇λ_j| from the line of the edge
+        # opposite vertex j: a cheap lower bound on the distance to the triangle that
+        # discards most outside pairs before the exact closest-point computation
+        alt = frames.altitudes
+        beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
+                            -lam2 * alt[2][tri])
+        band = self._row_bands(node, tri)
+        in_band = (lam0 > -band[:, 0]) & (lam1 > -band[:, 1]) & (lam2 > -band[:, 2])
+        h = self.params.reach
+        reach = np.flatnonzero(in_band | ((beyond < h) & (np.abs(d0) < h)))
+        keep = ~self._in_neighbourhood(node[reach], tri[reach])
+        return tuple(v[reach][keep] for v in (node, tri, d0, lam0, lam1, lam2, beyond, in_band))
+
+    def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
+                tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray, lam1: np.ndarray,
+                lam2: np.ndarray, beyond: np.ndarray, in_band: np.ndarray
+                ) -> tuple[np.ndarray, ...]:
+        """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
+
+        A node whose projection falls inside the triangle meets its face: the
+        closest point is the projection, at plane distance ``d0``.  A node
+        whose projection falls outside meets the closest point ``q`` on the
+        triangle's boundary (an edge or a vertex) if it is within the cut-off
+        of it.  Using the closest feature makes the distance to the surface,
+        the contact direction and the reaction weights continuous as a node
+        slides over a ridge between two triangles or off a free edge -- with
+        face-only contact the force jumps there by up to the full pressure
+        load, and Newton's method cycles.
+
+        Returns ``node, tri``, the unsided plane distance ``d0 = (x_p - x_{t0})·n_t``,
+        the distance ``gap`` to the closest point (``nan`` for face contacts),
+        the barycentric coordinates ``(K, 3)`` of the closest point and the
+        offset ``x_p - q`` ``(K, 3)``.
+        """
+        lam = np.stack([lam0, lam1, lam2], axis=1)
+        lam_min = lam.min(axis=1)
+        n = frames.normal
+        h = self.params.reach
+        # face rows: the projection inside the triangle or in a thin band around it (where
+        # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
+        # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
+        face = np.flatnonzero(in_band)
+        out = np.flatnonzero((lam_min < -INSIDE_TOLERANCE)
+                             & (np.hypot(beyond, d0) < h + _BOUND_MARGIN))
+        xo = xt.T
+        t = self.triangles[tri[out]]
+        q, bary = closest_point_on_triangles(xo[node[out]], xo[t[:, 0]], xo[t[:, 1]],
+                                             xo[t[:, 2]])
+        v = xo[node[out]] - q
+        gap = np.linalg.norm(v, axis=1)
+        near_edge = gap < self.params.reach
+        out, bary, v, gap = out[near_edge], bary[near_edge], v[near_edge], gap[near_edge]
+        rows = np.concatenate([face, out])
+        return (node[rows], tri[rows], d0[rows],
+                np.concatenate([np.full(len(face), np.nan), gap]),
+                np.concatenate([lam[face], bary]),
+                np.concatenate([d0[face, None] * n[:, tri[face]].T, v]),
+                lam[rows])
+
+    def _row_bands(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
+        """``(K, 3)`` fade bands of face rows: wide beyond another body's free edge."""
+        other = self.node_body[node] != self.triangle_body[tri]
+        return np.where(other[:, None], self.side_band[tri], FACE_BAND)
+
+    def _in_neighbourhood(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
+        """True where the node is a vertex of the triangle or an edge-neighbour of one."""
+        table = self.excluded_nodes
+        if self._excluded_by_column is None or self._excluded_by_column[0] is not table:
+            self._excluded_by_column = (table, np.ascontiguousarray(table.T))
+        columns = self._excluded_by_column[1]       # one contiguous gather per column: 3x faster
+        hit = np.zeros(len(node), dtype=bool)
+        for column in columns:
+            hit |= column[tri] == node
+        return hit
+
+    def _side(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, f_ext: np.ndarray,
+              n_tri: np.ndarray) -> np.ndarray:
+        """Side ``s = ±1`` of each node w.r.t. each triangle (see the class docstring).
+
+        The recorded state decides only for pairs that were already close then
+        (within twice the search distance of the triangle): their side is the
+        one the node was on, so a node that has crossed a little is pushed back.
+        A pair that was not close is a new contact; as no node moves through a
+        surface unseen in one step (the solver bounds the step's motion), the
+        node is on its own side now.  The sign of the recorded *plane* distance
+        of a far pair is meaningless -- a node beside a curved sheet can lie
+        behind a triangle's extended plane while approaching its front -- and
+        using it pushed such nodes through the sheet.
+        """
+        from_position = np.where(d0 < 0.0, -1.0, 1.0)
+        if self._history is None:
+            from_pressure = -np.sign(_rowdot(f_ext[node], n_tri))
+            return np.where(from_pressure != 0.0, from_pressure, from_position)
+        x_prev, n_prev = self._history
+        t = self.triangles[tri]
+        recorded = _rowdot(x_prev[node] - x_prev[t[:, 0]], n_prev[tri])
+        side = from_position.copy()
+        # only a pair whose recorded side differs from its present one needs the (costly)
+        # closest-point test: for all others both answers agree
+        differ = np.flatnonzero((np.abs(recorded) >= SIDE_TOLERANCE)
+                                & (np.sign(recorded) != from_position))
+        p, t = node[differ], t[differ]
+        q, _ = closest_point_on_triangles(x_prev[p], x_prev[t[:, 0]], x_prev[t[:, 1]],
+                                          x_prev[t[:, 2]])
+        was_close = np.linalg.norm(x_prev[p] - q, axis=1) < 2.0 * self.params.search_distance
+        side[differ[was_close]] = np.sign(recorded[differ[was_close]])
+        return side
+
+    def _pair_weight(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
+        """Weight of each (node, triangle) pair under the pairing rule (see ContactParameters).
+
+        ``"one_pass"``: 1 if the node's body precedes the triangle's, 0.5 within a
+        body (both halves of a fold test each other), 0 otherwise.
+        """
+        if self.params.pairing == "two_pass":
+            return np.ones(len(node))
+        nb, tb = self.node_body[node], self.triangle_body[tri]
+        return np.where(nb < tb, 1.0, np.where(nb == tb, 0.5, 0.0))
+
+    def _blend_weights(self, node: np.ndarray, tri: np.ndarray, d: np.ndarray,
+                       presence: np.ndarray | None = None) -> np.ndarray:
+        """Weights blending the candidate triangles of each (node, body) into one contact.
+
+        ``w_i ∝ exp(-(d_i - min d)/ε)``, normalised per (node, body), with
+        ``ε`` = :attr:`ContactParameters.blend_distance`.  The same contact seen
+        through a shared edge or vertex (equal distances) is counted once; a node
+        in a crease of a folded sheet, which projects into two faces at an
+        angle, feels a force whose direction turns continuously from one face's
+        normal to the other's as its distances to them cross.  Keeping only the
+        nearest face makes that direction jump, and Newton's method cycles.
+
+        A row of presence ``p < 1`` blends at the distance ``h − p·(h − d)``
+        (``h`` the cut-off), i.e. ``w ∝ p·e^{p(h − d)/ε}``: as a row fades out it
+        also recedes towards the cut-off.  With ``p e^{-d/ε}`` alone a deep row
+        that is fading out (a node far behind the extended plane of a neighbour's
+        triangle it has slid past) would outweigh the present rows by ``e^{Δd/ε}``
+        until its presence is ~1e-8 and then vanish within ~1e-5 mm: a jump of
+        several mN in the node's force (6 mN at the triple point of the normal
+        valve meshed at 0.8 mm, 10 mN on a graft) that no solver settles.  Fully
+        present rows (``p = 1``) blend as ``e^{-d/ε}``.
+        """
+        group = node * len(self.body_labels) + self.triangle_body[tri]
+        _, inverse = np.unique(group, return_inverse=True)
+        # the signed distance orders the surfaces from the most penetrated to the farthest;
+        # |d| would put a penetration and a gap of the same size on a par, and has a kink
+        if presence is not None:
+            h = self.params.cutoff
+            d = h - presence * (h - d)
+        nearest = np.full(inverse.max(initial=-1) + 1, np.inf)
+        np.minimum.at(nearest, inverse, d)
+        w = np.exp(-(d - nearest[inverse]) / self.params.blend_distance)
+        if presence is not None:
+            w = w * presence
+        total = np.bincount(inverse, w)[inverse]
+        return np.divide(w, total, out=np.zeros_like(w), where=total > 0.0)
