@@ -26,7 +26,6 @@ from valve_dolfinx._compat import MPI, dolfinx, package_versions
 from valve_dolfinx.bending import BendingHook, bending_stiffness_matrix, flexural_rigidity
 from valve_dolfinx.boundary_conditions import clamp_edges
 from valve_dolfinx.contact import ContactParameters, PlaneContact, SurfaceContact
-from valve_dolfinx.contact.edges import EdgeContact
 from valve_dolfinx.exceptions import ParameterError, check_range
 from valve_dolfinx.geometry.distributed import ValveDomain, create_valve_domain
 from valve_dolfinx.geometry.valve import (
@@ -91,11 +90,7 @@ class CaseConfig:
     ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
     ``D = E_b·t³/12`` (:mod:`valve_dolfinx.bending`; 0 = pure membrane): it
     regularises the slack free-edge tip at the triple point, without which the
-    three-leaflet valve does not converge (docs/closure.md).  ``edge_contact``
-    adds free-edge "scissors" contact
-    (:class:`~valve_dolfinx.contact.edges.EdgeContact`); it is off by default:
-    with it and the bending stiffness the three-leaflet valve crossed earlier
-    than without it (docs/closure.md).
+    three-leaflet valve does not converge (docs/numerics.md).
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
     pseudo-transient continuation with PETSc TS and SNES, contact and bending
     in the Newton system from the first step,
@@ -113,7 +108,6 @@ class CaseConfig:
     graft_material: FungMaterial = BOVINE_PERICARDIUM
     root: RootParameters = field(default_factory=RootParameters)
     contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
-    edge_contact: bool = False
     solver: str = "ptc"
     pseudo_transient: PseudoTransientParameters = field(
         default_factory=PseudoTransientParameters)
@@ -368,11 +362,6 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      attached_reference=valve.points,
                                      attached_exclusion_radius=config.commissure_exclusion_mm,
                                      boundary_band=config.free_edge_band))
-        if config.edge_contact:
-            models.append(EdgeContact(valve.edges[valve.edge_tags == FREE_EDGE],
-                                      valve.num_nodes, config.contact, reference=valve.points,
-                                      exclusion_radius=SELF_EXCLUSION_FACTOR
-                                      * config.contact.reach))
         # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
         # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
