@@ -254,28 +254,37 @@ class ContactRows:
                 left=(-(G * f * w)[multi], (w * f)[multi]),
                 right=(w[multi, None, None] * grad_L[multi],
                        c[multi, None, None] * grad_p[multi]))
+        # a row without force, force slope or driving-force turning has no blocks of its own
+        # (about half the rows: in range of the search, out of reach of the law); it may
+        # still take part in its group's coupling above
+        live = np.flatnonzero((f != 0.0) | (self.dfdd != 0.0) if self.grad_f is None else
+                              (f != 0.0) | (self.dfdd != 0.0)
+                              | np.any(self.grad_f != 0.0, axis=(1, 2)))
+        ids_live, B_live, own, magnitude_live = ids[live], B[live], own[live], magnitude[live]
         # one allocation for all blocks: at 10^5 triangles they take hundreds of MB
-        size = count * m * m
+        size = len(live) * m * m
         total = size + (0 if outer is None else len(outer[0]))
         rows = np.empty(total, dtype=np.int64)
         cols = np.empty(total, dtype=np.int64)
         blocks = np.empty((total, 3, 3))
-        row_blocks = blocks[:size].reshape(count, m, m, 3, 3)
+        row_blocks = blocks[:size].reshape(len(live), m, m, 3, 3)
         if self.geometric is None:
-            np.multiply(Bn[:, :, None, :, None], own[:, None, :, None, :], out=row_blocks)
+            np.multiply(Bn[live][:, :, None, :, None], own[:, None, :, None, :], out=row_blocks)
         else:
             # with the turning direction and the sliding point (linearisation module):
             # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m
-            dn, dlam = self.geometric
-            T = B[:, :, None, None] * own[:, None, :, :]                           # (A, m, m, 3)
-            T[:, 1:] -= magnitude[:, None, None, None] * dlam
-            np.multiply(self.normal[:, None, None, :, None], T[:, :, :, None, :], out=row_blocks)
-            scratch = np.empty((count, m, 3, 3))
+            dn, dlam = (g[live] for g in self.geometric)
+            T = B_live[:, :, None, None] * own[:, None, :, :]                      # (A, m, m, 3)
+            T[:, 1:] -= magnitude_live[:, None, None, None] * dlam
+            np.multiply(self.normal[live][:, None, None, :, None], T[:, :, :, None, :],
+                        out=row_blocks)
+            scratch = np.empty((len(live), m, 3, 3))
             for r in range(m):  # one row node at a time: a temporary of a quarter of the size
-                np.multiply((B[:, r] * magnitude)[:, None, None, None], dn, out=scratch)
+                np.multiply((B_live[:, r] * magnitude_live)[:, None, None, None], dn,
+                            out=scratch)
                 row_blocks[:, r] += scratch
-        rows[:size] = np.repeat(ids, m, axis=1).ravel()
-        cols[:size] = np.tile(ids, (1, m)).ravel()
+        rows[:size] = np.repeat(ids_live, m, axis=1).ravel()
+        cols[:size] = np.tile(ids_live, (1, m)).ravel()
         if outer is not None:
             rows[size:], cols[size:], blocks[size:] = outer
         if clock is not None:
@@ -351,6 +360,10 @@ def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_
     size = np.bincount(entry_group)[entry_group]
     a = np.repeat(np.arange(count), size)
     b = np.repeat(start, size) + np.arange(len(a)) - np.repeat(np.cumsum(size) - size, size)
+    # a node whose rows carry no force (α = β = 0) takes no coupling blocks
+    pushed = np.any(P != 0.0, axis=1) | np.any(P2 != 0.0, axis=1)
+    keep = pushed[a]
+    a, b = a[keep], b[keep]
     blocks = P[a, :, None] * Q[b, None, :] + P2[a, :, None] * Q2[b, None, :]
     return entry_node[a], entry_node[b], blocks
 
