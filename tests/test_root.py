@@ -138,7 +138,7 @@ def test_wall_that_cannot_hold_the_pressure_says_what_to_change():
 
 
 def test_config_round_trip_keeps_the_loaded_diameter():
-    from valve_dolfinx.closure import CaseConfig
+    from valve_dolfinx.config import CaseConfig
 
     config = CaseConfig(root=RootParameters(loaded_diameter=19.0))
     again = CaseConfig.from_dict(config.to_dict())
@@ -150,11 +150,8 @@ def test_default_wall_with_the_real_leaflets_reaches_the_wrap_diameter():
     """The leaflets' membrane energy on the cylinder of radius R (coarse valve, as
     ``solve_case`` builds it): the default root lands at 20 mm within 0.2 mm, pulled back
     from the free tube by leaflets stretched beyond the wrap diameter."""
-    from valve_dolfinx.closure import (
-        CaseConfig,
-        _leaflet_energy_on_cylinder,
-        closure_model,
-    )
+    from valve_dolfinx.case import _leaflet_energy_on_cylinder, closure_model
+    from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.distributed import create_valve_domain
     from valve_dolfinx.geometry.valve import ValveParameters, build_valve
 
@@ -182,7 +179,7 @@ def test_default_wall_with_the_real_leaflets_reaches_the_wrap_diameter():
 def test_cli_root_diameter_reaches_the_case_config(tmp_path, monkeypatch):
     """``valve-dolfinx run --root-diameter D`` builds the case with
     RootParameters(loaded_diameter=D); the case configuration is captured as it is built."""
-    import valve_dolfinx.closure as closure
+    import valve_dolfinx.config as closure
     from valve_dolfinx.cli import main
 
     class Captured(Exception):

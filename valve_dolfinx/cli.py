@@ -116,7 +116,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.closure import CaseConfig, run_case
+    from valve_dolfinx.case import run_case
+    from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.root import RootParameters
 

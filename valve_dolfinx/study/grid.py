@@ -49,7 +49,10 @@ NORMAL_CASE = "normal"
 
 
 def case_name(width_pct: float | None, height_pct: float | None) -> str:
-    """Folder name of a case: ``normal`` or ``W<width>_H<height>`` (as in closure.case_name)."""
+    """Folder name of a case: ``normal`` or ``W<width>_H<height>``.
+
+    The same as :func:`valve_dolfinx.config.case_name` of the case's geometry.
+    """
     if width_pct is None:
         return NORMAL_CASE
     return f"W{width_pct:g}_H{height_pct:g}"

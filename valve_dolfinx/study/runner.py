@@ -85,8 +85,8 @@ ProgressCallback = Callable[[dict], None]
 
 def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, figures: bool = True,
                      fields_output: bool = True) -> dict:
-    """The study's case: :func:`valve_dolfinx.closure.run_case` into ``out_dir``."""
-    from valve_dolfinx.closure import run_case
+    """The study's case: :func:`valve_dolfinx.case.run_case` into ``out_dir``."""
+    from valve_dolfinx.case import run_case
 
     return run_case(config, out_dir, comm=comm, figures=figures,
                     fields_output=fields_output).to_dict()
@@ -107,7 +107,7 @@ def _merge(base: dict, overrides: dict, where: str = "case") -> dict:
 
 def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[str, Any]:
     """The validated ``CaseConfig`` of every case (raises ParameterError before any run)."""
-    from valve_dolfinx.closure import CaseConfig
+    from valve_dolfinx.config import CaseConfig
 
     data = _merge(CaseConfig().to_dict(), settings.case)
     if settings.mesh_size_mm is not None:
@@ -127,7 +127,7 @@ def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[st
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
     """result.json of a case that raised: the SPEC fields unknown, the reason recorded."""
     from valve_dolfinx._compat import package_versions
-    from valve_dolfinx.closure import CaseResult
+    from valve_dolfinx.result import CaseResult
 
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
                         converged=False, n_ranks=n_ranks, wall_time_s=wall,
