@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx, package_versions
+from valve_dolfinx._version import __version__, git_commit
 from valve_dolfinx.bending import BendingHook, bending_stiffness_matrix, flexural_rigidity
 from valve_dolfinx.boundary_conditions import clamp_edges
 from valve_dolfinx.config import CaseConfig, case_name
@@ -199,8 +200,9 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
              figures: bool = True, fields_output: bool = True) -> CaseResult:
     """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
 
-    Files: ``result.json`` (SPEC §7 fields + parameters + versions),
-    ``config.json``, ``history.csv`` (time steps), ``fields.xdmf``/``.h5``
+    Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
+    hash), ``config.toml`` (the configuration that ran, reloadable with
+    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.xdmf``/``.h5``
     (displacement, stress, strain, contact force) and the PNG figures.
     """
     from valve_dolfinx import output
@@ -239,6 +241,9 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         parameters={**config.to_dict(), "root_state": state.root.to_dict(),
                     "python": platform.python_version()},
         versions=package_versions(),
+        settings_hash=config.settings_hash(),
+        version=__version__,
+        git_commit=git_commit(),
     )
     result.wall_time_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     if out_dir is not None:

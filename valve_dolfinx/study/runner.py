@@ -92,34 +92,21 @@ def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, figures: bool = T
                     fields_output=fields_output).to_dict()
 
 
-def _merge(base: dict, overrides: dict, where: str = "case") -> dict:
-    out = dict(base)
-    for key, value in overrides.items():
-        if key not in base:
-            raise ParameterError(f"study.{where}: unknown key {key!r}; allowed keys are "
-                                 f"{', '.join(sorted(base))}")
-        if isinstance(value, dict) and isinstance(base[key], dict) and key != "petsc_options":
-            out[key] = _merge(base[key], value, f"{where}.{key}")
-        else:
-            out[key] = value
-    return out
-
-
 def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[str, Any]:
-    """The validated ``CaseConfig`` of every case (raises ParameterError before any run)."""
-    from valve_dolfinx.config import CaseConfig
+    """The validated ``CaseConfig`` of every case (raises ParameterError before any run).
 
-    data = _merge(CaseConfig().to_dict(), settings.case)
+    The study's case settings (``settings.case``), then its mesh size and wall-clock
+    limit, then each case's graft size.
+    """
+    from valve_dolfinx.config import config_from_dict, set_dotted
+
+    data = json.loads(json.dumps(settings.case))  # a deep copy
     if settings.mesh_size_mm is not None:
-        data["geometry"]["mesh_size"] = settings.mesh_size_mm
+        set_dotted(data, "geometry.mesh_size", settings.mesh_size_mm)
     if settings.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
-        for value in data.values():
-            if isinstance(value, dict) and "wall_time_limit_s" in value:
-                value["wall_time_limit_s"] = settings.wall_time_limit_s
-    try:
-        base = CaseConfig.from_dict(data)
-    except TypeError as err:
-        raise ParameterError(f"study.case: {err}") from None
+        for stage in ("pseudo_transient", "dynamics"):
+            set_dotted(data, f"{stage}.wall_time_limit_s", settings.wall_time_limit_s)
+    base = config_from_dict(data, source="study case settings")
     return {c.name: base if c.is_normal else base.with_graft(c.width_pct, c.height_pct)
             for c in cases}
 
