@@ -114,12 +114,14 @@ def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[st
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
     """result.json of a case that raised: the SPEC fields unknown, the reason recorded."""
     from valve_dolfinx._compat import package_versions
+    from valve_dolfinx._version import __version__, git_commit
     from valve_dolfinx.result import CaseResult
 
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
                         converged=False, n_ranks=n_ranks, wall_time_s=wall,
                         solver_message=error, parameters=config.to_dict(),
-                        versions=package_versions()).to_dict()
+                        versions=package_versions(), settings_hash=config.settings_hash(),
+                        version=__version__, git_commit=git_commit()).to_dict()
     result["error"] = error
     return result
 
