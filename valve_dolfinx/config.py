@@ -35,7 +35,10 @@ __all__ = [
     "CONFIG_FILE",
     "CaseConfig",
     "case_name",
+    "DESCRIPTIONS",
+    "describe",
     "load_config",
+    "read_config_file",
     "apply_overrides",
     "set_dotted",
     "config_from_dict",
@@ -381,9 +384,9 @@ def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> 
         type, or a value outside its range.
     """
     defaults = CaseConfig()
+    known = {f.name: f for f in fields(CaseConfig)}
     kw: dict[str, Any] = {}
     for key, value in data.items():
-        known = {f.name: f for f in fields(CaseConfig)}
         if key not in known:
             raise ParameterError(f"{source}: unknown key {key!r}; allowed keys are "
                                  f"{', '.join(sorted(known))}")

@@ -96,7 +96,7 @@ def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[st
     """The validated ``CaseConfig`` of every case (raises ParameterError before any run).
 
     The study's case settings (``settings.case``), then its mesh size and wall-clock
-    limit, then each case's graft size.
+    limit, then each case's graft size (none for the normal valve).
     """
     from valve_dolfinx.config import config_from_dict, set_dotted
 
@@ -107,8 +107,7 @@ def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[st
         for stage in ("pseudo_transient", "dynamics"):
             set_dotted(data, f"{stage}.wall_time_limit_s", settings.wall_time_limit_s)
     base = config_from_dict(data, source="study case settings")
-    return {c.name: base if c.is_normal else base.with_graft(c.width_pct, c.height_pct)
-            for c in cases}
+    return {c.name: base.with_graft(c.width_pct, c.height_pct) for c in cases}
 
 
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
