@@ -14,7 +14,8 @@ import argparse
 from dataclasses import replace
 
 from valve_dolfinx._compat import MPI
-from valve_dolfinx.closure import CaseConfig, run_case
+from valve_dolfinx.case import run_case
+from valve_dolfinx.config import CaseConfig
 from valve_dolfinx.geometry.valve import ValveParameters
 
 CASES = {

@@ -2,7 +2,7 @@
 
 Runs the normal valve, W0/H0, W27/H0 and W21/H27 (``--cases``; default 0.8 mm mesh,
 ``--mesh-size``) one after the other, each in a fresh single-process subprocess, through
-:func:`valve_dolfinx.closure.run_case` with an output folder in a temporary directory, as
+:func:`valve_dolfinx.case.run_case` with an output folder in a temporary directory, as
 ``valve-dolfinx run`` does (result, fields and figures written).  Each subprocess runs its
 case ``--repeat`` times (default 2): the first run compiles the forms into an empty FFCx
 cache (``--user-cache``: into the user's cache, which may already hold them), the later
@@ -90,9 +90,11 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
     import resource
 
     logging.basicConfig(level=logging.WARNING)
-    from valve_dolfinx import closure, output
+    from valve_dolfinx import case as closure
+    from valve_dolfinx import output
     from valve_dolfinx._compat import MPI, dolfinx
     from valve_dolfinx.bending import BendingHook
+    from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.solvers.contact_hook import ContactHook
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
@@ -123,7 +125,7 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
         return state
 
     closure.solve_case = keep_report
-    config = closure.CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
+    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
     if case is not None:
         config = config.with_graft(*case)
     runs = []

@@ -3,7 +3,7 @@
 Runs the normal valve and every graft of the study grid (widths 0, 7, 14, 21, 27 % x
 heights 0, 13, 27, 40 %; ``--cases`` for a subset) at the default mesh (``--mesh-size``),
 each case in its own single-process subprocess (``--jobs N`` at a time, default 1)
-through :func:`valve_dolfinx.closure.run_case` with an output folder (a temporary one,
+through :func:`valve_dolfinx.case.run_case` with an output folder (a temporary one,
 or ``--keep DIR``), as ``valve-dolfinx run`` does.  Prints a line per case as it ends,
 then a Markdown table in grid order: converged, static residual (mN), penetration (mm),
 figure of merit (``min_coaptation_height_mm``), raw minimum, central height, regurgitant
@@ -52,7 +52,8 @@ def worker(case, mesh_size: float, limit: float | None, out: str) -> dict:
     from dataclasses import replace
 
     logging.basicConfig(level=logging.WARNING)
-    from valve_dolfinx.closure import CaseConfig, run_case
+    from valve_dolfinx.case import run_case
+    from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.valve import ValveParameters
 
     config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))

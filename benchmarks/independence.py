@@ -19,7 +19,8 @@ from dataclasses import replace
 import numpy as np
 
 from valve_dolfinx._compat import MPI
-from valve_dolfinx.closure import CaseConfig, analyse_case, solve_case
+from valve_dolfinx.case import analyse_case, solve_case
+from valve_dolfinx.config import CaseConfig
 from valve_dolfinx.geometry.valve import ValveParameters
 
 

@@ -52,10 +52,8 @@ def run_one(h: float) -> dict:
     from valve_dolfinx.geometry.verification import sphere_domain
     from valve_dolfinx.materials import FungMaterial
     from valve_dolfinx.membrane import MembraneModel
-    from valve_dolfinx.solvers.pseudo_transient import (
-        PseudoTransientParameters,
-        PseudoTransientSolver,
-    )
+    from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+    from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
     comm = MPI.COMM_WORLD
     domain = sphere_domain(R, h, comm=comm)

@@ -18,7 +18,7 @@
 # Each case replaces the non-coronary leaflet by a graft whose flat outline is
 # the native one scaled by $(1+W)$ across and $(1+H)$ in height, loads the
 # valve to 80 mmHg and measures the coaptation of the native leaflets
-# (`valve_dolfinx.closure.run_case`).  The figure of merit is the **minimum
+# (`valve_dolfinx.case.run_case`).  The figure of merit is the **minimum
 # coaptation height** of the native leaflets along their free edges (SPEC §6):
 # a graft is good enough when the valve seals (regurgitant orifice area 0) and
 # the native leaflets overlap at least as much as in the normal valve.

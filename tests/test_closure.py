@@ -23,11 +23,11 @@ import numpy as np
 import pytest
 
 from valve_dolfinx._compat import MPI
-from valve_dolfinx.closure import CaseConfig, run_case, solve_case
+from valve_dolfinx.case import run_case, solve_case
+from valve_dolfinx.config import CaseConfig, load_config
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.valve import ValveParameters
-from valve_dolfinx.solvers.dynamics import DynamicsParameters
-from valve_dolfinx.solvers.pseudo_transient import PseudoTransientParameters
+from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
 
 #: SPEC §7 fields every result.json carries
 RESULT_FIELDS = ("graft_width_pct", "graft_height_pct", "converged", "min_coaptation_height_mm",
@@ -86,8 +86,8 @@ def test_reference_writes_every_output(reference):
         assert key in data, key
     assert data["converged"] is True
     assert data["parameters"]["symmetric_reference"] is True
-    assert CaseConfig.from_dict(json.loads((out / "config.json").read_text())) == \
-        _reference_config()
+    assert load_config(out / "config.toml") == _reference_config()
+    assert data["settings_hash"] == _reference_config().settings_hash()
     for name in ("closed_valve_ventricular.png", "closed_valve.png", "cut_planes.png",
                  "fields.xdmf", "fields.h5", "history.csv", "loaded_state.npz"):
         assert (out / name).stat().st_size > 0, name
@@ -210,7 +210,7 @@ def default_mesh_cases():
     mine = {}
     for name, (rank, config) in DEFAULT_MESH_CASES.items():
         if rank == comm.rank:
-            from valve_dolfinx.closure import analyse_case
+            from valve_dolfinx.case import analyse_case
 
             state = solve_case(config, MPI.COMM_SELF)
             mine[name] = (state.report, analyse_case(state, config).result_fields(),

@@ -4,7 +4,7 @@ itself, Newton's convergence rate with contact active, and MPI consistency.
 The solves take the closure's path: pseudo-transient continuation at the full pressure
 (:class:`PseudoTransientSolver`) with the contact hook given as a factory of the solver's
 :class:`NodalCoupling`, its driving force frozen at the last accepted step
-(``lag_driving_force``) as in :mod:`valve_dolfinx.closure`."""
+(``lag_driving_force``) as in :mod:`valve_dolfinx.case`."""
 
 from __future__ import annotations
 
@@ -18,10 +18,8 @@ from valve_dolfinx.materials import FungMaterial
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
-from valve_dolfinx.solvers.pseudo_transient import (
-    PseudoTransientParameters,
-    PseudoTransientSolver,
-)
+from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
 #: Soft isotropic Fung membrane: the sheets balloon into each other at 2 kPa.
 SOFT = FungMaterial.isotropic(c=20.0, a=5.0, thickness=0.2, name="soft")

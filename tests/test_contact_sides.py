@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from valve_dolfinx.closure import VALVE_CONTACT as VALVE
+from valve_dolfinx.config import VALVE_CONTACT as VALVE
 from valve_dolfinx.contact import SurfaceContact
 
 #: a 4 mm square of body 0 (normals +z), and a node of body 1

@@ -119,7 +119,7 @@ def test_cli_mesh_writes_reloadable_meshes(tmp_path, flag):
                            str(tmp_path), "--mesh-size", "1.0"], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    from valve_dolfinx.io import load_valve_mesh
+    from valve_dolfinx.geometry.valve import load_valve_mesh
 
     valve = load_valve_mesh(tmp_path / "graft_valve_W21_H27.npz")
     assert valve.parameters.graft_width_pct == 21.0

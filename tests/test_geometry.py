@@ -334,7 +334,8 @@ def test_broken_mesh_rejected(valve):
 
 
 def test_save_load_roundtrip(valve, tmp_path):
-    from valve_dolfinx.io import export_valve_vtu, load_valve_mesh
+    from valve_dolfinx.geometry.valve import load_valve_mesh
+    from valve_dolfinx.io import export_valve_vtu
 
     path = valve.save(tmp_path / "valve.npz")
     back = load_valve_mesh(path)

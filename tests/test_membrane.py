@@ -32,10 +32,8 @@ from valve_dolfinx.geometry.verification import (
 )
 from valve_dolfinx.materials import NATIVE_LEAFLET, FungMaterial
 from valve_dolfinx.membrane import MembraneModel
-from valve_dolfinx.solvers.pseudo_transient import (
-    PseudoTransientParameters,
-    PseudoTransientSolver,
-)
+from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
 P80 = 10.666  # kPa
 #: residual tolerance (mN) of the exact-solution checks

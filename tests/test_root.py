@@ -138,7 +138,7 @@ def test_wall_that_cannot_hold_the_pressure_says_what_to_change():
 
 
 def test_config_round_trip_keeps_the_loaded_diameter():
-    from valve_dolfinx.closure import CaseConfig
+    from valve_dolfinx.config import CaseConfig
 
     config = CaseConfig(root=RootParameters(loaded_diameter=19.0))
     again = CaseConfig.from_dict(config.to_dict())
@@ -150,11 +150,8 @@ def test_default_wall_with_the_real_leaflets_reaches_the_wrap_diameter():
     """The leaflets' membrane energy on the cylinder of radius R (coarse valve, as
     ``solve_case`` builds it): the default root lands at 20 mm within 0.2 mm, pulled back
     from the free tube by leaflets stretched beyond the wrap diameter."""
-    from valve_dolfinx.closure import (
-        CaseConfig,
-        _leaflet_energy_on_cylinder,
-        closure_model,
-    )
+    from valve_dolfinx.case import _leaflet_energy_on_cylinder, closure_model
+    from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.distributed import create_valve_domain
     from valve_dolfinx.geometry.valve import ValveParameters, build_valve
 
@@ -180,23 +177,21 @@ def test_default_wall_with_the_real_leaflets_reaches_the_wrap_diameter():
 
 
 def test_cli_root_diameter_reaches_the_case_config(tmp_path, monkeypatch):
-    """``valve-dolfinx run --root-diameter D`` builds the case with
-    RootParameters(loaded_diameter=D); the case configuration is captured as it is built."""
-    import valve_dolfinx.closure as closure
+    """``valve-dolfinx run --root-diameter D`` runs the case with
+    RootParameters(loaded_diameter=D); the configuration is captured as the case starts."""
+    import valve_dolfinx.case as case
     from valve_dolfinx.cli import main
 
     class Captured(Exception):
         pass
 
-    def capture(**kwargs):
-        raise Captured(kwargs)
+    def capture(config, *args, **kwargs):
+        raise Captured(config)
 
-    monkeypatch.setattr(closure, "CaseConfig", capture)
+    monkeypatch.setattr(case, "run_case", capture)
     with pytest.raises(Captured) as caught:
         main(["run", "--out", str(tmp_path / "case"), "--root-diameter", "21.5"])
-    assert caught.value.args[0]["root"] == RootParameters(loaded_diameter=21.5)
+    assert caught.value.args[0].root == RootParameters(loaded_diameter=21.5)
     with pytest.raises(Captured) as caught:
         main(["run", "--out", str(tmp_path / "case")])
-    assert caught.value.args[0]["root"] == RootParameters()
-    # out of range: a usage error (exit status 2) naming the parameter, before any solve
-    assert main(["run", "--out", str(tmp_path / "bad"), "--root-diameter", "5"]) == 2
+    assert caught.value.args[0].root == RootParameters()

@@ -4,10 +4,14 @@ Commands
 --------
 mesh    write the default valve meshes (normal and graft) for ParaView and reuse
 run     close one valve (normal, or with a graft) under 80 mmHg and write
-        result.json, ParaView fields and figures to --out
+        result.json, config.toml, ParaView fields and figures to --out
 sweep   the graft sizing study: the normal valve and every graft of a width x height
         grid (resumable, spread over MPI ranks; --list / --case-index for job arrays)
 report  rebuild a study folder's tables, figures, recommendation and report.md
+config  print the case configuration as TOML, every setting with its unit and meaning
+
+Settings: the defaults < --config FILE < --set section.key=value < the named flags
+(--mesh-size, --graft-width, ...).
 """
 
 from __future__ import annotations
@@ -22,11 +26,17 @@ __all__ = ["main"]
 log = logging.getLogger("valve_dolfinx")
 
 
+def _version() -> str:
+    from valve_dolfinx._version import __version__
+
+    return __version__
+
+
 def _add_geometry_args(p: argparse.ArgumentParser) -> None:
     from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
 
-    p.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE,
-                   help="target triangle edge length in mm (default %(default)s)")
+    p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
+                   help=f"target triangle edge length in mm (default {DEFAULT_MESH_SIZE})")
     p.add_argument("--graft-width", type=float, default=None, metavar="W",
                    help="graft width enlargement in per cent (omit for the normal valve)")
     p.add_argument("--graft-height", type=float, default=None, metavar="H",
@@ -64,7 +74,8 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
         name = "normal_valve" if w is None else f"graft_valve_W{w:g}_H{h:g}"
         valve = None
         if comm.rank == 0:
-            valve = build_valve(mesh_size=args.mesh_size, graft_width_pct=w, graft_height_pct=h)
+            size = {} if args.mesh_size is None else {"mesh_size": args.mesh_size}
+            valve = build_valve(graft_width_pct=w, graft_height_pct=h, **size)
             valve.save(args.out / f"{name}.npz")
             export_valve_vtu(valve, args.out / f"{name}.vtu")
         write_domain_xdmf(create_valve_domain(valve, comm), args.out / f"{name}.xdmf")
@@ -95,14 +106,65 @@ def _progress_bar(comm):
     return update, bar.close
 
 
-def _finished_result(out: Path, config) -> dict | None:
-    """The result.json in ``out`` if it was computed with exactly ``config``."""
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, default=None, metavar="CASE.TOML",
+                   help="configuration file (TOML; `valve-dolfinx config` prints every key); "
+                   "the flags given here override it")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   dest="overrides",
+                   help="override one setting, e.g. --set pressure_mmhg=100 --set "
+                   "geometry.mesh_size=1.6 (repeatable)")
+
+
+def _case_config(args: argparse.Namespace):
+    """The case configuration of ``run``/``config``: defaults < --config < --set < flags."""
+    from valve_dolfinx.config import load_config
+
+    values: dict = {}
+    if getattr(args, "mesh_size", None) is not None:
+        values["geometry.mesh_size"] = args.mesh_size
+    graft = _graft_size(args.parser, args) if hasattr(args, "graft_width") else None
+    if graft is not None:
+        values["geometry.graft_width_pct"], values["geometry.graft_height_pct"] = graft
+    if getattr(args, "root_diameter", None) is not None:
+        values["root.loaded_diameter"] = args.root_diameter
+    if getattr(args, "solver", None) is not None:
+        values["solver"] = args.solver
+    if getattr(args, "symmetric_reference", False):
+        values["symmetric_reference"] = True
+    if getattr(args, "wall_time_limit", None) is not None:
+        for stage in ("pseudo_transient", "dynamics"):
+            values[f"{stage}.wall_time_limit_s"] = args.wall_time_limit
+    return load_config(args.config, args.overrides, values)
+
+
+def _existing_result(out: Path, config, force: bool) -> dict | None:
+    """The result.json already in ``out`` if it is this case's with the same settings.
+
+    Raises ParameterError (before any computation) if ``out`` is a file, or holds the
+    result of a case with other settings (another settings hash) and ``force`` is not
+    given.  The same case with another wall-clock limit is computed again.
+    """
     import json
 
-    try:
-        data = json.loads((out / "result.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
+    from valve_dolfinx.config import settings_hash
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.result import RESULT_FILE
+
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out {out} is a file, not a folder: give a folder for the "
+                             "case's outputs (it is created if missing)")
+    path = out / RESULT_FILE
+    if force or not path.exists():
         return None
+    try:
+        data = json.loads(path.read_text())
+        digest = data.get("settings_hash") or settings_hash(data.get("parameters", {}))
+    except (OSError, ValueError, AttributeError):
+        data, digest = {}, None
+    if digest != config.settings_hash():
+        raise ParameterError(f"--out {out} holds the result of another case (other settings); "
+                             "give another folder, or --force to overwrite it")
     wanted = json.loads(json.dumps(config.to_dict()))
     same = wanted == {k: v for k, v in data.get("parameters", {}).items() if k in wanted}
     return data if same else None
@@ -113,26 +175,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if graft is not None and args.symmetric_reference:
         args.parser.error("--symmetric-reference is the normal valve: drop --graft-width/"
                           "--graft-height, or drop --symmetric-reference")
-    from dataclasses import replace
-
+    config = _case_config(args)  # a bad setting stops here, before DOLFINx is imported
+    done = _existing_result(args.out, config, args.force)
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.closure import CaseConfig, run_case
-    from valve_dolfinx.geometry.valve import ValveParameters
-    from valve_dolfinx.root import RootParameters
+    from valve_dolfinx.case import run_case
 
-    config = CaseConfig(geometry=ValveParameters(mesh_size=args.mesh_size),
-                        root=RootParameters(loaded_diameter=args.root_diameter),
-                        symmetric_reference=args.symmetric_reference, solver=args.solver)
-    if graft is not None:
-        config = config.with_graft(*graft)
-    if args.wall_time_limit is not None:
-        limit = args.wall_time_limit
-        config = replace(config, pseudo_transient=replace(config.pseudo_transient,
-                                                          wall_time_limit_s=limit),
-                         dynamics=replace(config.dynamics, wall_time_limit_s=limit))
     comm = MPI.COMM_WORLD
-    done = _finished_result(args.out, config)
-    if done is not None and not args.force:
+    if done is not None:
         if comm.rank == 0:
             print(f"{args.out}/result.json already holds this case (converged: "
                   f"{done['converged']}); --force recomputes it")
@@ -151,11 +200,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0 if result.converged else 3
 
 
+def _cmd_config(args: argparse.Namespace) -> int:
+    from valve_dolfinx.config import config_toml
+
+    sys.stdout.write(config_toml(_case_config(args)))
+    return 0
+
+
 def _study_settings(args: argparse.Namespace):
-    """Study settings: defaults < the [study] section of --config < command-line flags."""
+    """Study settings: defaults < --config (its [study] table and case settings) < --set
+    (case settings) < command-line flags."""
+    from valve_dolfinx.config import apply_overrides, config_from_dict
     from valve_dolfinx.study.grid import StudySettings, load_study_toml, parse_percentages
 
-    settings = load_study_toml(args.config) if args.config else StudySettings()
+    if args.config:
+        settings = load_study_toml(args.config, args.overrides)
+    else:
+        case = apply_overrides({}, args.overrides)
+        config_from_dict(case, source="--set")
+        settings = StudySettings(case=case)
     changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
                "target_coaptation_mm": args.target_coaptation,
                "wall_time_limit_s": args.wall_time_limit}
@@ -267,8 +330,12 @@ def _add_sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("results/graft_sweep"),
                    help="study folder (default %(default)s)")
     p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
-                   help="configuration file; its [study] section sets the grid and the "
-                   "case settings (flags given here override it)")
+                   help="configuration file: a case configuration (`valve-dolfinx config`) "
+                   "applied to every case, with a [study] table for the grid (flags given "
+                   "here override it)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   dest="overrides",
+                   help="override one case setting of every case (repeatable)")
     p.add_argument("--ranks-per-case", type=int, default=None, metavar="K",
                    help="MPI ranks per case: mpirun -n N runs N/K cases at a time (default 1)")
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
@@ -288,6 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="valve-dolfinx", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("mesh", help="write valve meshes (.npz to reload, .vtu/.xdmf for ParaView)")
@@ -302,8 +370,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--symmetric-reference", action="store_true",
                    help="one leaflet against the two symmetry planes (the normal valve's "
                    "cheap reference of SPEC §4)")
-    # closure.SOLVERS and CaseConfig.solver, spelled out: the parser does not import DOLFINx
-    p.add_argument("--solver", choices=("ptc", "bdf2"), default="ptc",
+    # config.SOLVERS, spelled out: the parser imports nothing of the package
+    p.add_argument("--solver", choices=("ptc", "bdf2"), default=None,
                    help="pseudo-transient continuation to the static equilibrium (the "
                    "default), or damped BDF2 dynamics (SPEC §4, the cross-check)")
     p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
@@ -313,7 +381,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="prescribe the root diameter at 80 mmHg in mm (a patient's measured "
                    "root, 10-40 mm) instead of distending the root with its wall law")
     p.add_argument("--force", action="store_true",
-                   help="recompute even if --out already holds this case's result.json")
+                   help="recompute even if --out already holds this case's result.json, or "
+                   "overwrite another case's result there")
+    _add_config_args(p)
     _add_geometry_args(p)
     p.set_defaults(func=_cmd_run, parser=p)
 
@@ -327,6 +397,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's, or the study's)")
     p.set_defaults(func=_cmd_report, parser=p)
+
+    p = sub.add_parser("config", help="print the case configuration as TOML (defaults, or "
+                       "--config with --set applied), every key with its unit and meaning")
+    _add_config_args(p)
+    p.set_defaults(func=_cmd_config, parser=p)
 
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,

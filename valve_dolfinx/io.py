@@ -1,4 +1,7 @@
-"""Reading and writing meshes, fields and results (atomically where it matters)."""
+"""Writing files atomically; JSON results; the valve surface as VTK for ParaView.
+
+The valve mesh's own reloadable format is :func:`valve_dolfinx.geometry.valve.save_valve_mesh`.
+"""
 
 from __future__ import annotations
 
@@ -12,14 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from valve_dolfinx.exceptions import MeshError
-
 __all__ = [
     "atomic_write",
     "write_json",
     "read_json",
-    "save_valve_mesh",
-    "load_valve_mesh",
     "export_valve_vtu",
 ]
 
@@ -79,62 +78,6 @@ def read_json(path: str | Path) -> Any:
         return json.loads(path.read_text())
     except json.JSONDecodeError as err:
         raise ValueError(f"{path} is not valid JSON ({err}); delete it to recompute") from err
-
-
-# --- valve meshes -------------------------------------------------------------
-_LEAFLET_ARRAYS = ("nodes", "flat", "triangles", "free_edge", "attachment")
-
-
-def save_valve_mesh(valve, path: str | Path) -> Path:
-    """Write a :class:`~valve_dolfinx.geometry.valve.ValveMesh` to ``.npz`` (reloadable)."""
-    path = Path(path).with_suffix(".npz")
-    arrays: dict[str, np.ndarray] = {
-        "points": valve.points, "cells": valve.cells, "cell_tags": valve.cell_tags,
-        "flat": valve.flat, "fibres": valve.fibres, "edges": valve.edges,
-        "edge_tags": valve.edge_tags,
-    }
-    meta = {"parameters": valve.parameters.to_dict(), "leaflets": []}
-    for i, patch in enumerate(valve.leaflets):
-        meta["leaflets"].append({"name": patch.name, "tag": patch.tag, "is_graft": patch.is_graft,
-                                 "shape": {k: getattr(patch.shape, k) for k in (
-                                     "root_diameter", "gamma_deg", "commissure_height",
-                                     "width_pct", "height_pct")}})
-        for key in _LEAFLET_ARRAYS:
-            arrays[f"leaflet{i}_{key}"] = getattr(patch, key)
-    arrays["meta"] = np.array(json.dumps(meta))
-
-    def write(tmp: Path) -> None:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-
-    return atomic_write(path, write)
-
-
-def load_valve_mesh(path: str | Path):
-    """Read a valve mesh written by :func:`save_valve_mesh`, and validate it."""
-    from valve_dolfinx.geometry.outline import LeafletShape
-    from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh, ValveParameters
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such valve mesh; write the default meshes with "
-                                "`valve-dolfinx mesh --out meshes`")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-        meta = json.loads(str(arrays.pop("meta")))
-        leaflets = []
-        for i, info in enumerate(meta["leaflets"]):
-            kw = {key: arrays.pop(f"leaflet{i}_{key}") for key in _LEAFLET_ARRAYS}
-            leaflets.append(LeafletPatch(name=info["name"], tag=info["tag"],
-                                         shape=LeafletShape(**info["shape"]),
-                                         is_graft=info["is_graft"], **kw))
-        valve = ValveMesh(**arrays, leaflets=tuple(leaflets),
-                          parameters=ValveParameters(**meta["parameters"]))
-    except (KeyError, ValueError, TypeError, OSError) as err:
-        raise MeshError(f"{path} is not a valve mesh written by valve_dolfinx ({err}); "
-                        "regenerate it with `valve-dolfinx mesh`") from err
-    return valve.validate()
 
 
 def export_valve_vtu(valve, path: str | Path, point_data: dict | None = None,

@@ -1,4 +1,4 @@
-"""Writing a case's outputs: result.json, config.json, history.csv, ParaView fields, figures.
+"""Writing a case's outputs: result.json, config.toml, history.csv, ParaView fields, figures.
 
 Every file is written atomically (temporary file + rename), so an interrupted
 run never leaves a truncated result behind; ``result.json`` is written last,
@@ -16,14 +16,15 @@ from pathlib import Path
 import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx
+from valve_dolfinx.config import CONFIG_FILE, write_config
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.geometry.valve import LEAFLET_TAGS
 from valve_dolfinx.io import atomic_write, write_json
+from valve_dolfinx.result import POSITIONS_FILE, RESULT_FILE
 
 __all__ = ["write_case", "write_result", "plot_cut_planes", "RESULT_FILE"]
 
 log = logging.getLogger(__name__)
-RESULT_FILE = "result.json"
 
 
 def write_result(out: Path, result, comm: MPI.Comm = MPI.COMM_WORLD) -> Path | None:
@@ -41,9 +42,9 @@ def write_case(out: Path, config, result, state, *, figures: bool = True,
         _write_fields(out / "fields.xdmf", state)
     if comm.rank != 0:
         return
-    write_json(out / "config.json", config.to_dict())
+    write_config(out / CONFIG_FILE, config)
     _write_history(out / "history.csv", state.report.history)
-    _write_positions(out / "loaded_state.npz", state)
+    _write_positions(out / POSITIONS_FILE, state)
     if figures:
         _write_figures(out, state, result)
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-import gmsh
 import numpy as np
 
 from valve_dolfinx.exceptions import MeshError
@@ -77,6 +76,8 @@ def mesh_flat_leaflet(shape: LeafletShape, mesh_size: float, n_commissure: int |
     leaflets -- and of a graft, whose commissure is mapped onto the native one by
     normalised arc length -- carry nodes at identical heights and can share them.
     """
+    import gmsh  # here, so that the geometry's parameters load without Gmsh
+
     shape.check_mesh_size(mesh_size)
     if n_commissure is None:
         n_commissure = commissure_node_count(shape.native().commissure_height, mesh_size)
@@ -100,6 +101,8 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
     cutting through triangles, and the central coaptation height does not
     depend on where an unstructured mesh happens to put its nodes.
     """
+    import gmsh
+
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.option.setNumber("General.Verbosity", 1)
     name = f"leaflet_{id(shape)}"

@@ -21,6 +21,7 @@ Conventions
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from dataclasses import asdict, dataclass, field
@@ -33,6 +34,7 @@ import scipy.sparse.linalg as spla
 from valve_dolfinx.exceptions import MeshError, ParameterError, check_range
 from valve_dolfinx.geometry.flat_mesh import FlatLeafletMesh, mesh_flat_leaflet
 from valve_dolfinx.geometry.outline import MAX_GRAFT_PCT, LeafletShape
+from valve_dolfinx.io import atomic_write
 
 __all__ = [
     "LEAFLET_NAMES",
@@ -44,6 +46,8 @@ __all__ = [
     "LeafletPatch",
     "ValveMesh",
     "build_valve",
+    "save_valve_mesh",
+    "load_valve_mesh",
     "wrap_flat",
     "place_graft",
 ]
@@ -245,9 +249,60 @@ class ValveMesh:
     # --- I/O ----------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         """Write all arrays to ``path`` (``.npz``), atomically."""
-        from valve_dolfinx.io import save_valve_mesh
-
         return save_valve_mesh(self, path)
+
+
+# --- the valve mesh file ---------------------------------------------------------------
+_LEAFLET_ARRAYS = ("nodes", "flat", "triangles", "free_edge", "attachment")
+
+
+def save_valve_mesh(valve: ValveMesh, path: str | Path) -> Path:
+    """Write a :class:`ValveMesh` to ``.npz`` (reloadable)."""
+    path = Path(path).with_suffix(".npz")
+    arrays: dict[str, np.ndarray] = {
+        "points": valve.points, "cells": valve.cells, "cell_tags": valve.cell_tags,
+        "flat": valve.flat, "fibres": valve.fibres, "edges": valve.edges,
+        "edge_tags": valve.edge_tags,
+    }
+    meta = {"parameters": valve.parameters.to_dict(), "leaflets": []}
+    for i, patch in enumerate(valve.leaflets):
+        meta["leaflets"].append({"name": patch.name, "tag": patch.tag, "is_graft": patch.is_graft,
+                                 "shape": {k: getattr(patch.shape, k) for k in (
+                                     "root_diameter", "gamma_deg", "commissure_height",
+                                     "width_pct", "height_pct")}})
+        for key in _LEAFLET_ARRAYS:
+            arrays[f"leaflet{i}_{key}"] = getattr(patch, key)
+    arrays["meta"] = np.array(json.dumps(meta))
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    return atomic_write(path, write)
+
+
+def load_valve_mesh(path: str | Path) -> ValveMesh:
+    """Read a valve mesh written by :func:`save_valve_mesh`, and validate it."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such valve mesh; write the default meshes with "
+                                "`valve-dolfinx mesh --out meshes`")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        meta = json.loads(str(arrays.pop("meta")))
+        leaflets = []
+        for i, info in enumerate(meta["leaflets"]):
+            kw = {key: arrays.pop(f"leaflet{i}_{key}") for key in _LEAFLET_ARRAYS}
+            leaflets.append(LeafletPatch(name=info["name"], tag=info["tag"],
+                                         shape=LeafletShape(**info["shape"]),
+                                         is_graft=info["is_graft"], **kw))
+        valve = ValveMesh(**arrays, leaflets=tuple(leaflets),
+                          parameters=ValveParameters(**meta["parameters"]))
+    except (KeyError, ValueError, TypeError, OSError) as err:
+        raise MeshError(f"{path} is not a valve mesh written by valve_dolfinx ({err}); "
+                        "regenerate it with `valve-dolfinx mesh`") from err
+    return valve.validate()
 
 
 def wrap_flat(flat: np.ndarray, centre_angle: float, diameter: float) -> np.ndarray:

@@ -37,18 +37,18 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import ufl
 
 from valve_dolfinx._compat import PETSc, dolfinx
-from valve_dolfinx.exceptions import check_range
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
+from valve_dolfinx.solvers.parameters import DynamicsParameters
+from valve_dolfinx.solvers.report import DynamicsReport
 
-__all__ = ["DynamicsParameters", "DynamicsReport", "DampedDynamicsSolver", "STATE_LAYOUT"]
+__all__ = ["DampedDynamicsSolver", "STATE_LAYOUT"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
@@ -56,101 +56,6 @@ fem_petsc = dolfinx.fem.petsc
 
 #: forces act on the momentum rows (components 3-5), depend on the displacement (0-2)
 STATE_LAYOUT = NodalLayout(block_size=6, row_offset=3, col_offset=0)
-
-
-@dataclass
-class DynamicsParameters:
-    """Numerical mass, damping and step control (units: s, mm).
-
-    Attributes
-    ----------
-    relaxation_time
-        τ (s): damping per unit stiffness, ``c = k·τ/L²``.
-    mass_ratio
-        Mass time scale over τ: ``ρ = c·mass_ratio·τ`` (small: over-damped).
-    length_scale
-        L (mm) in the stiffness-per-area estimate k/L².
-    stiffness_exponent
-        β in ``c ∝ (k_tissue/k_ref)^β`` (1: damping proportional to stiffness).
-    ramp_time
-        Pressure ramp duration (s), smooth-step shaped.
-    dt_initial, dt_min, dt_max
-        Time steps (s); ``dt_min`` is the floor below which the run is
-        declared stalled.
-    t_max
-        Simulated time limit (s).
-    error_tolerance_mm
-        Local truncation error target of the displacement (mm).
-    stop_increment_mm
-        Convergence: displacement increment of the watched nodes per step (mm).
-    equilibrium_tolerance
-        Convergence also needs the static residual (internal − pressure −
-        contact forces at rest), max-norm over the free nodes, below this (mN):
-        small increments alone can also mean a stalled, tiny time step.
-    max_increment_mm
-        Largest nodal displacement per step (mm): the next step is shortened
-        so that no node moves further, which keeps nodes from tunnelling
-        through a surface between two contact evaluations (the contact search
-        only sees penetrations shallower than ``penetration_depth``).
-    wall_time_limit_s
-        Wall-clock limit of the run (s).
-    max_steps
-        Limit on accepted + rejected steps.
-    newton_max_it
-        Newton iterations per step before the step is retried smaller.
-    petsc_options
-        Extra PETSc options for the TS/SNES/KSP (without prefix), e.g.
-        ``{"snes_linesearch_type": "l2"}``.
-    """
-
-    relaxation_time: float = 1.0
-    mass_ratio: float = 0.05
-    length_scale: float = 10.0
-    stiffness_exponent: float = 1.0
-    ramp_time: float = 1.0
-    dt_initial: float = 1e-3
-    dt_min: float = 1e-8
-    dt_max: float = 50.0
-    t_max: float = 1e5
-    error_tolerance_mm: float = 0.01
-    stop_increment_mm: float = 1e-5
-    max_increment_mm: float = 0.1
-    equilibrium_tolerance: float = 0.05
-    wall_time_limit_s: float = 3600.0
-    max_steps: int = 20000
-    newton_max_it: int = 20
-    petsc_options: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        check_range("relaxation_time", self.relaxation_time, 0.0, 1e6, low_open=True, unit="s")
-        check_range("mass_ratio", self.mass_ratio, 0.0, 1e3, unit="")
-        check_range("length_scale", self.length_scale, 0.0, 1e3, low_open=True, unit="mm")
-        check_range("stiffness_exponent", self.stiffness_exponent, 0.0, 1.0)
-        check_range("ramp_time", self.ramp_time, 0.0, 1e6, low_open=True, unit="s")
-        check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True, unit="s")
-        check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max, unit="s")
-        check_range("error_tolerance_mm", self.error_tolerance_mm, 0.0, 10.0, low_open=True)
-        check_range("stop_increment_mm", self.stop_increment_mm, 0.0, 1.0, low_open=True)
-        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-@dataclass
-class DynamicsReport:
-    converged: bool = False
-    reason: str = ""
-    time: float = 0.0
-    steps: int = 0
-    rejected_steps: int = 0
-    newton_iterations: int = 0
-    last_dt: float = float("nan")
-    last_increment_mm: float = float("nan")
-    rejected_for_motion: int = 0
-    equilibrium_residual: float = float("nan")
-    wall_time_s: float = 0.0
-    history: list[dict] = field(default_factory=list)
 
 
 class _Stalled(RuntimeError):
@@ -224,7 +129,7 @@ class DampedDynamicsSolver:
         local_bc = local_bc[local_bc < imap.size_local * bs]
         self._bc_rows = (imap.local_range[0] * bs + local_bc).astype(PETSc.IntType)
         self._snes_options = snes_options or {}
-        self.report = DynamicsReport()
+        self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
         self._ts = None
         self._progress: Callable[[dict], None] | None = None
 
@@ -466,7 +371,7 @@ class DampedDynamicsSolver:
         """
         self._progress = progress
         self._t0 = time.perf_counter()
-        self.report = DynamicsReport()
+        self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
         self._last_displacement = self.coupling.displacements(self.U)
         self._t_prev = 0.0
         ts = self._make_ts()
@@ -486,14 +391,14 @@ class DampedDynamicsSolver:
         self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.U.x.scatter_forward()
         self._copy_displacement()
-        self.report.equilibrium_residual = self.equilibrium_residual()
+        self.report.residual_mN = self.equilibrium_residual()
         self.report.wall_time_s = time.perf_counter() - self._t0
         log.info("damped dynamics: %s; %d steps (%d rejected), %d Newton its, t = %.4g s, "
                  "|R_static|_inf = %.3g mN, %.1f s",
                  "converged" if self.report.converged else "NOT converged",
                  self.report.steps, self.report.rejected_steps,
                  self.report.newton_iterations, self.report.time,
-                 self.report.equilibrium_residual, self.report.wall_time_s)
+                 self.report.residual_mN, self.report.wall_time_s)
         self._ts = ts
         return self.report
 

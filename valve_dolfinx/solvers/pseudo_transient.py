@@ -48,116 +48,22 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import ufl
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.exceptions import MeshError, check_range
+from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling
+from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+from valve_dolfinx.solvers.report import SolveReport
 
-__all__ = ["PseudoTransientParameters", "SolveReport", "PseudoTransientSolver"]
+__all__ = ["PseudoTransientSolver"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
 fem_petsc = dolfinx.fem.petsc
-
-
-@dataclass
-class PseudoTransientParameters:
-    """Step control of the pseudo-transient continuation (lengths in mm, forces in mN).
-
-    Attributes
-    ----------
-    residual_tolerance
-        Convergence: ``‖R‖∞`` of the static residual at full load (mN).  The slack
-        free edges at the triple point are held only by bending and contact, modes of
-        about 0.3 mN/mm: a residual r leaves them up to r/0.3 mm from their
-        equilibrium.  At 0.05 mN the normal valve's minimum coaptation height moved by
-        0.2 mm with the Newton settings; at 1e-3 mN (the default, ~0.003 mm) two
-        settings gave the same height to 0.001 mm, for a few Newton steps more.
-    mass_length_mm
-        L in the nodal mass ``p·A_i/L`` (mm): the distance an unbalanced node
-        moves in a unit pseudo-time step.
-    dt_initial, dt_min, dt_max
-        Pseudo-time steps (dimensionless); below ``dt_min`` the run has stalled.
-    increment
-        Factor on the residual ratio of switched evolution relaxation (PETSc's
-        ``-ts_pseudo_increment``): Δτ grows by it while the residual stalls.
-    growth_limit
-        Largest factor by which Δτ grows (or shrinks) from one step to the next.
-    max_step_motion_mm
-        The next Δτ is shortened so that no node is expected to move further
-        than this in one step.
-    newton_motion_mm
-        Largest nodal motion of one Newton update (mm); longer updates are
-        scaled down (contact is evaluated at every Newton iterate).
-    newton_max_it, newton_rtol
-        Newton iterations per step and the relative residual reduction that ends
-        a step's Newton solve; a step whose Newton solve fails is retried with
-        half the Δτ.
-    max_steps
-        Limit on pseudo-time steps (accepted + rejected).
-    wall_time_limit_s
-        Wall-clock limit (s).
-    petsc_options
-        Extra PETSc options (without prefix) for the TS/SNES/KSP.
-    """
-
-    residual_tolerance: float = 1e-3
-    mass_length_mm: float = 1.0
-    dt_initial: float = 0.05
-    dt_min: float = 1e-8
-    dt_max: float = 1e12
-    increment: float = 1.2
-    growth_limit: float = 3.0
-    max_step_motion_mm: float = 0.5
-    newton_motion_mm: float = 0.1
-    newton_max_it: int = 12
-    newton_rtol: float = 0.05
-    max_steps: int = 4000
-    wall_time_limit_s: float = 900.0
-    petsc_options: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
-                    unit="mN", hint="nodal pressure forces are ~1-10 mN; 1e-3 mN is the default")
-        check_range("mass_length_mm", self.mass_length_mm, 0.0, 1e3, low_open=True, unit="mm")
-        check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True)
-        check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max)
-        check_range("increment", self.increment, 1.0, 10.0)
-        check_range("growth_limit", self.growth_limit, 1.0, 100.0, low_open=True)
-        check_range("max_step_motion_mm", self.max_step_motion_mm, 0.0, 10.0, low_open=True,
-                    unit="mm")
-        check_range("newton_motion_mm", self.newton_motion_mm, 0.0, 10.0, low_open=True,
-                    unit="mm", hint="keep it below the contact's penetration window")
-        check_range("newton_max_it", self.newton_max_it, 1, 1000)
-        check_range("newton_rtol", self.newton_rtol, 0.0, 1.0, low_open=True)
-        check_range("max_steps", self.max_steps, 1, 1e7)
-        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
-                    unit="s")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-@dataclass
-class SolveReport:
-    """How a solve ended; ``history`` has a row per accepted step."""
-
-    converged: bool = False
-    reason: str = ""
-    steps: int = 0
-    rejected_steps: int = 0
-    newton_iterations: int = 0
-    pseudo_time: float = 0.0
-    last_dt: float = float("nan")
-    residual_mN: float = float("nan")
-    wall_time_s: float = 0.0
-    timings: dict = field(default_factory=dict)
-    history: list[dict] = field(default_factory=list)
 
 
 class _Stop(RuntimeError):
@@ -216,7 +122,7 @@ class PseudoTransientSolver:
                                   or [np.empty(0, np.int32)])
         self._bc_local = local_bc[local_bc < imap.size_local * bs]
         self._bc_rows = (imap.local_range[0] * bs + self._bc_local).astype(PETSc.IntType)
-        self.report = SolveReport()
+        self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self._progress: Callable[[dict], None] | None = None
         self._clock: dict[str, float] = {}
 
@@ -395,10 +301,10 @@ class PseudoTransientSolver:
         r_inf, r_two = self.static_residual()
         dt = ts.getTimeStep()
         r.steps = ts.getStepNumber()
-        r.pseudo_time = ts.getTime()
+        r.time = ts.getTime()
         r.newton_iterations += ts.getSNES().getIterationNumber()
         r.residual_mN, r.last_dt = r_inf, dt
-        entry = {"step": r.steps, "pseudo_time": r.pseudo_time, "dt": dt,
+        entry = {"step": r.steps, "pseudo_time": r.time, "dt": dt,
                  "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
                  "watched_motion_mm": watched,
                  "newton_iterations": ts.getSNES().getIterationNumber()}
@@ -439,7 +345,7 @@ class PseudoTransientSolver:
         self._progress = progress
         self._t0 = time.perf_counter()
         self._clock = {}
-        self.report = SolveReport()
+        self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self.model.pressure.value = self.target_pressure
         self._last_displacement = self.coupling.displacements(self.u)
         _, self._r_prev = self.static_residual()

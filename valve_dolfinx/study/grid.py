@@ -2,7 +2,7 @@
 
 A study is the normal valve plus every graft of a width × height grid of
 enlargements (per cent of the native leaflet).  This module turns what a user
-typed (command-line values, a ``[study]`` section of a TOML file) into a
+typed (command-line values, a ``[study]`` table of a TOML file) into a
 validated :class:`StudySettings` and enumerates its cases in a fixed order:
 the normal valve first, then the grafts width by width, heights ascending
 within each width.  The case index (``--case-index I``) is the position in
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import math
-import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -49,7 +48,10 @@ NORMAL_CASE = "normal"
 
 
 def case_name(width_pct: float | None, height_pct: float | None) -> str:
-    """Folder name of a case: ``normal`` or ``W<width>_H<height>`` (as in closure.case_name)."""
+    """Folder name of a case: ``normal`` or ``W<width>_H<height>``.
+
+    The same as :func:`valve_dolfinx.config.case_name` of the case's geometry.
+    """
     if width_pct is None:
         return NORMAL_CASE
     return f"W{width_pct:g}_H{height_pct:g}"
@@ -163,8 +165,8 @@ class StudySettings:
         MPI ranks that share one case (``mpirun -n N`` runs ``N / ranks_per_case``
         cases at a time).
     case
-        Overrides of the case configuration (``CaseConfig.to_dict()`` layout, nested
-        tables for nested parameters), applied to every case.
+        Case settings applied to every case (the ``CaseConfig.to_dict()`` layout, nested
+        tables for nested parameters; in a file, its top-level keys and tables).
     """
 
     widths_pct: tuple[float, ...] = STUDY_WIDTHS_PCT
@@ -252,10 +254,13 @@ class StudySettings:
         return StudySettings(**data)
 
 
-def load_study_toml(path: str | Path) -> StudySettings:
-    """The ``[study]`` section of a TOML configuration file (other sections are ignored).
+def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySettings:
+    """A sizing study's configuration file: the ``[study]`` table and the case settings.
 
-    Example::
+    The file is a case configuration (the layout ``valve-dolfinx config`` prints, read
+    by ``valve-dolfinx run --config`` too) with a ``[study]`` table for the grid; its
+    case settings apply to every case, whose graft size the grid sets.  ``overrides``
+    are ``section.key=value`` changes of the case settings (``--set``).  Example::
 
         [study]
         widths = [0, 7, 14, 21, 27]     # per cent
@@ -263,17 +268,31 @@ def load_study_toml(path: str | Path) -> StudySettings:
         mesh_size = 0.8                 # mm
         panel_cases = ["W0_H0", "W7_H0", "W21_H27"]
 
-        [study.case.dynamics]           # overrides of every case's configuration
-        wall_time_limit_s = 1800
+        [dynamics]                      # the case settings of every case
+        max_steps = 30000
+
+    Raises
+    ------
+    ParameterError
+        On an unknown key or a bad value, in ``[study]`` or in the case settings
+        (named with its table), before anything runs.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such configuration file (--config)")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ParameterError(f"{path} is not valid TOML ({err})") from None
-    if "study" not in data or not isinstance(data["study"], dict):
-        raise ParameterError(f"{path} has no [study] section; put the sweep settings under "
-                             "[study] (widths, heights, mesh_size, ...)")
-    return StudySettings.from_dict(data["study"], source=f"{path} [study]")
+    from valve_dolfinx.config import (
+        STUDY_TABLE,
+        apply_overrides,
+        config_from_dict,
+        read_config_file,
+    )
+
+    data = read_config_file(path)
+    study = data.pop(STUDY_TABLE, {})
+    if not isinstance(study, dict):
+        raise ParameterError(f"{path}: {STUDY_TABLE} must be a table ([study]) of the sweep "
+                             "settings (widths, heights, mesh_size, ...)")
+    if "case" in study:
+        raise ParameterError(f"{path}: [study.case] is not read; write the case settings at "
+                             "the top level of the file, in the layout `valve-dolfinx config` "
+                             "prints (e.g. [dynamics] max_steps = 30000)")
+    apply_overrides(data, overrides)
+    config_from_dict(data, source=str(path))  # the case settings' errors, named, now
+    return StudySettings.from_dict({**study, "case": data}, source=f"{path} [study]")

@@ -85,54 +85,42 @@ ProgressCallback = Callable[[dict], None]
 
 def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, figures: bool = True,
                      fields_output: bool = True) -> dict:
-    """The study's case: :func:`valve_dolfinx.closure.run_case` into ``out_dir``."""
-    from valve_dolfinx.closure import run_case
+    """The study's case: :func:`valve_dolfinx.case.run_case` into ``out_dir``."""
+    from valve_dolfinx.case import run_case
 
     return run_case(config, out_dir, comm=comm, figures=figures,
                     fields_output=fields_output).to_dict()
 
 
-def _merge(base: dict, overrides: dict, where: str = "case") -> dict:
-    out = dict(base)
-    for key, value in overrides.items():
-        if key not in base:
-            raise ParameterError(f"study.{where}: unknown key {key!r}; allowed keys are "
-                                 f"{', '.join(sorted(base))}")
-        if isinstance(value, dict) and isinstance(base[key], dict) and key != "petsc_options":
-            out[key] = _merge(base[key], value, f"{where}.{key}")
-        else:
-            out[key] = value
-    return out
-
-
 def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[str, Any]:
-    """The validated ``CaseConfig`` of every case (raises ParameterError before any run)."""
-    from valve_dolfinx.closure import CaseConfig
+    """The validated ``CaseConfig`` of every case (raises ParameterError before any run).
 
-    data = _merge(CaseConfig().to_dict(), settings.case)
+    The study's case settings (``settings.case``), then its mesh size and wall-clock
+    limit, then each case's graft size (none for the normal valve).
+    """
+    from valve_dolfinx.config import config_from_dict, set_dotted
+
+    data = json.loads(json.dumps(settings.case))  # a deep copy
     if settings.mesh_size_mm is not None:
-        data["geometry"]["mesh_size"] = settings.mesh_size_mm
+        set_dotted(data, "geometry.mesh_size", settings.mesh_size_mm)
     if settings.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
-        for value in data.values():
-            if isinstance(value, dict) and "wall_time_limit_s" in value:
-                value["wall_time_limit_s"] = settings.wall_time_limit_s
-    try:
-        base = CaseConfig.from_dict(data)
-    except TypeError as err:
-        raise ParameterError(f"study.case: {err}") from None
-    return {c.name: base if c.is_normal else base.with_graft(c.width_pct, c.height_pct)
-            for c in cases}
+        for stage in ("pseudo_transient", "dynamics"):
+            set_dotted(data, f"{stage}.wall_time_limit_s", settings.wall_time_limit_s)
+    base = config_from_dict(data, source="study case settings")
+    return {c.name: base.with_graft(c.width_pct, c.height_pct) for c in cases}
 
 
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
     """result.json of a case that raised: the SPEC fields unknown, the reason recorded."""
     from valve_dolfinx._compat import package_versions
-    from valve_dolfinx.closure import CaseResult
+    from valve_dolfinx._version import __version__, git_commit
+    from valve_dolfinx.result import CaseResult
 
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
                         converged=False, n_ranks=n_ranks, wall_time_s=wall,
                         solver_message=error, parameters=config.to_dict(),
-                        versions=package_versions()).to_dict()
+                        versions=package_versions(), settings_hash=config.settings_hash(),
+                        version=__version__, git_commit=git_commit()).to_dict()
     result["error"] = error
     return result
 

@@ -25,10 +25,8 @@ and taken over.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import logging
-import math
 import os
 import shutil
 import socket
@@ -38,8 +36,8 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from valve_dolfinx.config import canonical_hash
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.io import write_json
 
@@ -78,24 +76,12 @@ def config_hash(config: dict) -> str:
     """SHA-256 of a case configuration (``CaseConfig.to_dict()``) as canonical JSON.
 
     Keys are sorted and NaN/infinity written as null, so the hash depends on the
-    values only.  Output settings (figures, ParaView fields, logging) are not part
-    of ``CaseConfig`` and do not enter it.
+    values only.  Unlike ``CaseConfig.settings_hash`` it includes the wall-clock
+    limits: a case that ran out of time is recomputed when the limit is raised.
+    Output settings (figures, ParaView fields, logging) are not part of
+    ``CaseConfig`` and do not enter it.
     """
-    text = json.dumps(_canonical(config), sort_keys=True, separators=(",", ":"),
-                      allow_nan=False, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _canonical(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _canonical(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_canonical(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if hasattr(value, "item") and callable(value.item):  # NumPy scalars
-        return _canonical(value.item())
-    return value
+    return canonical_hash(config)
 
 
 def case_dir(out: Path, name: str) -> Path:

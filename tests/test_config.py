@@ -1,0 +1,304 @@
+"""Configuration files, the public API and the run folder's guard.
+
+One real closure runs here: the normal valve's symmetric reference on a 1.6 mm mesh
+(about 20 s), from a TOML file through ``valve-dolfinx run --config``.  Everything
+else reads or writes configurations, or stops before computing.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import subprocess
+import sys
+from dataclasses import fields, replace
+from pathlib import Path
+
+import pytest
+
+from valve_dolfinx.config import (
+    DESCRIPTIONS,
+    CaseConfig,
+    config_toml,
+    describe,
+    load_config,
+    settings_hash,
+)
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.geometry.valve import ValveParameters
+from valve_dolfinx.root import RootParameters
+from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+
+#: the case the real run computes: cheap, and every file of a case is written
+CASE_TOML = "symmetric_reference = true\n\n[geometry]\nmesh_size = 1.6\n"
+
+
+def _errors(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+def _must_not_run(monkeypatch) -> None:
+    import valve_dolfinx.case as case
+
+    def fail(*args, **kwargs):
+        raise AssertionError("a case was computed")
+
+    monkeypatch.setattr(case, "run_case", fail)
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+# --- writing and reading ----------------------------------------------------------------------
+def test_printed_defaults_load_as_the_defaults(tmp_path, capsys):
+    from valve_dolfinx.cli import main
+
+    assert main(["config"]) == 0
+    text = capsys.readouterr().out
+    (tmp_path / "case.toml").write_text(text)
+    assert load_config(tmp_path / "case.toml") == CaseConfig()
+    settings = [line for line in text.splitlines() if line and not line.startswith(("#", "["))]
+    assert len(settings) > 60
+    assert all("  # " in line for line in settings)  # every key with its unit and meaning
+    assert "pressure_mmhg = 80.0  # mmHg; " in text and "mesh_size = 0.8  # mm; " in text
+
+
+def test_every_setting_has_a_unit_and_a_meaning():
+    data = CaseConfig().to_dict()
+    for key, value in data.items():
+        for sub in value if isinstance(value, dict) else [None]:
+            section, name = (key, sub) if sub is not None else ("", key)
+            unit, meaning = describe(section, name)
+            assert meaning, f"{section}.{name}"
+    listed = sum(len(v) for k, v in DESCRIPTIONS.items() if k != "material")
+    assert listed + len(DESCRIPTIONS["material"]) * 2 == sum(
+        len(v) if isinstance(v, dict) else 1 for v in data.values())
+
+
+def test_a_changed_configuration_round_trips(tmp_path):
+    """Every kind of value (unset, a graft, a PETSc option table, an integer for a real
+    number) comes back equal through the written TOML."""
+    config = CaseConfig(geometry=ValveParameters(mesh_size=1.6, graft_width_pct=21,
+                                                 graft_height_pct=27.0),
+                        root=RootParameters(loaded_diameter=21.5), pressure_mmhg=95.0,
+                        pseudo_transient=PseudoTransientParameters(
+                            petsc_options={"ksp_type": "preonly", "snes_max_it": 7}),
+                        solver="bdf2")
+    (tmp_path / "c.toml").write_text(config_toml(config))
+    again = load_config(tmp_path / "c.toml")
+    assert again == config and again.settings_hash() == config.settings_hash()
+    assert isinstance(again.geometry.graft_width_pct, float)
+
+
+def test_overrides_and_flags_apply_in_order(tmp_path):
+    (tmp_path / "c.toml").write_text("pressure_mmhg = 90\n[geometry]\nmesh_size = 1.2\n")
+    config = load_config(tmp_path / "c.toml", ["pressure_mmhg=100", "solver=bdf2",
+                                               "root.loaded_diameter=none"],
+                         {"geometry.mesh_size": 1.6})
+    assert config.pressure_mmhg == 100.0 and config.solver == "bdf2"
+    assert config.geometry.mesh_size == 1.6 and config.root.loaded_diameter is None
+    assert config.native_material == CaseConfig().native_material  # the rest: defaults
+
+
+@pytest.mark.parametrize("text,named", [
+    ("pressure = 80\n", "unknown key 'pressure'"),
+    ("[geometry]\nmesh_sise = 1.0\n", "unknown key 'geometry.mesh_sise'"),
+    ("[study]\n[contact]\nstifness = 3\n", "unknown key 'contact.stifness'"),
+    ("pressure_mmhg = 900\n", "pressure_mmhg = 900"),
+    ("[geometry]\nmesh_size = 40\n", "geometry.mesh_size = 40"),
+    ("[graft_material]\nc = -1\n", "graft_material.c = -1"),
+    ("[root]\nloaded_diameter = 5\n", "root.loaded_diameter = 5"),
+    ("[pseudo_transient]\nresidual_tolerance = 0\n", "pseudo_transient.residual_tolerance = 0"),
+    ("[dynamics]\nmax_steps = \"many\"\n", "dynamics.max_steps = 'many' must be a int"),
+    ("geometry = 3\n", "geometry must be a table"),
+    ("pressure_mmhg = \n", "is not valid TOML"),
+])
+def test_bad_file_names_the_key(tmp_path, text, named):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ParameterError) as err:
+        load_config(path)
+    assert named in str(err.value) and str(path) in str(err.value)
+
+
+def test_cli_bad_configuration_stops_before_computing(tmp_path, caplog, monkeypatch):
+    from valve_dolfinx.cli import main
+
+    _must_not_run(monkeypatch)
+    path = tmp_path / "bad.toml"
+    path.write_text("[geometry]\ngraft_width_pct = 500\ngraft_height_pct = 0\n")
+    assert main(["run", "--config", str(path), "--out", str(tmp_path / "out")]) == 2
+    (err,) = _errors(caplog)
+    assert "geometry.graft_width_pct = 500" in err and "\n" not in err
+    assert main(["run", "--set", "nosuch.key=1", "--out", str(tmp_path / "out")]) == 2
+    assert "unknown key 'nosuch'" in _errors(caplog)[-1]
+    assert main(["run", "--set", "pressure_mmhg", "--out", str(tmp_path / "out")]) == 2
+    assert "section.key=value" in _errors(caplog)[-1]
+    assert not (tmp_path / "out").exists()
+
+
+def test_settings_hash_is_the_physics_and_numerics():
+    base = CaseConfig()
+    timed = replace(base, pseudo_transient=replace(base.pseudo_transient, wall_time_limit_s=5.0))
+    assert timed.settings_hash() == base.settings_hash()  # a wall-clock limit is not physics
+    assert replace(base, pressure_mmhg=81.0).settings_hash() != base.settings_hash()
+    mesh = replace(base, geometry=replace(base.geometry, mesh_size=1.6))
+    assert mesh.settings_hash() != base.settings_hash()
+    # result.json's parameters (the configuration plus the root state) hash the same
+    assert settings_hash({**base.to_dict(), "root_state": {"diameter": 20.1}}) == \
+        base.settings_hash()
+
+
+# --- the package -------------------------------------------------------------------------------
+def test_import_is_light_and_the_api_is_complete():
+    code = ("import sys, valve_dolfinx as vd\n"
+            "heavy = [m for m in ('dolfinx', 'petsc4py', 'matplotlib', 'pyvista', 'gmsh') "
+            "if m in sys.modules]\n"
+            "assert not heavy, heavy\n"
+            "vd.CaseConfig(); vd.load_config; vd.load_case; vd.build_valve\n"
+            "heavy = [m for m in ('dolfinx', 'petsc4py', 'matplotlib', 'pyvista') "
+            "if m in sys.modules]\n"
+            "assert not heavy, heavy\n"
+            "assert all(callable(getattr(vd, n)) for n in vd.__all__ if n != '__version__')\n"
+            "print(vd.__version__)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    import valve_dolfinx
+
+    assert proc.stdout.strip() == valve_dolfinx.__version__
+    assert {"build_valve", "CaseConfig", "load_config", "run_case", "run_sweep",
+            "load_case"} <= set(valve_dolfinx.__all__)
+
+
+def test_cli_version(capsys):
+    import valve_dolfinx
+    from valve_dolfinx.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.strip() == f"valve-dolfinx {valve_dolfinx.__version__}"
+
+
+def test_config_needs_no_dolfinx():
+    code = ("import sys\n"
+            "from valve_dolfinx.config import load_config, config_toml\n"
+            "config_toml(load_config(overrides=['pressure_mmhg=90']))\n"
+            "assert not {'dolfinx', 'petsc4py', 'gmsh'} & set(sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+# --- a run from a configuration file -----------------------------------------------------------
+@pytest.fixture(scope="module")
+def case_run(tmp_path_factory):
+    """``valve-dolfinx run --config case.toml`` of the 1.6 mm symmetric reference."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.cli import main
+
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("serial fixture")
+    folder = tmp_path_factory.mktemp("config_run")
+    (folder / "case.toml").write_text(CASE_TOML)
+    out = folder / "case"
+    code = main(["run", "--config", str(folder / "case.toml"), "--out", str(out)])
+    return code, folder, out
+
+
+def test_run_writes_the_resolved_configuration(case_run):
+    code, folder, out = case_run
+    assert code == 0
+    data = json.loads((out / "result.json").read_text())
+    written = load_config(out / "config.toml")
+    assert written == load_config(folder / "case.toml")
+    assert written.settings_hash() == data["settings_hash"]
+    assert written.geometry.mesh_size == data["mesh_size_mm"] == 1.6
+    import valve_dolfinx
+
+    assert data["version"] == valve_dolfinx.__version__
+    assert data["git_commit"] is None or len(data["git_commit"]) == 40
+    # every setting is written, not only those the file gave
+    assert "[dynamics]" in (out / "config.toml").read_text()
+    names = {f.name for f in fields(CaseConfig)}
+    assert names <= set(data["parameters"])
+
+
+def test_the_written_configuration_is_this_case(case_run, capsys):
+    """Run again from the written config.toml into the same folder: the same settings, so
+    the stored result is this case's (not recomputed)."""
+    from valve_dolfinx.cli import main
+
+    _, _, out = case_run
+    before = _tree(out)
+    assert main(["run", "--config", str(out / "config.toml"), "--out", str(out)]) == 0
+    assert "already holds this case" in capsys.readouterr().out
+    assert _tree(out) == before
+
+
+def test_another_case_never_overwrites_a_result(case_run, caplog, monkeypatch):
+    from valve_dolfinx.cli import main
+
+    _must_not_run(monkeypatch)
+    _, _, out = case_run
+    before = _tree(out)
+    for argv in (["--set", "pressure_mmhg=100"], ["--config", str(out / "config.toml"),
+                                                  "--mesh-size", "2.0"]):
+        caplog.clear()
+        assert main(["run", *argv, "--out", str(out)]) == 2
+        (err,) = _errors(caplog)
+        assert f"--out {out}" in err and "--force" in err and "\n" not in err
+    assert _tree(out) == before
+
+
+def test_out_that_is_a_file_stops_at_once(tmp_path, caplog, monkeypatch):
+    from valve_dolfinx.cli import main
+
+    _must_not_run(monkeypatch)
+    target = tmp_path / "result.txt"
+    target.write_text("keep me")
+    assert main(["run", "--out", str(target)]) == 2
+    (err,) = _errors(caplog)
+    assert f"--out {target} is a file" in err and "\n" not in err
+    assert target.read_text() == "keep me"
+
+
+def test_changed_pressure_in_the_file_changes_the_result(case_run, tmp_path):
+    """100 instead of 80 mmHg in the file: the root (step 1, solved before the closure)
+    distends further.  One pseudo-time step of the closure is enough to see it."""
+    from valve_dolfinx.cli import main
+
+    _, folder, out = case_run
+    text = (out / "config.toml").read_text()
+    assert "pressure_mmhg = 80.0" in text
+    path = tmp_path / "higher.toml"
+    path.write_text(text.replace("pressure_mmhg = 80.0", "pressure_mmhg = 100.0")
+                    .replace("max_steps = 4000", "max_steps = 1"))
+    assert main(["run", "--config", str(path), "--out", str(tmp_path / "higher")]) == 3
+    low = json.loads((out / "result.json").read_text())
+    high = json.loads((tmp_path / "higher" / "result.json").read_text())
+    assert high["parameters"]["pressure_mmhg"] == 100.0
+    assert high["root_diameter_mm"] > low["root_diameter_mm"] + 0.01
+    assert high["settings_hash"] != low["settings_hash"]
+
+
+def test_load_case_gives_the_surface_to_draw(case_run):
+    import numpy as np
+
+    from valve_dolfinx import load_case
+
+    _, _, out = case_run
+    case = load_case(out)
+    data = json.loads((out / "result.json").read_text())
+    assert case.result.central_coaptation_height_mm == data["central_coaptation_height_mm"]
+    assert case.config == load_config(out / "config.toml")
+    # the symmetric reference is drawn as the solved leaflet and its two mirror images
+    assert len(case.valve.leaflets) == 3 and case.positions.shape == (case.valve.num_nodes, 3)
+    with np.load(out / "loaded_state.npz") as written:
+        n = len(written["positions"])
+        assert np.array_equal(case.positions[:n], written["positions"])
+    with pytest.raises(FileNotFoundError, match="not a finished case folder"):
+        load_case(out.parent)

@@ -1,0 +1,260 @@
+"""One closure case, from geometry to result (SPEC §2-§7).
+
+:func:`run_case` builds the valve (normal, or with a graft), distends the root
+(step 1), holds the attachment at the distended root and brings the leaflets to
+their static equilibrium under the diastolic pressure with leaflet contact and
+bending (step 2: pseudo-transient continuation, or damped BDF2 dynamics as the
+cross-check), then measures coaptation and writes the result, the configuration,
+ParaView fields and figures.  It never raises because a solve failed: a stalled
+or diverged run is reported with ``converged: false`` and where it stopped, and
+whatever was computed is written.  :func:`solve_case` and :func:`analyse_case`
+are its two halves, for tests and benchmarks that need the live objects.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from valve_dolfinx._compat import MPI, dolfinx, package_versions
+from valve_dolfinx._version import __version__, git_commit
+from valve_dolfinx.bending import BendingHook, bending_stiffness_matrix, flexural_rigidity
+from valve_dolfinx.boundary_conditions import clamp_edges
+from valve_dolfinx.config import CaseConfig, case_name
+from valve_dolfinx.contact import PlaneContact, SurfaceContact
+from valve_dolfinx.geometry.distributed import ValveDomain, create_valve_domain
+from valve_dolfinx.geometry.symmetry import mirror_leaflet, single_leaflet, symmetry_planes
+from valve_dolfinx.geometry.valve import ATTACHMENT, ValveMesh, build_valve
+from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.result import CaseResult
+from valve_dolfinx.root import RootState, distend_root
+from valve_dolfinx.solvers.contact_hook import ContactHook
+from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
+from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
+from valve_dolfinx.solvers.report import SolveReport
+
+__all__ = ["CaseState", "closure_model", "solve_case", "analyse_case", "run_case"]
+
+log = logging.getLogger(__name__)
+fem = dolfinx.fem
+
+#: own-body triangles closer than this many contact reaches (reference state) are not
+#: contacts (see SurfaceContact: a fold meets itself across about 1.57 reaches of material)
+SELF_EXCLUSION_FACTOR = 1.5
+#: the aortic pressure acts on the aortic side, against the chart normal
+VALVE_PRESSURE_SIDE = -1.0
+
+
+# --- building blocks -----------------------------------------------------------------------
+def closure_model(domain: ValveDomain, config: CaseConfig) -> MembraneModel:
+    """The membrane model of a valve domain: native leaflets and (if present) the graft."""
+    materials = {}
+    for patch in domain.valve.leaflets:
+        materials[patch.tag] = config.graft_material if patch.is_graft else config.native_material
+    return MembraneModel(domain, materials, pressure_side=VALVE_PRESSURE_SIDE,
+                         quadrature_degree=config.quadrature_degree)
+
+
+def _radial_scaling(model: MembraneModel, factor: float) -> fem.Function:
+    """Displacement that scales every node's distance from the valve axis by ``factor``."""
+    u = fem.Function(model.V, name="root_scaling")
+    u.interpolate(lambda x: np.stack([(factor - 1) * x[0], (factor - 1) * x[1], 0 * x[2]]))
+    return u
+
+
+def _leaflet_energy_on_cylinder(model: MembraneModel, wrap_radius: float
+                                ) -> Callable[[float], float]:
+    """R ↦ membrane energy of the unloaded leaflets lying on the cylinder of radius R."""
+    energy = fem.form(model.strain_energy())
+    comm = model.domain.comm
+    saved = model.u.x.array.copy()
+
+    def evaluate(R: float) -> float:
+        model.u.x.array[:] = _radial_scaling(model, R / wrap_radius).x.array
+        value = comm.allreduce(fem.assemble_scalar(energy), op=MPI.SUM)
+        model.u.x.array[:] = saved
+        return float(value)
+
+    return evaluate
+
+
+def leaflet_bending_matrix(valve: ValveMesh, model: MembraneModel, modulus_kpa: float):
+    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.bending`), D = E_b·t³/12 with
+    the thickness of each node's tissue; no curvature is measured on the boundary."""
+    node_rigidity = np.zeros(valve.num_nodes)
+    for tag, material in model.materials.items():
+        cells = valve.cells[valve.cell_tags == tag]
+        node_rigidity[cells.ravel()] = flexural_rigidity(modulus_kpa, material.thickness)
+    return bending_stiffness_matrix(valve.cells, valve.flat, valve.num_nodes,
+                                    np.unique(valve.edges), node_rigidity)
+
+
+# --- the case ---------------------------------------------------------------------------------
+@dataclass
+class CaseState:
+    """Live objects of a solved case, for post-processing and tests."""
+
+    domain: ValveDomain
+    model: MembraneModel
+    root: RootState
+    positions: np.ndarray  # (N, 3) loaded positions (on every rank)
+    contact_forces: np.ndarray  # (N, 3)
+    report: SolveReport
+    coaptation: object | None = None
+    #: (valve, positions) to draw: the valve itself, or the single leaflet of the symmetric
+    #: reference with its two mirror images
+    display: tuple | None = None
+
+
+def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
+               progress: Callable[[dict], None] | None = None,
+               valve: ValveMesh | None = None) -> CaseState:
+    """Root step and closure solve (no output written)."""
+    if valve is None and comm.rank == 0:
+        valve = build_valve(config.geometry)
+    if config.symmetric_reference and comm.rank == 0:
+        valve = single_leaflet(valve)
+    domain = create_valve_domain(valve if comm.rank == 0 else None, comm)
+    valve = domain.valve
+    model = closure_model(domain, config)
+    shape = valve.leaflets[0].shape
+    wrap_radius = 0.5 * shape.root_diameter
+
+    # step 1: the root
+    root = distend_root(config.root, shape.root_diameter, shape.height, config.pressure_kpa,
+                        _leaflet_energy_on_cylinder(model, wrap_radius))
+    u0 = _radial_scaling(model, root.radius / wrap_radius)
+
+    # step 2: closure with the attachment held at the distended root
+    bc = clamp_edges(model.V, domain.facet_tags, [ATTACHMENT], value=u0)
+    model.u.x.array[:] = u0.x.array
+    watch = [int(p.nodes[p.midline_free_edge_node]) for p in valve.leaflets]
+
+    def make_hook(coupling):
+        models = []
+        if config.symmetric_reference:
+            points, normals = symmetry_planes()
+            models.append(PlaneContact(points, normals, config.contact, mirror=True))
+            # a single leaflet may still fold onto itself
+        models.append(SurfaceContact(valve.cells, valve.num_nodes, config.contact,
+                                     triangle_body=valve.cell_tags,
+                                     reference=valve.flat,
+                                     self_exclusion_radius=SELF_EXCLUSION_FACTOR
+                                     * config.contact.reach,
+                                     attached_reference=valve.points,
+                                     attached_exclusion_radius=config.commissure_exclusion_mm,
+                                     boundary_band=config.free_edge_band))
+        # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
+        # takes it from the current positions
+        return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
+                           lag_driving_force=config.solver == "ptc",
+                           fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
+
+    hooks = [make_hook]
+    if config.bending_modulus_kpa > 0:
+        K = leaflet_bending_matrix(valve, model, config.bending_modulus_kpa)
+        hooks.append(lambda coupling: BendingHook(coupling, K))
+    if config.solver == "ptc":
+        solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
+                                       config.pseudo_transient, hooks=hooks, watch_nodes=watch)
+        report = solver.solve(progress=progress)
+        state = model.u
+    else:
+        stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
+        solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
+                                      config.dynamics, hooks=hooks)
+        report = solver.solve(progress=progress)
+        state = solver.U
+    hook = solver.hooks[0]
+    positions = solver.coupling.positions(state)
+    forces = hook.contact_forces(state)
+    display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
+    return CaseState(domain, model, root, positions, forces, report, display=display)
+
+
+def analyse_case(state: CaseState, config: CaseConfig):
+    """Coaptation analysis of a solved case (on every rank; it is serial and cheap)."""
+    from valve_dolfinx.analysis import analyse_coaptation
+
+    valve, positions = state.display or (state.domain.valve, state.positions)
+    result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
+                                pixel_mm=config.orifice_pixel_mm,
+                                nodulus_length_mm=config.nodulus_length_mm)
+    if config.symmetric_reference:
+        # the heights are the solved leaflet's (its images see each other only through it)
+        solved = result.leaflets[valve.leaflets[0].name]
+        result.min_native_height_mm = solved.min_height_mm
+        result.min_native_height_raw_mm = solved.min_height_raw_mm
+        result.central_native_height_mm = solved.central_height_mm
+    return result
+
+
+def run_case(config: CaseConfig, out_dir: str | Path | None = None,
+             comm: MPI.Comm = MPI.COMM_WORLD, progress: Callable[[dict], None] | None = None,
+             figures: bool = True, fields_output: bool = True) -> CaseResult:
+    """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
+
+    Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
+    hash), ``config.toml`` (the configuration that ran, reloadable with
+    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.xdmf``/``.h5``
+    (displacement, stress, strain, contact force) and the PNG figures.
+    """
+    from valve_dolfinx import output
+
+    t0 = time.perf_counter()
+    g = config.geometry
+    state = solve_case(config, comm, progress)
+    coaptation = analyse_case(state, config)
+    state.coaptation = coaptation
+    report = state.report
+    last = report.history[-1] if report.history else {}
+    fields_ = coaptation.result_fields()
+    result = CaseResult(
+        graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
+        converged=bool(report.converged),
+        min_coaptation_height_mm=fields_["min_coaptation_height_mm"],
+        min_coaptation_height_raw_mm=fields_["min_coaptation_height_raw_mm"],
+        central_coaptation_height_mm=fields_["central_coaptation_height_mm"],
+        coaptation_area_mm2=fields_["coaptation_area_mm2"],
+        regurgitant_orifice_area_mm2=fields_["regurgitant_orifice_area_mm2"],
+        competent=bool(fields_["competent"]) and bool(report.converged),
+        root_diameter_mm=state.root.diameter,
+        max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
+        max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
+        n_dofs=state.model.V.dofmap.index_map.size_global * 3,
+        n_ranks=comm.size,
+        mesh_size_mm=g.mesh_size,
+        n_cells=state.domain.num_cells_global(),
+        solver_message=report.reason,
+        solver=config.solver,
+        time_steps=report.steps,
+        newton_iterations=report.newton_iterations,
+        residual_tolerance_mN=report.residual_tolerance_mN,
+        equilibrium_residual_mN=report.residual_mN,
+        leaflets={name: lc.to_dict() for name, lc in coaptation.leaflets.items()},
+        parameters={**config.to_dict(), "root_state": state.root.to_dict(),
+                    "python": platform.python_version()},
+        versions=package_versions(),
+        settings_hash=config.settings_hash(),
+        version=__version__,
+        git_commit=git_commit(),
+    )
+    result.wall_time_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    if out_dir is not None:
+        output.write_case(Path(out_dir), config, result, state, figures=figures,
+                          fields_output=fields_output)
+        result.wall_time_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+        output.write_result(Path(out_dir), result, comm)
+    log.info("case %s: converged=%s, central coaptation %.3f mm, min %.3f mm, RO area %.3g mm², "
+             "root %.2f mm, %.1f s", case_name(g), result.converged,
+             result.central_coaptation_height_mm, result.min_coaptation_height_mm,
+             result.regurgitant_orifice_area_mm2, result.root_diameter_mm, result.wall_time_s)
+    return result
+
+

@@ -1,0 +1,560 @@
+"""The configuration of one closure case: typed, validated, without DOLFINx.
+
+:class:`CaseConfig` holds everything that defines a case: the valve geometry,
+the pressure, the tissues, the root, the contact law, the solver path and its
+numerical settings, and the analysis settings.  Each nested parameter set
+validates its own ranges; :class:`CaseConfig` checks how they combine.  Nothing
+here imports DOLFINx or PETSc, so a configuration is loaded and checked in a
+fraction of a second, before any mesh is built.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx.contact.law import ContactParameters
+from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.geometry.valve import ValveParameters
+from valve_dolfinx.io import atomic_write
+from valve_dolfinx.materials import BOVINE_PERICARDIUM, NATIVE_LEAFLET, FungMaterial
+from valve_dolfinx.root import RootParameters
+from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
+
+__all__ = [
+    "MMHG_TO_KPA",
+    "VALVE_CONTACT",
+    "SOLVERS",
+    "CONFIG_FILE",
+    "CaseConfig",
+    "case_name",
+    "DESCRIPTIONS",
+    "describe",
+    "load_config",
+    "read_config_file",
+    "apply_overrides",
+    "set_dotted",
+    "config_from_dict",
+    "config_toml",
+    "write_config",
+    "settings_hash",
+    "canonical_hash",
+]
+
+#: 1 mmHg in kPa (80 mmHg = 10.666 kPa)
+MMHG_TO_KPA = 0.133322
+#: Contact of the closing valve (SPEC §5 law, k = 10 mN/mm, h = 0.1 mm) with the numerical
+#: choices of docs/contact.md: the leaflets' contact surfaces are offset 0.125 mm (half of
+#: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
+#: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
+#: The side of every node-triangle pair, between leaflets as within one, is the side the node
+#: approaches from (recorded at the last accepted state), whichever face of the triangle that is.
+VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05)
+#: leaflets never contact each other within this distance (mm) of where they are sewn
+#: together, measured on the unloaded valve (see SurfaceContact: attached_reference)
+COMMISSURE_EXCLUSION_MM = 2.5
+#: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
+#: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
+FREE_EDGE_BAND = 1.0
+#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/closure.md)
+BENDING_MODULUS_KPA = 200.0
+#: paths to the loaded equilibrium (CaseConfig.solver): pseudo-transient continuation (the
+#: default) and damped BDF2 dynamics (SPEC §4, the cross-check)
+SOLVERS = ("ptc", "bdf2")
+
+#: the resolved configuration written beside every result
+CONFIG_FILE = "config.toml"
+#: top-level table of a sizing study's configuration file (read by valve_dolfinx.study.grid)
+STUDY_TABLE = "study"
+#: settings that bound the run's wall-clock time, not its result (left out of settings_hash)
+_WALL_CLOCK_KEYS = ("wall_time_limit_s",)
+
+#: the nested parameter sets of a CaseConfig, by field name
+_SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
+             "graft_material": FungMaterial, "root": RootParameters,
+             "contact": ContactParameters, "pseudo_transient": PseudoTransientParameters,
+             "dynamics": DynamicsParameters}
+
+
+@dataclass
+class CaseConfig:
+    """Everything that defines one closure case (written beside every result).
+
+    ``symmetric_reference=True`` runs the cheap reference of SPEC §4 instead of
+    the valve: the left-coronary leaflet alone, closing against the two planes
+    through the valve axis at ±60° that its neighbours mirror it across (the
+    contact law sees the distance to the mirror image, as between leaflets).
+
+    ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
+    ``D = E_b·t³/12`` (:mod:`valve_dolfinx.bending`; 0 = pure membrane): it
+    regularises the slack free-edge tip at the triple point, without which the
+    three-leaflet valve does not converge (docs/closure.md).
+    ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
+    pseudo-transient continuation with PETSc TS and SNES, contact and bending
+    in the Newton system from the first step,
+    :mod:`~valve_dolfinx.solvers.pseudo_transient`) or ``"bdf2"`` (SPEC §4: damped
+    BDF2 dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`, the
+    cross-check).  Both stop at a static equilibrium.
+    ``nodulus_length_mm`` (0 mm) is the free-edge length at the triple point
+    treated as the nodulus of Arantius by the coaptation heights
+    (:mod:`valve_dolfinx.analysis.coaptation`); 0 leaves nothing out.
+    """
+
+    geometry: ValveParameters = field(default_factory=ValveParameters)
+    pressure_mmhg: float = 80.0
+    native_material: FungMaterial = NATIVE_LEAFLET
+    graft_material: FungMaterial = BOVINE_PERICARDIUM
+    root: RootParameters = field(default_factory=RootParameters)
+    contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
+    solver: str = "ptc"
+    pseudo_transient: PseudoTransientParameters = field(
+        default_factory=PseudoTransientParameters)
+    dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
+    coaptation_threshold_mm: float = 0.5
+    orifice_pixel_mm: float = 0.05
+    nodulus_length_mm: float = 0.0
+    commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
+    free_edge_band: float = FREE_EDGE_BAND
+    quadrature_degree: int = 1
+    symmetric_reference: bool = False
+    bending_modulus_kpa: float = BENDING_MODULUS_KPA
+
+    def __post_init__(self) -> None:
+        check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
+                    unit="mmHg", hint="diastolic aortic pressure is about 80 mmHg")
+        check_range("coaptation_threshold_mm", self.coaptation_threshold_mm, 0.0, 5.0,
+                    low_open=True, unit="mm")
+        check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
+                    hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
+        if self.solver not in SOLVERS:
+            raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
+                                 "'ptc' (pseudo-transient continuation, the default) or "
+                                 "'bdf2' (damped BDF2 dynamics, the cross-check)")
+        if self.symmetric_reference and self.geometry.has_graft:
+            raise ParameterError("symmetric_reference needs the normal valve (no graft)")
+
+    @property
+    def pressure_kpa(self) -> float:
+        return self.pressure_mmhg * MMHG_TO_KPA
+
+    def to_dict(self) -> dict:
+        out = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            out[f.name] = asdict(value) if hasattr(value, "__dataclass_fields__") else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> CaseConfig:
+        """A configuration from (part of) the :meth:`to_dict` layout (:func:`config_from_dict`)."""
+        return config_from_dict(data)
+
+    def settings_hash(self) -> str:
+        """SHA-256 of the settings that determine the result (see :func:`settings_hash`)."""
+        return settings_hash(self.to_dict())
+
+    def with_graft(self, width_pct: float | None, height_pct: float | None) -> CaseConfig:
+        geometry = replace(self.geometry, graft_width_pct=width_pct, graft_height_pct=height_pct)
+        return replace(self, geometry=geometry)
+
+
+def case_name(geometry: ValveParameters) -> str:
+    """``normal`` or ``W<width>_H<height>``: the case's folder name in a study."""
+    if not geometry.has_graft:
+        return "normal"
+    return f"W{geometry.graft_width_pct:g}_H{geometry.graft_height_pct:g}"
+
+
+# --- meaning and unit of every setting ------------------------------------------------------
+#: ``key: (unit, meaning)`` of every setting, by table ("" = the top level; both materials
+#: share the "material" entries); `valve-dolfinx config` writes them as comments
+DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
+    "": {
+        "pressure_mmhg": ("mmHg", "transvalvular diastolic pressure on the aortic side"),
+        "solver": ("", "path to the loaded equilibrium: 'ptc' (pseudo-transient "
+                   "continuation, the default) or 'bdf2' (damped BDF2 dynamics, the "
+                   "cross-check)"),
+        "coaptation_threshold_mm": ("mm", "leaflets closer than this to a neighbour coapt"),
+        "orifice_pixel_mm": ("mm", "pixel size of the regurgitant orifice map"),
+        "nodulus_length_mm": ("mm", "free-edge length at the triple point treated as the "
+                              "nodulus of Arantius by the coaptation heights (0: none)"),
+        "commissure_exclusion_mm": ("mm", "leaflets do not contact each other this close "
+                                    "to where they are sewn together"),
+        "free_edge_band": ("triangle heights", "face contact with a neighbour fades out "
+                           "over this band beyond its free edge"),
+        "quadrature_degree": ("", "quadrature degree of the membrane forms (1 is exact "
+                              "for the linear triangles' constant strain)"),
+        "symmetric_reference": ("", "true: one leaflet against the two ±60° symmetry "
+                                "planes (the normal valve's cheap reference)"),
+        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the leaflets, "
+                                "D = E_b·t³/12 (0: pure membrane)"),
+    },
+    "geometry": {
+        "root_diameter": ("mm", "root diameter the flat leaflets are sized on"),
+        "gamma_deg": ("deg", "angle γ of the attachment curve y = sin²x / tan γ"),
+        "commissure_height": ("mm", "height of the straight commissure segments"),
+        "mesh_size": ("mm", "target triangle edge length"),
+        "graft_width_pct": ("%", "graft width enlargement over the native leaflet "
+                            "(unset: the normal valve)"),
+        "graft_height_pct": ("%", "graft height enlargement over the native leaflet "
+                             "(unset: the normal valve)"),
+        "graft_fibre_angle_deg": ("deg", "fibre direction of the graft from the "
+                                  "circumferential direction"),
+        "graft_placement": ("", "initial 3-D placement of the slack graft: 'conformal' "
+                            "or 'billowed'"),
+        "billow_mm": ("mm", "bulge of a 'billowed' graft towards the valve axis "
+                      "(negative: towards the sinus)"),
+    },
+    "material": {
+        "c": ("kPa", "Fung stress scale"),
+        "A1": ("", "Fung coefficient of E11² (fibre)"),
+        "A2": ("", "Fung coefficient of E22² (cross-fibre)"),
+        "A3": ("", "Fung coefficient of 2·E11·E22"),
+        "A4": ("", "Fung coefficient of E12²"),
+        "A5": ("", "Fung coefficient of 2·E11·E12"),
+        "A6": ("", "Fung coefficient of 2·E22·E12"),
+        "thickness": ("mm", "tissue thickness (tension = thickness × stress)"),
+        "name": ("", "label of the tissue"),
+        "reference": ("", "literature source of the parameters"),
+    },
+    "root": {
+        "free_edge_excess": ("", "free edges' length over the unpressurised root's "
+                             "circumference, minus 1"),
+        "youngs_modulus": ("kPa", "secant Young's modulus of the root wall over 0-80 mmHg"),
+        "wall_thickness": ("mm", "root wall thickness"),
+        "height": ("mm", "height of the root segment carrying the leaflets (unset: the "
+                   "leaflet height)"),
+        "loaded_diameter": ("mm", "prescribed root diameter at the loading pressure, a "
+                            "patient's measured root (unset: the wall law distends it)"),
+    },
+    "contact": {
+        "stiffness": ("mN/mm", "penalty stiffness k of the contact law"),
+        "cutoff": ("mm", "distance h beyond which a surface exerts no force"),
+        "penetration_depth": ("mm", "depth behind a triangle still treated as penetration"),
+        "driving_force": ("", "driving force F from the pressure force: 'normal' or "
+                          "'magnitude'"),
+        "min_driving_force": ("mN", "floor on the driving force F"),
+        "taper": ("", "fraction of the cut-off band over which the force fades to zero"),
+        "pairing": ("", "node-triangle pairing: 'two_pass' or 'one_pass'"),
+        "blend_distance": ("mm", "width ε of the smooth minimum over a node's triangles"),
+        "thickness": ("mm", "contact thickness: sheets rest this far apart"),
+        "crossing_stiffness": ("mN/mm", "barrier against the mid-surfaces crossing "
+                               "(0: the SPEC law alone)"),
+        "crossing_width": ("mm", "width of the barrier's quadratic onset"),
+        "edge_row_fade_in": ("", "fade edge/vertex contact rows in near the triangle's "
+                             "boundary"),
+    },
+    "pseudo_transient": {
+        "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
+        "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
+        "dt_initial": ("", "first pseudo-time step"),
+        "dt_min": ("", "pseudo-time step below which the run has stalled"),
+        "dt_max": ("", "largest pseudo-time step"),
+        "increment": ("", "growth factor of switched evolution relaxation"),
+        "growth_limit": ("", "largest factor of the step from one step to the next"),
+        "max_step_motion_mm": ("mm", "largest expected nodal motion per step"),
+        "newton_motion_mm": ("mm", "largest nodal motion of one Newton update"),
+        "newton_max_it": ("", "Newton iterations per step"),
+        "newton_rtol": ("", "relative residual reduction that ends a step's Newton solve"),
+        "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),
+        "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
+        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),
+    },
+    "dynamics": {
+        "relaxation_time": ("s", "τ: damping per unit stiffness, c = k·τ/L²"),
+        "mass_ratio": ("", "mass time scale over τ"),
+        "length_scale": ("mm", "L in the stiffness-per-area estimate k/L²"),
+        "stiffness_exponent": ("", "β in c ∝ (k_tissue/k_ref)^β"),
+        "ramp_time": ("s", "duration of the smooth pressure ramp"),
+        "dt_initial": ("s", "first time step"),
+        "dt_min": ("s", "time step below which the run has stalled"),
+        "dt_max": ("s", "largest time step"),
+        "t_max": ("s", "simulated time limit"),
+        "error_tolerance_mm": ("mm", "local truncation error target of the displacement"),
+        "stop_increment_mm": ("mm", "convergence: displacement increment per step"),
+        "max_increment_mm": ("mm", "largest nodal displacement per step"),
+        "equilibrium_tolerance": ("mN", "convergence: max-norm of the static residual"),
+        "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
+        "max_steps": ("", "limit on time steps (accepted + rejected)"),
+        "newton_max_it": ("", "Newton iterations per step"),
+        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),
+    },
+}
+
+
+def describe(section: str, key: str) -> tuple[str, str]:
+    """``(unit, meaning)`` of ``section.key`` (``section`` "" for a top-level key)."""
+    table = "material" if section in ("native_material", "graft_material") else section
+    return DESCRIPTIONS[table][key]
+
+
+# --- loading --------------------------------------------------------------------------------
+def load_config(path: str | Path | None = None, overrides: Iterable[str] = (),
+                values: Mapping[str, Any] | None = None) -> CaseConfig:
+    """The case configuration: defaults < the file at ``path`` < ``overrides`` < ``values``.
+
+    Parameters
+    ----------
+    path
+        A TOML file in the :meth:`CaseConfig.to_dict` layout (any subset of the keys);
+        a ``[study]`` table, a sizing study's grid, is skipped.  ``None``: the defaults.
+    overrides
+        ``"section.key=value"`` strings (``--set``); the value is read as a TOML value,
+        or taken as a string if it is not one (``solver=bdf2``).
+    values
+        ``{"section.key": value}`` set last (the command line's named flags).
+
+    Raises
+    ------
+    ParameterError
+        On an unknown key, a value of the wrong type or out of its range (the message
+        names the key, ``section.key``), or a file that is not TOML.
+    FileNotFoundError
+        If ``path`` does not exist.
+    """
+    data: dict = {}
+    source = "configuration"
+    if path is not None:
+        data = read_config_file(path)
+        data.pop(STUDY_TABLE, None)
+        source = str(path)
+    apply_overrides(data, overrides)
+    for key, value in (values or {}).items():
+        set_dotted(data, key, value)
+    return config_from_dict(data, source)
+
+
+def read_config_file(path: str | Path) -> dict:
+    """The TOML file at ``path`` as a dict (errors name the file)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such configuration file (--config); "
+                                "`valve-dolfinx config > case.toml` writes one to start from")
+    try:
+        return tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ParameterError(f"{path} is not valid TOML ({err})") from None
+
+
+def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:
+    """Set each ``"section.key=value"`` of ``overrides`` in the nested ``data`` (in place)."""
+    for text in overrides:
+        key, sep, raw = text.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ParameterError(f"--set {text!r}: give section.key=value, e.g. "
+                                 "--set pressure_mmhg=100 or --set geometry.mesh_size=1.6")
+        raw = raw.strip()
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw  # a bare word: a string
+        set_dotted(data, key, value)
+    return data
+
+
+def set_dotted(data: dict, key: str, value: Any) -> None:
+    """Set ``data[a][b] = value`` for ``key = "a.b"`` (tables created as needed)."""
+    *tables, name = key.split(".")
+    target = data
+    for table in tables:
+        target = target.setdefault(table, {})
+        if not isinstance(target, dict):
+            raise ParameterError(f"{key}: {table!r} is a value, not a table")
+    target[name] = value
+
+
+def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> CaseConfig:
+    """A validated :class:`CaseConfig` from (part of) the :meth:`CaseConfig.to_dict` layout.
+
+    Keys left out keep their defaults (a table given in part keeps the rest of its
+    defaults).  Integers are accepted for real-valued settings.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``source`` and the dotted key: an unknown key, a value of the wrong
+        type, or a value outside its range.
+    """
+    defaults = CaseConfig()
+    known = {f.name: f for f in fields(CaseConfig)}
+    kw: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in known:
+            raise ParameterError(f"{source}: unknown key {key!r}; allowed keys are "
+                                 f"{', '.join(sorted(known))}")
+        if key in _SECTIONS:
+            kw[key] = _section(key, value, getattr(defaults, key), source)
+        else:
+            kw[key] = _checked_value(key, value, known[key].type, source)
+    try:
+        return replace(defaults, **kw)
+    except ParameterError as err:
+        raise ParameterError(f"{source}: {err}") from None
+
+
+def _section(name: str, value: Any, default: Any, source: str) -> Any:
+    """The parameter set ``name`` with the keys of ``value`` changed from ``default``."""
+    if isinstance(value, type(default)):
+        return value
+    if not isinstance(value, Mapping):
+        raise ParameterError(f"{source}: {name} must be a table of settings "
+                             f"([{name}] in a TOML file), got {value!r}")
+    known = {f.name: f for f in fields(default)}
+    changes = {}
+    for key, item in value.items():
+        if key not in known:
+            raise ParameterError(f"{source}: unknown key '{name}.{key}'; allowed keys of "
+                                 f"[{name}] are {', '.join(known)}")
+        changes[key] = _checked_value(f"{name}.{key}", item, known[key].type, source)
+    try:
+        return replace(default, **changes)
+    except ParameterError as err:
+        raise ParameterError(f"{source}: {_dotted_message(name, known, str(err))}") from None
+
+
+def _dotted_message(section: str, keys: Iterable[str], message: str) -> str:
+    """A parameter set's range message with the key spelled ``section.key``."""
+    match = re.match(r"(?:\w+\.)?(\w+)( = .*)", message, re.DOTALL)
+    if match and match.group(1) in keys:
+        return f"{section}.{match.group(1)}{match.group(2)}"
+    return f"[{section}] {message}"
+
+
+def _checked_value(key: str, value: Any, annotation: Any, source: str) -> Any:
+    """``value`` checked against the field's annotation (a string: postponed annotations)."""
+    kinds = str(annotation).replace(" ", "").split("|")
+    if value is None or (isinstance(value, str) and value.lower() == "none" and "None" in kinds):
+        if "None" in kinds:
+            return None
+        raise ParameterError(f"{source}: {key} needs a value ({kinds[0]})")
+    if isinstance(value, bool):
+        ok = "bool" in kinds
+    elif isinstance(value, int):
+        ok = "int" in kinds or "float" in kinds
+        if ok and "int" not in kinds:
+            value = float(value)
+    elif isinstance(value, float):
+        ok = "float" in kinds
+    elif isinstance(value, str):
+        ok = "str" in kinds
+    elif isinstance(value, Mapping):
+        ok = "dict" in kinds
+        value = dict(value)
+    else:
+        ok = False
+    if not ok:
+        wanted = " or ".join(k for k in kinds if k != "None")
+        raise ParameterError(f"{source}: {key} = {value!r} must be a {wanted}")
+    return value
+
+
+# --- writing --------------------------------------------------------------------------------
+def config_toml(config: CaseConfig | None = None, header: str = "") -> str:
+    """``config`` (default: the defaults) as TOML, every key with its unit and meaning.
+
+    Settings without a value (``None``: "unset") are written as comments, so that
+    reading the text back (:func:`load_config`) gives ``config`` again.
+    """
+    config = CaseConfig() if config is None else config
+    data = config.to_dict()
+    lines = [f"# {line}".rstrip() for line in header.splitlines()] if header else [
+        "# valve-dolfinx case configuration: every setting with its unit and meaning.",
+        "# Run it with `valve-dolfinx run --config FILE`; keys left out keep their defaults;",
+        "# `--set section.key=value` overrides one key.",
+    ]
+    lines.append("")
+    lines += [_toml_line("", k, v) for k, v in data.items() if k not in _SECTIONS]
+    for name in _SECTIONS:
+        lines += ["", f"[{name}]"]
+        lines += [_toml_line(name, k, v) for k, v in data[name].items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_line(section: str, key: str, value: Any) -> str:
+    unit, meaning = describe(section, key)
+    comment = f"# {unit}; {meaning}" if unit else f"# {meaning}"
+    if value is None:
+        return f"# {key} = (unset)  {comment}"
+    return f"{key} = {_toml_value(value)}  {comment}"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)  # inf, -inf and nan are TOML too
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, Mapping):
+        items = ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items())
+        return "{ " + items + " }" if items else "{}"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ParameterError(f"cannot write {value!r} ({type(value).__name__}) to TOML")
+
+
+def _toml_key(key: str) -> str:
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
+def write_config(path: str | Path, config: CaseConfig, header: str = "") -> Path:
+    """Write ``config`` as commented TOML to ``path``, atomically (reloadable with --config)."""
+    text = config_toml(config, header)
+    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+# --- identity of the settings ---------------------------------------------------------------
+def canonical_hash(data: Any) -> str:
+    """SHA-256 of ``data`` as canonical JSON (sorted keys, NaN/infinity as null)."""
+    text = json.dumps(_canonical(data), sort_keys=True, separators=(",", ":"),
+                      allow_nan=False, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _canonical(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _canonical(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_canonical(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if hasattr(value, "item") and callable(value.item):  # NumPy scalars
+        return _canonical(value.item())
+    return value
+
+
+def settings_hash(config: Mapping[str, Any]) -> str:
+    """SHA-256 of the settings that determine a result, from the :meth:`CaseConfig.to_dict`
+    layout (other keys, such as ``result.json``'s ``root_state``, are ignored).
+
+    Every physical and numerical setting enters it; the wall-clock limits do not (they
+    decide whether a run finishes, not where it lands).  Integers count as the equal
+    real numbers.  Output paths, figures and
+    logging are not part of a :class:`CaseConfig`.
+    """
+    names = {f.name for f in fields(CaseConfig)}
+    data = {}
+    for key, value in config.items():
+        if key not in names:
+            continue
+        if isinstance(value, Mapping):
+            value = {k: _as_float(v) for k, v in value.items() if k not in _WALL_CLOCK_KEYS}
+        data[key] = _as_float(value)
+    return canonical_hash(data)
+
+
+def _as_float(value: Any) -> Any:
+    """Numbers as floats (21 and 21.0 are the same setting; a file may write either)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value

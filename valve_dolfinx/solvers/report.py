@@ -1,0 +1,58 @@
+"""How a solve to the loaded equilibrium ended: one report type for every solver path."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["SolveReport", "DynamicsReport"]
+
+
+@dataclass
+class SolveReport:
+    """How a solve ended; ``history`` has a row per accepted step.
+
+    Attributes
+    ----------
+    converged, reason
+        Whether the static equilibrium was reached, and why the run stopped.
+    steps, rejected_steps, newton_iterations
+        Accepted time steps, rejected ones, and Newton iterations over all steps.
+    time
+        Time reached: pseudo-time (dimensionless) for the pseudo-transient
+        continuation, simulated time (s) for the damped dynamics.
+    last_dt
+        Last time step (same unit as ``time``).
+    residual_mN, residual_tolerance_mN
+        ``‖R‖∞`` of the static residual at the final state (mN), and the tolerance
+        convergence asks it to be below.
+    wall_time_s
+        Wall-clock time of the solve (s).
+    timings
+        Wall-clock time (s) per part of the solve, where the solver measures it.
+    """
+
+    converged: bool = False
+    reason: str = ""
+    steps: int = 0
+    rejected_steps: int = 0
+    newton_iterations: int = 0
+    time: float = 0.0
+    last_dt: float = float("nan")
+    residual_mN: float = float("nan")
+    residual_tolerance_mN: float = float("nan")
+    wall_time_s: float = 0.0
+    timings: dict = field(default_factory=dict)
+    history: list[dict] = field(default_factory=list)
+
+
+@dataclass
+class DynamicsReport(SolveReport):
+    """:class:`SolveReport` of the damped dynamics, with its step-motion control.
+
+    ``last_increment_mm`` is the watched nodes' displacement increment of the last
+    step (mm); ``rejected_for_motion`` counts steps retried because a node would have
+    moved further than ``max_increment_mm``.
+    """
+
+    last_increment_mm: float = float("nan")
+    rejected_for_motion: int = 0
