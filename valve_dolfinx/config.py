@@ -248,8 +248,6 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "crossing_stiffness": ("mN/mm", "barrier against the mid-surfaces crossing "
                                "(0: the SPEC law alone)"),
         "crossing_width": ("mm", "width of the barrier's quadratic onset"),
-        "edge_row_fade_in": ("", "fade edge/vertex contact rows in near the triangle's "
-                             "boundary"),
     },
     "pseudo_transient": {
         "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
