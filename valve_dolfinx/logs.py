@@ -1,8 +1,8 @@
 """Logging set-up of the command line: rank 0 reports, the other ranks only their errors.
 
 Library modules log through ``logging.getLogger(__name__)`` and never add
-handlers; ``valve-dolfinx`` runs each command inside :func:`configure_logging`
-(a script that wants the same output can do the same).  Lines read::
+handlers; ``valve-dolfinx`` runs each command inside :class:`configure_logging`, and a
+script that wants the same output calls it once.  Lines read::
 
     2026-12-01 23:10:05 INFO    root: d0 = 17.391 mm -> d = 20.089 mm at 10.666 kPa
     2026-12-01 23:10:07 ERROR   [rank 1/2] error: ...
@@ -78,33 +78,40 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
-@contextlib.contextmanager
-def configure_logging(verbosity: int = 0, log_file: str | Path | None = None):
-    """Within the block, the package logs to stderr (and appends to ``log_file``) with time
-    and level; on the way out its handlers and level are removed again.
+class configure_logging(contextlib.AbstractContextManager):  # noqa: N801 (used as a function)
+    """Send the package's log to stderr (and append it to ``log_file``) with time and level.
 
     ``verbosity``: -1 warnings and errors only (``-q``), 0 progress (INFO, the
     default), 1 debug (``-v``).  Other libraries log their warnings and errors.
+    Takes effect at the call and replaces an earlier call's handlers (a script
+    calls it once); used as a context manager (the CLI), its handlers and levels
+    are removed again on the way out.
     """
-    level = {-1: logging.WARNING, 0: logging.INFO}.get(verbosity, logging.DEBUG)
-    root, package = logging.getLogger(), logging.getLogger(PACKAGE)
-    saved = root.level, package.level
-    handlers: list[logging.Handler] = [_StderrHandler()]
-    if log_file is not None:
-        Path(log_file).parent.mkdir(parents=True, exist_ok=True)
-        handlers.append(logging.FileHandler(log_file, mode="a", encoding="utf-8"))
-    for handler in handlers:
-        handler.setFormatter(_Formatter(FORMAT, DATE_FORMAT))
-        handler.addFilter(_RankFilter())
-        root.addHandler(handler)
-    root.setLevel(min(logging.WARNING, root.level or logging.WARNING))
-    package.setLevel(level)
-    try:
-        yield
-    finally:
-        for handler in handlers:
+
+    def __init__(self, verbosity: int = 0, log_file: str | Path | None = None) -> None:
+        level = {-1: logging.WARNING, 0: logging.INFO}.get(verbosity, logging.DEBUG)
+        root, package = logging.getLogger(), logging.getLogger(PACKAGE)
+        self._saved = root.level, package.level
+        for handler in [h for h in root.handlers if getattr(h, "valve_dolfinx", False)]:
+            root.removeHandler(handler)  # an earlier call's: one set of handlers at a time
+            handler.close()
+        self._handlers: list[logging.Handler] = [_StderrHandler()]
+        if log_file is not None:
+            Path(log_file).parent.mkdir(parents=True, exist_ok=True)
+            self._handlers.append(logging.FileHandler(log_file, mode="a", encoding="utf-8"))
+        for handler in self._handlers:
+            handler.valve_dolfinx = True
+            handler.setFormatter(_Formatter(FORMAT, DATE_FORMAT))
+            handler.addFilter(_RankFilter())
+            root.addHandler(handler)
+        root.setLevel(min(logging.WARNING, root.level or logging.WARNING))
+        package.setLevel(level)
+
+    def __exit__(self, *exc) -> None:
+        root = logging.getLogger()
+        for handler in self._handlers:
             handler.flush()
             root.removeHandler(handler)
             handler.close()
-        root.setLevel(saved[0])
-        package.setLevel(saved[1])
+        root.setLevel(self._saved[0])
+        logging.getLogger(PACKAGE).setLevel(self._saved[1])
