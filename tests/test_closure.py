@@ -204,6 +204,11 @@ DEFAULT_MESH_CASES = {
 }
 
 
+#: the first test to use :func:`default_mesh_cases` pays for its eight closures (the suite's
+#: 900 s per test is for one closure on two loaded cores)
+DEFAULT_MESH_TIMEOUT = pytest.mark.timeout(3600)
+
+
 @pytest.fixture(scope="module")
 def default_mesh_cases():
     """Every rank solves its share of :data:`DEFAULT_MESH_CASES` on its own (COMM_SELF, the
@@ -224,6 +229,7 @@ def default_mesh_cases():
 
 @pytest.mark.mpi
 @pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 @pytest.mark.parametrize("case", ["normal", "reference", "W0/H0", "W27/H0", "W21/H27"])
 def test_cases_converge_at_the_default_mesh_without_penetration(default_mesh_cases, case):
     report, fields, *_ = default_mesh_cases[case]
@@ -236,6 +242,7 @@ def test_cases_converge_at_the_default_mesh_without_penetration(default_mesh_cas
 
 @pytest.mark.mpi
 @pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases):
     """The normal valve seals, and its coaptation region agrees with the one-leaflet
     reference (SPEC §4): the areas of the three regions within 2 %.  (The minimum height
@@ -250,6 +257,7 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
 
 @pytest.mark.mpi
 @pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 @pytest.mark.parametrize("case", ["W27/H0", "W21/H27"])
 def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases, case):
     """The numerical mass ×4 moves the figure of merit by less than 0.02 mm."""
@@ -262,6 +270,7 @@ def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases,
 
 @pytest.mark.mpi
 @pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mesh_cases):
     """SPEC §1: two placements of the slack W21/H27 graft, 1.5 mm apart at the graft's
     free-edge midpoint, close to the same coaptation: figure of merit within 0.05 mm.
@@ -279,6 +288,7 @@ def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mes
 
 @pytest.mark.mpi
 @pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_parallel_run_equals_the_serial_one(default_mesh_cases):
     """The reference solved by both ranks together agrees with the serial solve."""
     comm = MPI.COMM_WORLD
