@@ -320,10 +320,11 @@ def _one_line(err: BaseException) -> str:
         text = (f"{err.filename}: {err.strerror or err}; check the path and its permissions")
     else:
         text = " ".join(str(err).split()) or type(err).__name__
-    if not isinstance(err, ValveError | OSError | ValueError):
-        text = (f"internal error ({type(err).__name__}: {text}); rerun with -v for the "
-                "traceback")
-    return text
+    if isinstance(err, ValveError | OSError):
+        return text
+    if not isinstance(err, ValueError):
+        text = f"internal error ({type(err).__name__}: {text})"
+    return f"{text}; rerun with -v for the traceback"
 
 
 def _fail(err: BaseException, verbose: bool) -> int:
