@@ -182,6 +182,17 @@ def test_verbose_shows_the_traceback_and_log_file_keeps_the_line(tmp_path, capsy
     assert len(_error_lines(log_file.read_text())) == 2  # appended
 
 
+def test_unwritable_log_file_is_a_usage_error(tmp_path, capsys):
+    from valve_dolfinx.cli import main
+
+    (tmp_path / "a_file").write_text("")
+    with pytest.raises(SystemExit) as exit_:
+        main(["report", str(tmp_path), "--log-file", str(tmp_path / "a_file" / "run.log")])
+    assert exit_.value.code == ExitCode.USAGE
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "--log-file" in err and "writable" in err
+
+
 def test_solver_failure_in_a_run_is_one_line(tmp_path, capsys, monkeypatch):
     """A solver that breaks down mid-run (stand-in for PETSc failing): status 5, one line."""
     from valve_dolfinx.cli import main

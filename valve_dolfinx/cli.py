@@ -398,7 +398,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("-v/--verbose and -q/--quiet contradict each other: give one")
     from valve_dolfinx.logs import configure_logging
 
-    with configure_logging(1 if args.verbose else -1 if args.quiet else 0, args.log_file):
+    try:
+        logs = configure_logging(1 if args.verbose else -1 if args.quiet else 0, args.log_file)
+    except OSError as err:
+        parser.error(f"--log-file {args.log_file}: {err.strerror or err}; give a writable path")
+    with logs:
         try:
             return args.func(args)
         except (Exception, KeyboardInterrupt) as err:
