@@ -35,6 +35,7 @@ import logging
 from pathlib import Path
 
 from valve_dolfinx._compat import MPI
+from valve_dolfinx.logs import configure_logging
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.runner import run_study, terminate_on_sigterm
 
@@ -50,7 +51,7 @@ def main(argv: list[str] | None = None):
                         help="wall-clock limit of each case")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    configure_logging()
     comm = MPI.COMM_WORLD
 
     # %% [markdown]

@@ -66,6 +66,7 @@ def _assert_converged_and_sealed(result) -> None:
     assert result.max_penetration_mm < 0.05
 
 
+@pytest.mark.slow
 def test_reference_closes_and_seals(reference):
     result, _ = reference
     _assert_converged_and_sealed(result)
@@ -79,6 +80,7 @@ def test_reference_closes_and_seals(reference):
     assert result.root_diameter_mm == pytest.approx(20.0, abs=0.2)  # SPEC §2
 
 
+@pytest.mark.slow
 def test_reference_writes_every_output(reference):
     result, out = reference
     data = json.loads((out / "result.json").read_text())
@@ -93,6 +95,7 @@ def test_reference_writes_every_output(reference):
         assert (out / name).stat().st_size > 0, name
 
 
+@pytest.mark.slow
 def test_equilibrium_independent_of_the_numerical_mass(reference):
     """The pseudo-time mass ×4 (L = mass_length_mm ÷ 4) with a 4× first step: another path,
     the same static equilibrium (the graft valves: benchmarks/independence.py)."""
@@ -150,6 +153,7 @@ def test_with_graft_keeps_the_rest():
     assert config.pressure_mmhg == 90.0
 
 
+@pytest.mark.slow
 def test_cli_run_resumes_a_finished_case(reference, capsys):
     """``valve-dolfinx run`` on a directory that holds the same case does not recompute it."""
     from valve_dolfinx.cli import main
@@ -200,6 +204,11 @@ DEFAULT_MESH_CASES = {
 }
 
 
+#: the first test to use :func:`default_mesh_cases` pays for its eight closures (the suite's
+#: 900 s per test is for one closure on two loaded cores)
+DEFAULT_MESH_TIMEOUT = pytest.mark.timeout(3600)
+
+
 @pytest.fixture(scope="module")
 def default_mesh_cases():
     """Every rank solves its share of :data:`DEFAULT_MESH_CASES` on its own (COMM_SELF, the
@@ -219,6 +228,8 @@ def default_mesh_cases():
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 @pytest.mark.parametrize("case", ["normal", "reference", "W0/H0", "W27/H0", "W21/H27"])
 def test_cases_converge_at_the_default_mesh_without_penetration(default_mesh_cases, case):
     report, fields, *_ = default_mesh_cases[case]
@@ -230,6 +241,8 @@ def test_cases_converge_at_the_default_mesh_without_penetration(default_mesh_cas
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases):
     """The normal valve seals, and its coaptation region agrees with the one-leaflet
     reference (SPEC §4): the areas of the three regions within 2 %.  (The minimum height
@@ -243,6 +256,8 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 @pytest.mark.parametrize("case", ["W27/H0", "W21/H27"])
 def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases, case):
     """The numerical mass ×4 moves the figure of merit by less than 0.02 mm."""
@@ -254,6 +269,8 @@ def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases,
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mesh_cases):
     """SPEC §1: two placements of the slack W21/H27 graft, 1.5 mm apart at the graft's
     free-edge midpoint, close to the same coaptation: figure of merit within 0.05 mm.
@@ -270,6 +287,8 @@ def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mes
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
+@DEFAULT_MESH_TIMEOUT
 def test_parallel_run_equals_the_serial_one(default_mesh_cases):
     """The reference solved by both ranks together agrees with the serial solve."""
     comm = MPI.COMM_WORLD

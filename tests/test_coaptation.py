@@ -322,7 +322,7 @@ def test_gap_narrower_than_threshold_is_sealed():
     assert res.competent and res.regurgitant_orifice_area_mm2 == 0.0
 
 
-@pytest.mark.parametrize("rho", [1.0, 1.5])
+@pytest.mark.parametrize("rho", [pytest.param(1.0, marks=pytest.mark.slow), 1.5])
 def test_central_hole_area(rho):
     valve, x = _three_sectors(rho=rho)
     expected = 3.0 * math.sqrt(3.0) * (rho - THRESHOLD / 2) ** 2  # 2.923 / 5.846 mm²
@@ -334,7 +334,7 @@ def test_central_hole_area(rho):
     assert res.regurgitant_orifice_area_mm2 == area
 
 
-@pytest.mark.parametrize("lift", [2.0, 0.6])
+@pytest.mark.parametrize("lift", [pytest.param(2.0, marks=pytest.mark.slow), 0.6])
 def test_overlap_without_touching_is_a_leak(lift):
     alpha = math.radians(10.0)
     valve, x = _three_sectors(widen_deg=10.0, lift=lift)

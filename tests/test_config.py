@@ -24,7 +24,7 @@ from valve_dolfinx.config import (
     load_config,
     settings_hash,
 )
-from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.exceptions import ExitCode, ParameterError
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.root import RootParameters
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
@@ -248,7 +248,7 @@ def test_another_case_never_overwrites_a_result(case_run, caplog, monkeypatch):
     for argv in (["--set", "pressure_mmhg=100"], ["--config", str(out / "config.toml"),
                                                   "--mesh-size", "2.0"]):
         caplog.clear()
-        assert main(["run", *argv, "--out", str(out)]) == 2
+        assert main(["run", *argv, "--out", str(out)]) == ExitCode.OUTPUT_CONFLICT
         (err,) = _errors(caplog)
         assert f"--out {out}" in err and "--force" in err and "\n" not in err
     assert _tree(out) == before
@@ -260,7 +260,7 @@ def test_out_that_is_a_file_stops_at_once(tmp_path, caplog, monkeypatch):
     _must_not_run(monkeypatch)
     target = tmp_path / "result.txt"
     target.write_text("keep me")
-    assert main(["run", "--out", str(target)]) == 2
+    assert main(["run", "--out", str(target)]) == ExitCode.OUTPUT_CONFLICT
     (err,) = _errors(caplog)
     assert f"--out {target} is a file" in err and "\n" not in err
     assert target.read_text() == "keep me"

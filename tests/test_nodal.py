@@ -16,6 +16,13 @@ def test_blocks_are_added_at_their_nodes(block_size):
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (block_size,)))
     layout = NodalLayout() if block_size == 3 else NodalLayout(6, 3, 0)
     coupling = NodalCoupling(V, layout)
+    # the node -> block map itself, against DOLFINx's own dof coordinates: the block of
+    # node i holds node i's position once x is interpolated into the space
+    where = dolfinx.fem.Function(V)
+    where.interpolate(lambda x: np.vstack([x] * (block_size // 3)))
+    positions = where.x.array.reshape(-1, block_size)[coupling.block_of_node, :3]
+    assert np.allclose(positions, coupling.reference_positions, atol=1e-14)
+    assert len(np.unique(positions[:, :2], axis=0)) == coupling.num_nodes
     n, size = coupling.num_nodes, block_size * coupling.num_nodes
     rng = np.random.default_rng(1)
     rows, cols = rng.integers(0, n, 300), rng.integers(0, n, 300)  # many duplicates

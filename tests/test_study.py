@@ -356,6 +356,7 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
             == _stable_json(json.loads((fresh / "results.json").read_text())))
 
 
+@pytest.mark.slow
 def test_serial_and_mpi_sweeps_agree(tmp_path):
     """`mpirun -n 2` spreads the cases over two groups, runs each exactly once and gives the
     serial sweep's tables; --ranks-per-case 2 runs every case on both ranks."""
@@ -373,6 +374,7 @@ def test_serial_and_mpi_sweeps_agree(tmp_path):
         assert {r["n_ranks"] for r in rows} == {k}
 
 
+@pytest.mark.slow
 def test_two_sweeps_on_one_folder_share_the_cases(tmp_path):
     """Two sweeps started together on one folder: every case computed once, by one of them."""
     out, run_log = tmp_path / "study", tmp_path / "runs.log"

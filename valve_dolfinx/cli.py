@@ -148,11 +148,11 @@ def _existing_result(out: Path, config, force: bool) -> dict | None:
     import json
 
     from valve_dolfinx.config import settings_hash
-    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.exceptions import OutputConflictError
     from valve_dolfinx.result import RESULT_FILE
 
     if out.exists() and not out.is_dir():
-        raise ParameterError(f"--out {out} is a file, not a folder: give a folder for the "
+        raise OutputConflictError(f"--out {out} is a file, not a folder: give a folder for the "
                              "case's outputs (it is created if missing)")
     path = out / RESULT_FILE
     if force or not path.exists():
@@ -163,7 +163,7 @@ def _existing_result(out: Path, config, force: bool) -> dict | None:
     except (OSError, ValueError, AttributeError):
         data, digest = {}, None
     if digest != config.settings_hash():
-        raise ParameterError(f"--out {out} holds the result of another case (other settings); "
+        raise OutputConflictError(f"--out {out} holds the result of another case (other settings); "
                              "give another folder, or --force to overwrite it")
     wanted = json.loads(json.dumps(config.to_dict()))
     same = wanted == {k: v for k, v in data.get("parameters", {}).items() if k in wanted}
@@ -229,14 +229,15 @@ def _study_settings(args: argparse.Namespace):
     return settings.replace(**changes)
 
 
-def _quiet_library(comm, verbose: bool) -> None:
+def _quiet_library(comm, verbose: bool, quiet: bool = False) -> None:
     """Rank 0 alone prints; the study's one line per case, not every solver's log."""
     library = logging.getLogger("valve_dolfinx")
     if comm.rank != 0:
         library.setLevel(logging.ERROR)
     elif not verbose:
         library.setLevel(logging.WARNING)
-        logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
+        logging.getLogger("valve_dolfinx.study").setLevel(
+            logging.WARNING if quiet else logging.INFO)
 
 
 def _sweep_bar(comm, enabled: bool):
@@ -272,7 +273,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from valve_dolfinx.study.runner import run_study, study_status, terminate_on_sigterm
 
     comm = MPI.COMM_WORLD
-    _quiet_library(comm, args.verbose)
+    _quiet_library(comm, args.verbose, args.quiet)
     if args.list:
         rows = study_status(settings, args.out)
         if comm.rank == 0:
@@ -351,10 +352,71 @@ def _add_sweep_args(p: argparse.ArgumentParser) -> None:
                    help="plain log lines, no progress bar (batch jobs)")
 
 
+_EXIT_STATUS = """exit status:
+  0    success
+  1    internal error (a bug): rerun with -v and report the traceback
+  2    usage, configuration or parameter error (the message names the option or key)
+  3    the case ran but did not converge (results written with converged: false)
+  4    an input or output file is missing, unreadable or not what it should be
+  5    a solver failed and left no result
+  6    --out is a file or holds another case's results (nothing computed; --force)
+  130  interrupted (Ctrl-C); 128 + N after signal N (143: SIGTERM)
+Under mpirun, an error on any rank ends every rank with that status."""
+
+
+def _add_logging_args(p: argparse.ArgumentParser, top: bool) -> None:
+    """-v/-q/--log-file, before the command or after it (a command's copy does not
+    overwrite what was given before it)."""
+    unset = {} if top else {"default": argparse.SUPPRESS}
+    loud = p.add_mutually_exclusive_group()
+    loud.add_argument("-v", "--verbose", action="store_true", **unset,
+                      help="debug logging, and the traceback of an error")
+    loud.add_argument("-q", "--quiet", action="store_true", **unset,
+                      help="warnings and errors only")
+    p.add_argument("--log-file", type=Path, metavar="PATH", **unset,
+                   help="append the log to PATH as well")
+
+
+def _one_line(err: BaseException) -> str:
+    """The error as one line: what went wrong, about which file or parameter, what to do."""
+    from valve_dolfinx.exceptions import ValveError
+
+    if isinstance(err, KeyboardInterrupt):
+        return "interrupted; rerun the same command to continue (finished results are kept)"
+    if isinstance(err, OSError) and not isinstance(err, ValveError) and err.filename:
+        text = (f"{err.filename}: {err.strerror or err}; check the path and its permissions")
+    else:
+        text = " ".join(str(err).split()) or type(err).__name__
+    if isinstance(err, ValveError | OSError):
+        return text
+    if not isinstance(err, ValueError):
+        text = f"internal error ({type(err).__name__}: {text})"
+    return f"{text}; rerun with -v for the traceback"
+
+
+def _fail(err: BaseException, verbose: bool) -> int:
+    """Log ``err`` in one line (with its traceback under -v) and return its exit status;
+    under MPI with more than one rank, end every rank with it instead of returning."""
+    from valve_dolfinx.exceptions import exit_code
+    from valve_dolfinx.logs import world_rank_size
+
+    code = int(exit_code(err))
+    log.error("error: %s", _one_line(err), exc_info=err if verbose else None)
+    if world_rank_size()[1] > 1 and "mpi4py.MPI" in sys.modules:
+        mpi = sys.modules["mpi4py.MPI"]
+        if mpi.Is_initialized() and not mpi.Is_finalized():
+            for handler in logging.getLogger().handlers:
+                handler.flush()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            mpi.COMM_WORLD.Abort(code)  # the other ranks may wait in a collective call
+    return code
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="valve-dolfinx", description=__doc__,
+                                     epilog=_EXIT_STATUS,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -403,14 +465,23 @@ def main(argv: list[str] | None = None) -> int:
     _add_config_args(p)
     p.set_defaults(func=_cmd_config, parser=p)
 
+    _add_logging_args(parser, top=True)
+    for command in sub.choices.values():
+        _add_logging_args(command, top=False)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
-                        format="%(message)s")
+    if args.verbose and args.quiet:
+        parser.error("-v/--verbose and -q/--quiet contradict each other: give one")
+    from valve_dolfinx.logs import configure_logging
+
     try:
-        return args.func(args)
-    except (ValueError, FileNotFoundError) as err:
-        log.error("error: %s", err)
-        return 2
+        logs = configure_logging(1 if args.verbose else -1 if args.quiet else 0, args.log_file)
+    except OSError as err:
+        parser.error(f"--log-file {args.log_file}: {err.strerror or err}; give a writable path")
+    with logs:
+        try:
+            return args.func(args)
+        except (Exception, KeyboardInterrupt) as err:
+            return _fail(err, args.verbose)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,12 @@ from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.contact.law import ContactParameters
-from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.exceptions import (
+    ConfigurationError,
+    InputFileError,
+    ParameterError,
+    check_range,
+)
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.materials import BOVINE_PERICARDIUM, NATIVE_LEAFLET, FungMaterial
@@ -314,8 +319,8 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = (),
     ParameterError
         On an unknown key, a value of the wrong type or out of its range (the message
         names the key, ``section.key``), or a file that is not TOML.
-    FileNotFoundError
-        If ``path`` does not exist.
+    InputFileError
+        If ``path`` does not exist (an ``OSError``).
     """
     data: dict = {}
     source = "configuration"
@@ -333,12 +338,12 @@ def read_config_file(path: str | Path) -> dict:
     """The TOML file at ``path`` as a dict (errors name the file)."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such configuration file (--config); "
-                                "`valve-dolfinx config > case.toml` writes one to start from")
+        raise InputFileError(f"{path}: no such configuration file (--config); "
+                             "`valve-dolfinx config > case.toml` writes one to start from")
     try:
         return tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ParameterError(f"{path} is not valid TOML ({err})") from None
+        raise ConfigurationError(f"{path} is not valid TOML ({err})") from None
 
 
 def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:

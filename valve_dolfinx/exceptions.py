@@ -1,32 +1,94 @@
-"""Named errors with messages that say what was wrong and how to fix it."""
+"""Named errors with messages that say what was wrong and how to fix it, and the CLI's exit codes.
+
+Every error class carries the exit code the command line ends with when it
+reaches ``valve-dolfinx``; :func:`exit_code` maps any exception to one.
+"""
 
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 __all__ = [
+    "ExitCode",
     "ValveError",
     "ParameterError",
+    "ConfigurationError",
     "MeshError",
+    "InputFileError",
     "SolverError",
+    "OutputConflictError",
     "check_range",
+    "exit_code",
 ]
+
+
+class ExitCode(IntEnum):
+    """Exit status of ``valve-dolfinx``."""
+
+    OK = 0
+    INTERNAL = 1  #: an unexpected error (a bug): rerun with -v and report the traceback
+    USAGE = 2  #: a bad command line, configuration or parameter value
+    NOT_CONVERGED = 3  #: the case ran but did not converge (results written, converged: false)
+    INPUT = 4  #: an input or output file is missing, unreadable or not what it should be
+    SOLVER = 5  #: a solver failed in a way that left no result
+    OUTPUT_CONFLICT = 6  #: the output folder holds something else; nothing was computed
+    INTERRUPTED = 130  #: Ctrl-C (SIGINT); 128 + the signal number for other signals
 
 
 class ValveError(Exception):
     """Base class of the package's errors."""
 
+    exit_code = ExitCode.INTERNAL
+
 
 class ParameterError(ValveError, ValueError):
     """A parameter is outside its allowed range (a ``ValueError``)."""
+
+    exit_code = ExitCode.USAGE
+
+
+class ConfigurationError(ParameterError):
+    """A configuration file cannot be parsed, or holds an unknown key or a bad value."""
 
 
 class MeshError(ValveError, ValueError):
     """A mesh (built, loaded or passed in) is unusable: broken, degenerate or inconsistent."""
 
+    exit_code = ExitCode.INPUT
+
+
+class InputFileError(ValveError, OSError):
+    """A file the run needs is missing or is not what it should be."""
+
+    exit_code = ExitCode.INPUT
+
 
 class SolverError(ValveError, RuntimeError):
     """A nonlinear or time-stepping solve failed; the message says where and with what residual."""
+
+    exit_code = ExitCode.SOLVER
+
+
+class OutputConflictError(ValveError, FileExistsError):
+    """The output path is a file, or a folder holding another case's results (``--force``)."""
+
+    exit_code = ExitCode.OUTPUT_CONFLICT
+
+
+def exit_code(err: BaseException) -> ExitCode:
+    """The exit status for ``err`` reaching the command line."""
+    if isinstance(err, KeyboardInterrupt):
+        return ExitCode.INTERRUPTED
+    if isinstance(err, ValveError):
+        return err.exit_code
+    if isinstance(err, OSError):
+        return ExitCode.INPUT
+    if isinstance(err, ValueError):
+        return ExitCode.USAGE
+    if type(err).__module__.startswith("petsc4py"):
+        return ExitCode.SOLVER
+    return ExitCode.INTERNAL
 
 
 def check_range(
@@ -38,10 +100,14 @@ def check_range(
     low_open: bool = False,
     unit: str = "",
     hint: str = "",
+    low_hint: str = "",
+    high_hint: str = "",
 ) -> float:
     """Return ``float(value)`` or raise :class:`ParameterError` naming ``name`` and the range.
 
-    NaN, infinities and non-numbers are always rejected.
+    NaN, infinities and non-numbers are always rejected.  The message ends with
+    the reason for the bound that was crossed (``low_hint`` below the range,
+    ``high_hint`` above it), else with ``hint``.
     """
     try:
         v = float(value)
@@ -51,14 +117,16 @@ def check_range(
     hi = "inf" if high is None else f"{high:g}"
     bracket = "(" if low_open else "["
     allowed = f"{bracket}{lo}, {hi}]" + (f" {unit}" if unit else "")
-    bad = not math.isfinite(v)
-    if low is not None:
-        bad |= v <= low if low_open else v < low
-    if high is not None:
-        bad |= v > high
-    if bad:
+    reason = None
+    if not math.isfinite(v):
+        reason = hint
+    elif low is not None and (v <= low if low_open else v < low):
+        reason = low_hint or hint
+    elif high is not None and v > high:
+        reason = high_hint or hint
+    if reason is not None:
         msg = f"{name} = {value!r} is outside the allowed range {allowed}"
-        if hint:
-            msg += f"; {hint}"
+        if reason:
+            msg += f"; {reason}"
         raise ParameterError(msg)
     return v

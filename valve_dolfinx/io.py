@@ -29,7 +29,9 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it into place.
 
     A crash mid-write never leaves a truncated ``path`` behind; readers see the
-    old file or the new one.
+    old file or the new one.  The file is flushed to disk before the rename (and
+    the folder after it), and gets the mode a plain ``open`` would give it under
+    the user's umask (0644 under umask 022), not the temporary file's 0600.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -37,11 +39,43 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     os.close(fd)
     try:
         write(Path(tmp))
+        os.chmod(tmp, 0o666 & ~_umask())
+        _fsync(tmp, os.O_RDONLY)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+    _fsync(path.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     return path
+
+
+def _umask() -> int:
+    """The process's umask: from /proc on Linux, else by setting it and straight back
+    (which a thread creating a file at that instant could see)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync(path: str | Path, flags: int) -> None:
+    """Flush ``path`` (a file, or a folder where the platform allows it) to disk."""
+    try:
+        fd = os.open(path, flags)
+    except OSError:  # a folder that cannot be opened (Windows)
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # a file system without fsync on folders
+        pass
+    finally:
+        os.close(fd)
 
 
 def _json_default(obj: Any) -> Any:

@@ -17,8 +17,8 @@ including the non-symmetric load stiffness of the follower pressure.
 Quadrature: on P1 triangles F and therefore W are constant per cell and the
 pressure integrand is linear, so one-point quadrature integrates everything
 exactly; UFL's automatic estimate for ``exp(Q)`` would be far higher (SPEC §4:
-85× slower solves).  ``quadrature_degree`` is a parameter (default 1), and a
-test checks that degree 2 gives the same answer.
+85× slower solves).  ``quadrature_degree`` is a parameter (default 1); a test
+checks the degree-1 energy and pressure work against their closed-form integrals.
 """
 
 from __future__ import annotations

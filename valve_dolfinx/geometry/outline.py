@@ -24,12 +24,18 @@ from scipy.integrate import cumulative_simpson
 
 from valve_dolfinx.exceptions import check_range
 
-__all__ = ["LeafletShape", "MAX_GRAFT_PCT"]
+__all__ = ["LeafletShape", "MAX_GRAFT_PCT", "GRAFT_TOO_SMALL", "GRAFT_TOO_LARGE"]
 
 #: Largest graft enlargement accepted (per cent).  Pericardial patches in the
 #: study go to 27 % (width) and 40 % (height); doubling the leaflet is already
 #: far outside surgical practice, larger values are treated as typing errors.
 MAX_GRAFT_PCT = 100.0
+#: Why a graft enlargement below 0 or above :data:`MAX_GRAFT_PCT` is rejected.
+GRAFT_TOO_SMALL = ("a graft smaller than the native leaflet cannot be sewn onto its annulus; "
+                   "give a non-negative enlargement in per cent, e.g. 21")
+GRAFT_TOO_LARGE = (f"more than {MAX_GRAFT_PCT:g} % (doubling the native leaflet) is far outside "
+                   "surgical practice and taken for a typing error; the study's grafts go to "
+                   "27 % wider and 40 % higher")
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,8 +68,7 @@ class LeafletShape:
                     unit="mm")
         for name in ("width_pct", "height_pct"):
             check_range(f"graft_{name}", getattr(self, name), 0.0, MAX_GRAFT_PCT, unit="%",
-                        hint="a graft smaller than the native leaflet cannot be sewn onto "
-                        "its annulus; pass a non-negative enlargement in per cent")
+                        low_hint=GRAFT_TOO_SMALL, high_hint=GRAFT_TOO_LARGE)
 
     # --- scales ------------------------------------------------------------
     @property

@@ -33,7 +33,12 @@ import scipy.sparse.linalg as spla
 
 from valve_dolfinx.exceptions import MeshError, ParameterError, check_range
 from valve_dolfinx.geometry.flat_mesh import FlatLeafletMesh, mesh_flat_leaflet
-from valve_dolfinx.geometry.outline import MAX_GRAFT_PCT, LeafletShape
+from valve_dolfinx.geometry.outline import (
+    GRAFT_TOO_LARGE,
+    GRAFT_TOO_SMALL,
+    MAX_GRAFT_PCT,
+    LeafletShape,
+)
 from valve_dolfinx.io import atomic_write
 
 __all__ = [
@@ -99,8 +104,7 @@ class ValveParameters:
         if self.has_graft:
             for name in ("graft_width_pct", "graft_height_pct"):
                 check_range(name, getattr(self, name), 0.0, MAX_GRAFT_PCT, unit="%",
-                            hint="a graft smaller than the native leaflet cannot be sewn "
-                            "onto its annulus; give the enlargement in per cent, e.g. 21")
+                            low_hint=GRAFT_TOO_SMALL, high_hint=GRAFT_TOO_LARGE)
         check_range("graft_fibre_angle_deg", self.graft_fibre_angle_deg, -90.0, 90.0,
                     unit="deg")
         if self.graft_placement not in GRAFT_PLACEMENTS:

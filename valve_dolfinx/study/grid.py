@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.exceptions import ParameterError, check_range
-from valve_dolfinx.geometry.outline import MAX_GRAFT_PCT
+from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
 
 __all__ = [
     "STUDY_WIDTHS_PCT",
@@ -130,11 +130,10 @@ def parse_percentages(option: str, values: Iterable[Any] | None, what: str) -> t
             raise ParameterError(f"{option}: {item!r} is not a number; give graft {what} "
                                  f"enlargements in per cent within {allowed}, {example}") from None
         if not math.isfinite(value) or not 0.0 <= value <= MAX_GRAFT_PCT:
-            raise ParameterError(
-                f"{option}: {item!r} is outside the allowed range {allowed} (graft {what} "
-                "enlargement in per cent of the native leaflet; a graft smaller than the "
-                "native one cannot be sewn onto its annulus, and more than doubling it is "
-                "taken for a typing error)")
+            reason = GRAFT_TOO_LARGE if value > MAX_GRAFT_PCT else GRAFT_TOO_SMALL
+            raise ParameterError(f"{option}: {item!r} is outside the allowed range {allowed} "
+                                 f"(graft {what} enlargement in per cent of the native "
+                                 f"leaflet): {reason}")
         if value in seen:
             raise ParameterError(f"{option}: {item!r} is given twice (also as {seen[value]!r}); "
                                  f"list each graft {what} once, within {allowed}")
