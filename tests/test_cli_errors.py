@@ -113,7 +113,7 @@ def test_broken_toml_is_a_configuration_error(tmp_path):
 
 
 def test_unreadable_mesh_file_is_an_input_error(tmp_path):
-    from valve_dolfinx.io import load_valve_mesh
+    from valve_dolfinx.geometry.valve import load_valve_mesh
 
     with pytest.raises(FileNotFoundError) as missing:
         load_valve_mesh(tmp_path / "valve.npz")
@@ -218,7 +218,7 @@ def test_unconverged_run_exits_3_with_files_readable_under_umask_022(tmp_path):
     assert "Traceback" not in proc.stderr
     assert "wall-clock limit" in proc.stderr and "NOT converged" in proc.stdout
     files = [p for p in out.rglob("*") if p.is_file()]
-    assert {"result.json", "config.json", "history.csv"} <= {p.name for p in files}
+    assert {"result.json", "config.toml", "history.csv"} <= {p.name for p in files}
     modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode)) for p in files}
     assert set(modes.values()) == {"0o644"}, modes
 
