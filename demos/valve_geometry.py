@@ -86,9 +86,9 @@ def main(argv: list[str] | None = None) -> list[Path]:
         plot_flat_leaflet(gpatch.flat, gpatch.triangles, out / f"flat_graft_{tag}.png",
                           outline=leaflet_outline(patch),
                           title=f"flat graft {tag} (black: native outline)")
-        plot_valve_3d(normal.points, normal, out / "normal_valve.png",
+        plot_valve_3d(normal.points, normal, out / "normal_valve.png", view="side",
                       title=f"normal valve, d = 20 mm ({normal.num_cells} triangles), open")
-        plot_valve_3d(graft.points, graft, out / f"graft_valve_{tag}.png",
+        plot_valve_3d(graft.points, graft, out / f"graft_valve_{tag}.png", view="side",
                       title=f"graft valve {tag}: the graft placed slack, open")
         written += [out / "flat_leaflet.png", out / f"flat_graft_{tag}.png",
                     out / "normal_valve.png", out / f"graft_valve_{tag}.png"]

@@ -1,6 +1,7 @@
 """3-D views of the valve with PyVista, each in its own off-screen plotter.
 
-Views (``view``): ``"iso"`` (oblique, from the aortic side), ``"aortic"``
+Views (``view``): ``"iso"`` (oblique, from the aortic side), ``"side"`` (lower,
+nearer the side: the open valve's shape), ``"aortic"``
 (along the axis from the aorta, what the surgeon sees) and ``"ventricular"``
 (along the axis from the ventricle: a mirror image of the aortic view).  The
 camera uses a parallel projection, so the scale bar (5 mm) holds everywhere in
@@ -37,9 +38,11 @@ log = logging.getLogger(__name__)
 
 #: view name -> (vector from the focal point to the camera, view-up)
 VIEWS = {"iso": ((0.8, -1.3, 2.4), (0.0, 0.0, 1.0)),
+         "side": ((1.0, -1.6, 1.1), (0.0, 0.0, 1.0)),
          "aortic": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
          "ventricular": ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0))}
-VIEW_TITLES = {"iso": "oblique view from the aortic side", "aortic": "seen from the aorta",
+VIEW_TITLES = {"iso": "oblique view from the aortic side", "side": "oblique view from the side",
+               "aortic": "seen from the aorta",
                "ventricular": "seen from the ventricle"}
 SCALE_BAR_MM = 5.0
 #: colour range of the gap view (mm): gaps wider than this are drawn in the top colour
