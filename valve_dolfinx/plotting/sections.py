@@ -119,7 +119,9 @@ def plot_cut_planes(positions: np.ndarray, valve, path=None, *, title: str = "",
     radius = _radius(positions, valve)
     z = positions[:, 2]
     for ax, cut in zip(axes, cuts, strict=True):
-        phi = math.radians(cut.phi_deg)
+        # a hair off the cut's azimuth: a commissure made by mirroring lies exactly in the
+        # plane, where no triangle crosses it
+        phi = math.radians(cut.phi_deg + 0.01)
         e = np.array([math.cos(phi), math.sin(phi), 0.0])
         n = np.array([-math.sin(phi), math.cos(phi), 0.0])
         for i, patch in enumerate(valve.leaflets):

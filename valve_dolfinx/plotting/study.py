@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 
 FIGURE = "min_coaptation_height_mm"
 #: the pictures of a case folder that make its panel, with their captions
-PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve, ventricular view"),
-                ("cut_planes.png", "cuts through the axis"),
+PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve seen from the ventricle"),
+                ("cut_planes.png", "axial cuts"),
                 ("coaptation_map.png", "coaptation region on the flat leaflets"))
 
 
@@ -40,7 +40,6 @@ _CURVE_COLOURS = tuple(OKABE_ITO[k] for k in ("blue", "orange", "bluish_green", 
                                               "sky_blue", "vermillion", "yellow"))
 _TARGET_COLOUR = OKABE_ITO["vermillion"]
 _LEAK_COLOUR = OKABE_ITO["vermillion"]
-_RECOMMENDED_COLOUR = OKABE_ITO["yellow"]
 
 
 def _num(value) -> float:
@@ -118,7 +117,7 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
     note = "vermillion hatched: leaks (regurgitant orifice area > 0)"
     if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
         bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
-        note += f"; black bar line: normal valve {_num(normal[FIGURE]):.2f} mm"
+        note += f"; black line on the colour bar: normal valve {_num(normal[FIGURE]):.2f} mm"
     finite = grid[np.isfinite(grid)]
     middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
     for (i, j), r in by_cell.items():
@@ -137,14 +136,15 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
                                    lw=2.5, hatch="//", alpha=0.8))
         label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"
         if label == recommended:
-            ax.add_patch(Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False,
-                                   ec=_RECOMMENDED_COLOUR, lw=3.0))
+            for colour, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
+                ax.add_patch(Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False,
+                                       ec=colour, lw=width))
     ax.set_xticks(range(len(widths)), [f"+{w:g}" for w in widths])
     ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("graft height enlargement H (%)")
     if recommended:
-        note += f"; yellow frame: recommended {recommended}"
+        note += f"\nblack-and-white frame: recommended {recommended}"
     ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
     return save_figure(fig, path, dpi=130)
 

@@ -64,12 +64,12 @@ def leaflet_colour(patch, index: int | None = None) -> str:
 
 
 def leaflet_label(patch) -> str:
-    """``LC``, ``RC``, ``NC``, ``graft``; a mirror image is ``LC mirror``."""
+    """``LC``, ``RC``, ``NC``, ``graft``; mirror image ``k`` of a leaflet is ``LC mirror k``."""
     if patch.is_graft:
         return "graft"
     base, _, mirror = patch.name.partition("_mirror")
     label = LEAFLET_LABELS.get(base, base.replace("_", " "))
-    return f"{label} mirror" if mirror else label
+    return f"{label} mirror {mirror}" if mirror else label
 
 
 def _get(result, key: str):
