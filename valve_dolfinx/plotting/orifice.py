@@ -11,7 +11,7 @@ counted area, which the ventricular 3-D view and the 2-D figures draw.
 from __future__ import annotations
 
 import numpy as np
-from matplotlib.collections import PolyCollection
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Circle, Patch
 
@@ -25,8 +25,8 @@ from valve_dolfinx.plotting.style import (
     save_figure,
 )
 
-__all__ = ["ORIFICE_GID", "orifice_mask", "orifice_rectangles", "draw_orifice",
-           "plot_orifice_map"]
+__all__ = ["ORIFICE_GID", "orifice_mask", "orifice_rectangles", "orifice_outline",
+           "draw_orifice", "plot_orifice_map"]
 
 #: ``gid`` of the artist that draws the orifice in a matplotlib figure
 ORIFICE_GID = "regurgitant_orifice"
@@ -54,9 +54,24 @@ def orifice_rectangles(diagnostics: dict, mask: np.ndarray | None = None) -> np.
                      np.stack([x1, y1], -1), np.stack([x0, y1], -1)], axis=1)
 
 
+def orifice_outline(diagnostics: dict) -> list[np.ndarray]:
+    """Polylines ``(k, 2)`` (mm) around the orifice, midway between its pixels and the others.
+
+    For drawing only: it cuts the pixels' corners, so the area it encloses is
+    not exactly the counted one (:func:`orifice_rectangles` is).
+    """
+    from contourpy import contour_generator
+
+    mask = np.pad(orifice_mask(diagnostics), 1).astype(float)
+    origin, pixel = float(diagnostics["origin_mm"]), float(diagnostics["pixel_mm"])
+    centres = origin + (np.arange(mask.shape[0]) - 0.5) * pixel
+    return [line for line in contour_generator(centres, centres, mask).lines(0.5)
+            if len(line) > 1]
+
+
 def draw_orifice(ax, diagnostics: dict, *, label: str | None = "regurgitant orifice",
                  zorder: float = 5) -> PolyCollection | None:
-    """Fill the orifice on a 2-D axes in mm (``None`` if the orifice is empty)."""
+    """Fill the orifice on a 2-D axes in mm, outlined (``None`` if the orifice is empty)."""
     rects = orifice_rectangles(diagnostics)
     if len(rects) == 0:
         return None
@@ -64,6 +79,8 @@ def draw_orifice(ax, diagnostics: dict, *, label: str | None = "regurgitant orif
                              zorder=zorder, label=label)
     patches.set_gid(ORIFICE_GID)
     ax.add_collection(patches)
+    ax.add_collection(LineCollection(orifice_outline(diagnostics), colors="black",
+                                     linewidths=0.8, zorder=zorder))
     return patches
 
 

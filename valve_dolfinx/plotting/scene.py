@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from valve_dolfinx.plotting.orifice import orifice_rectangles
+from valve_dolfinx.plotting.orifice import orifice_outline, orifice_rectangles
 from valve_dolfinx.plotting.style import (
     ORIFICE_COLOUR,
     SEQUENTIAL_CMAP,
@@ -182,7 +182,10 @@ def valve_plotter(positions: np.ndarray, valve, *, view: str = "iso", title: str
     if orifice is not None and view in ("aortic", "ventricular"):
         quads = orifice_surface(orifice, z.max() + 0.5 if view == "aortic" else z.min() - 0.5)
         if quads is not None:
-            plotter.add_mesh(quads, color=ORIFICE_COLOUR, opacity=0.9)
+            plotter.add_mesh(quads, color=ORIFICE_COLOUR, opacity=0.9, lighting=False)
+            for line in orifice_outline(orifice):
+                xyz = np.column_stack([line, np.full(len(line), quads.points[0, 2])])
+                plotter.add_mesh(pv.lines_from_points(xyz), color="black", line_width=2)
             plotter.add_text(f"vermillion: regurgitant orifice {quads.area:.2f} mm² "
                              "(projected along the axis)", position="lower_right",
                              font_size=10, color="black")

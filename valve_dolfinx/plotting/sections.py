@@ -164,7 +164,7 @@ def plot_cross_sections(positions: np.ndarray, valve, path=None, *, title: str =
     if heights is None:
         heights = tuple(np.round(np.linspace(z.min(), z.max(), 6)[1:-1], 1))
     radius = _radius(positions, valve)
-    fig = new_figure(3.9 * len(heights), 4.9)
+    fig = new_figure(3.9 * len(heights), 5.2)
     axes = fig.subplots(1, len(heights), squeeze=False, sharey=True)[0]
     leaks = orifice is not None and orifice_mask(orifice).any()
     for k, (ax, z0) in enumerate(zip(axes, heights, strict=True)):
