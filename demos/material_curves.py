@@ -32,18 +32,15 @@ import argparse
 import logging
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from valve_dolfinx.materials import (  # noqa: E402
+from valve_dolfinx.materials import (
     BOVINE_PERICARDIUM,
     NATIVE_LEAFLET,
     FungMaterial,
     equibiaxial_response,
 )
+from valve_dolfinx.plotting.style import OKABE_ITO, new_figure, save_figure
 
 MATERIALS = (NATIVE_LEAFLET, BOVINE_PERICARDIUM)
 
@@ -74,14 +71,16 @@ def plot_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
                 materials: tuple[FungMaterial, ...] = MATERIALS) -> Path:
     """Draw the fibre and cross-fibre curves of each material side by side; write ``path``."""
     max_stress = max(float(c["stress"][-1]) for c in curves.values())
-    fig, axes = plt.subplots(1, len(materials), figsize=(5.5 * len(materials), 4.4),
-                             constrained_layout=True)
-    for ax, m in zip(np.atleast_1d(axes), materials, strict=True):
+    fig = new_figure(5.5 * len(materials), 4.4)
+    axes = fig.subplots(1, len(materials), squeeze=False)[0]
+    for ax, m in zip(axes, materials, strict=True):
         curve = curves[m.name]
         unit = 1.0 if curve["E22"][-1] > 0.01 else 100.0
         scale = "" if unit == 1.0 else " (%)"
-        ax.plot(curve["E11"] * unit, curve["stress"], lw=2, label="fibre (E11)")
-        ax.plot(curve["E22"] * unit, curve["stress"], lw=2, ls="--", label="cross-fibre (E22)")
+        ax.plot(curve["E11"] * unit, curve["stress"], lw=2, color=OKABE_ITO["blue"],
+                label="fibre (E11)")
+        ax.plot(curve["E22"] * unit, curve["stress"], lw=2, ls="--", color=OKABE_ITO["orange"],
+                label="cross-fibre (E22)")
         ax.set_xlabel(f"Green–Lagrange strain{scale}")
         ax.set_ylabel("Lagrangian (1st Piola–Kirchhoff) stress (kPa)")
         ax.set_title(f"{m.name.replace('_', ' ')}: c = {m.c:g} kPa\n{m.reference.split(';')[0]}",
@@ -90,11 +89,8 @@ def plot_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
         ax.legend()
         ax.set_ylim(0, max_stress * 1.02)
     fig.suptitle("Equibiaxial response (equal Lagrangian stresses, E12 = 0)")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-    return path
+    save_figure(fig, path)
+    return Path(path)
 
 
 # %%

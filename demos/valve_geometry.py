@@ -31,13 +31,11 @@ import argparse
 import logging
 from pathlib import Path
 
-import numpy as np
-
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
-from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, LEAFLET_TAGS, build_valve
+from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, build_valve
 from valve_dolfinx.io import export_valve_vtu
-from valve_dolfinx.plotting import plot_flat_leaflet, plot_valve_3d
+from valve_dolfinx.plotting import leaflet_outline, plot_flat_leaflet, plot_valve_3d
 
 
 def main(argv: list[str] | None = None) -> list[Path]:
@@ -60,7 +58,6 @@ def main(argv: list[str] | None = None) -> list[Path]:
     normal = build_valve(mesh_size=args.mesh_size) if comm.rank == 0 else None
     domain = create_valve_domain(normal, comm)
     write_domain_xdmf(domain, out / "normal_valve.xdmf")
-    graft_tag = LEAFLET_TAGS["non_coronary"]
 
     # %% [markdown]
     # ## The graft valve
@@ -81,31 +78,26 @@ def main(argv: list[str] | None = None) -> list[Path]:
     if comm.rank == 0:
         patch = normal.leaflets[0]
         tri_fibres = normal.fibres[normal.cell_tags == patch.tag]
-        written.append(plot_flat_leaflet(
+        plot_flat_leaflet(
             patch.flat, patch.triangles, out / "flat_leaflet.png", fibres=tri_fibres,
             title=f"flat native leaflet, mesh size {args.mesh_size:g} mm: "
-                  f"{len(patch.flat)} nodes, {len(patch.triangles)} triangles"))
+                  f"{len(patch.flat)} nodes, {len(patch.triangles)} triangles")
         gpatch = graft.leaflet("non_coronary")
-        written.append(plot_flat_leaflet(
-            gpatch.flat, gpatch.triangles, out / f"flat_graft_{tag}.png",
-            outline=_outline(patch), title=f"flat graft {tag} (black: native outline)"))
-        written.append(plot_valve_3d(
-            normal.points, normal.cells, normal.cell_tags, out / "normal_valve.png",
-            title=f"normal valve, d = 20 mm ({normal.num_cells} triangles)"))
-        written.append(plot_valve_3d(
-            graft.points, graft.cells, graft.cell_tags, out / f"graft_valve_{tag}.png",
-            graft_tag=graft_tag, title=f"graft valve {tag} (graft in blue, slack)"))
+        plot_flat_leaflet(gpatch.flat, gpatch.triangles, out / f"flat_graft_{tag}.png",
+                          outline=leaflet_outline(patch),
+                          title=f"flat graft {tag} (black: native outline)")
+        plot_valve_3d(normal.points, normal, out / "normal_valve.png", view="side",
+                      title=f"normal valve, d = 20 mm ({normal.num_cells} triangles), open")
+        plot_valve_3d(graft.points, graft, out / f"graft_valve_{tag}.png", view="side",
+                      title=f"graft valve {tag}: the graft placed slack, open")
+        written += [out / "flat_leaflet.png", out / f"flat_graft_{tag}.png",
+                    out / "normal_valve.png", out / f"graft_valve_{tag}.png"]
         export_valve_vtu(normal, out / "normal_valve.vtu")
         export_valve_vtu(graft, out / f"graft_valve_{tag}.vtu")
         for p in written:
             logging.info("wrote %s", p)
     return written
 
-
-def _outline(patch) -> np.ndarray:
-    """Closed outline polygon of a flat leaflet from its boundary node chains."""
-    ring = np.concatenate([patch.attachment, patch.free_edge[::-1]])
-    return patch.flat[np.append(ring, ring[0])]
 
 
 if __name__ == "__main__":

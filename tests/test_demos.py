@@ -27,6 +27,18 @@ def test_valve_geometry_demo(tmp_path):
         assert (tmp_path / name).stat().st_size > 1000, name
 
 
+@pytest.mark.slow
+def test_normal_valve_demo(tmp_path):
+    """The demo closes the normal valve (1.6 mm) and writes the case and its own figures."""
+    proc = _run("normal_valve.py", "--out", str(tmp_path), "--mesh-size", "1.6", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "converged: True" in proc.stdout and "competent" in proc.stdout
+    for name in ("result.json", "loaded_state.npz", "closed_valve_aortic.png", "demo_aortic.png",
+                 "demo_ventricular.png", "demo_gap.png", "demo_cuts.png",
+                 "demo_coaptation_map.png"):
+        assert (tmp_path / name).stat().st_size > 1000, name
+
+
 def _load_demo(script: str):
     spec = importlib.util.spec_from_file_location(f"demo_{Path(script).stem}",
                                                   ROOT / "demos" / script)

@@ -17,7 +17,6 @@ from valve_dolfinx.analysis.coaptation import (
     regurgitant_orifice_area,
 )
 from valve_dolfinx.analysis.orifice import orifice_leak_map, rasterise_footprint
-from valve_dolfinx.analysis.plots import leaflet_outline, plot_coaptation_map, plot_orifice_map
 from valve_dolfinx.analysis.sealing import through_flow
 
 __all__ = [
@@ -29,11 +28,8 @@ __all__ = [
     "coaptation_height_profile",
     "distance_to_surface",
     "fraction_below",
-    "leaflet_outline",
     "leaflet_pair_gaps",
     "orifice_leak_map",
-    "plot_coaptation_map",
-    "plot_orifice_map",
     "profile_break_points",
     "rasterise_footprint",
     "through_flow",

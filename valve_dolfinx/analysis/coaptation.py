@@ -166,6 +166,9 @@ class CoaptationResult:
     coaptation_area_mm2: float
     min_native_height_raw_mm: float = math.nan
     nodulus_length_mm: float = 0.0
+    #: the raster the orifice area was counted on (see
+    #: :func:`~valve_dolfinx.analysis.orifice.orifice_leak_map`), for drawing it
+    orifice: dict | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         """JSON-ready scalars (no arrays); NaN becomes ``None``."""
@@ -464,7 +467,8 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
     -------
     CoaptationResult
         Per-leaflet heights and areas; the figure of merit
-        ``min_native_height_mm``; the regurgitant orifice area and competence.
+        ``min_native_height_mm``; the regurgitant orifice area and competence,
+        and the raster it was counted on (``orifice``).
     """
     x = _check_inputs(positions, valve, threshold_mm, pixel_mm)
     if int(profile_samples) < 3:
@@ -480,8 +484,8 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         gap = np.min([g for (a, _), g in pair_gaps.items() if a == i], axis=0)
         leaflets[patch.name] = _leaflet_coaptation(patch, x[patch.nodes], gap, threshold,
                                                    int(profile_samples), nodulus)
-    ro_area = (orifice_leak_map(x, valve, pair_gaps, threshold, float(pixel_mm))[0]
-               if orifice else math.nan)
+    ro_area, ro_map = (orifice_leak_map(x, valve, pair_gaps, threshold, float(pixel_mm))
+                       if orifice else (math.nan, None))
     native = [lc for lc in leaflets.values() if not lc.is_graft]
     if not native:
         log.warning("no native leaflet: the native coaptation heights are undefined (NaN)")
@@ -497,6 +501,7 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         central_native_height_mm=min((lc.central_height_mm for lc in native),
                                      default=math.nan),
         coaptation_area_mm2=float(sum(lc.area_mm2 for lc in leaflets.values())),
+        orifice=ro_map,
     )
     log.info("coaptation: min native height %.3f mm (raw %.3f mm), central %.3f mm, "
              "area %.2f mm², regurgitant orifice %.3f mm² (%s)", result.min_native_height_mm,

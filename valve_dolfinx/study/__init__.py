@@ -5,7 +5,8 @@
 * :mod:`~valve_dolfinx.study.runner`: every case once, over MPI rank groups, resumable;
 * :mod:`~valve_dolfinx.study.table`: ``results.csv`` / ``results.json`` (SPEC §7 schema);
 * :mod:`~valve_dolfinx.study.recommend`: the sizing recommendation;
-* :mod:`~valve_dolfinx.study.figures`, :mod:`~valve_dolfinx.study.report`: plots and report.md.
+* :mod:`~valve_dolfinx.study.report`: tables, figures (:mod:`valve_dolfinx.plotting.study`) and
+  report.md.
 
 The runner imports DOLFINx; import it as ``valve_dolfinx.study.runner`` (``run_study``
 is re-exported lazily, so ``import valve_dolfinx.study`` stays light).

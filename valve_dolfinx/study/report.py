@@ -18,7 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from valve_dolfinx.io import atomic_write, write_json
-from valve_dolfinx.study.figures import plot_case_panel, plot_coaptation_vs_width, plot_sizing_map
+from valve_dolfinx.plotting.study import (
+    plot_case_panel,
+    plot_coaptation_vs_width,
+    plot_sizing_map,
+)
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
 from valve_dolfinx.study.recommend import Recommendation, recommend
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
@@ -160,16 +164,14 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None, "recommendation": rec.to_dict(),
         "cases": len(rows), "missing": missing}))
-    files.append(plot_coaptation_vs_width(rows, out / "coaptation_vs_width.png",
-                                          target_mm=target_mm))
-    files.append(plot_sizing_map(rows, out / "sizing_map.png",
-                                 recommended=rec.recommended or rec.best))
+    plot_coaptation_vs_width(rows, out / "coaptation_vs_width.png", target_mm=target_mm)
+    plot_sizing_map(rows, out / "sizing_map.png", recommended=rec.recommended or rec.best)
+    files += [out / "coaptation_vs_width.png", out / "sizing_map.png"]
     panels = []
     wanted = [NORMAL_CASE, *(settings.panel_cases if settings else ())]
     for name in dict.fromkeys(wanted):
-        panel = plot_case_panel(out / CASES_DIR / name, out / "panels" / f"{name}.png",
-                                title=_panel_title(name))
-        if panel is not None:
+        panel = out / "panels" / f"{name}.png"
+        if plot_case_panel(out / CASES_DIR / name, panel, title=_panel_title(name)) is not None:
             panels.append(panel)
     files += panels
     files.append(_write_markdown(out, rows, rec, settings, missing, panels))

@@ -1,4 +1,4 @@
-"""Figures of a sizing study (matplotlib, off-screen), drawn from the study table alone.
+"""Figures of a sizing study, drawn from the study table alone.
 
 * :func:`plot_coaptation_vs_width`: minimum native coaptation height against graft
   width, one curve per graft height, the normal valve as a reference line;
@@ -8,6 +8,8 @@
 * :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
   two axial cuts, coaptation region on the flat outline), assembled from the
   pictures ``run`` wrote into the case folder.
+
+Each returns the figure and writes it to ``path`` if given.
 """
 
 from __future__ import annotations
@@ -17,6 +19,10 @@ import math
 from pathlib import Path
 
 import numpy as np
+from matplotlib import colormaps
+from matplotlib.patches import Rectangle
+
+from valve_dolfinx.plotting.style import OKABE_ITO, SEQUENTIAL_CMAP, new_figure, save_figure
 
 __all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_case_panel", "PANEL_IMAGES"]
 
@@ -24,18 +30,16 @@ log = logging.getLogger(__name__)
 
 FIGURE = "min_coaptation_height_mm"
 #: the pictures of a case folder that make its panel, with their captions
-PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve, ventricular view"),
-                ("cut_planes.png", "cuts through the axis"),
+PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve seen from the ventricle"),
+                ("cut_planes.png", "axial cuts"),
                 ("coaptation_map.png", "coaptation region on the flat leaflets"))
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+#: one colour per graft height (Okabe-Ito, black kept for the normal valve)
+_CURVE_COLOURS = tuple(OKABE_ITO[k] for k in ("blue", "orange", "bluish_green", "reddish_purple",
+                                              "sky_blue", "vermillion", "yellow"))
+_TARGET_COLOUR = OKABE_ITO["vermillion"]
+_LEAK_COLOUR = OKABE_ITO["vermillion"]
 
 
 def _num(value) -> float:
@@ -47,16 +51,16 @@ def _sound(row: dict) -> bool:
     return bool(row.get("converged")) and bool(row.get("competent"))
 
 
-def plot_coaptation_vs_width(rows: list[dict], path: Path, *, target_mm: float | None = None,
-                             title: str = "") -> Path:
+def plot_coaptation_vs_width(rows: list[dict], path: Path | None = None, *,
+                             target_mm: float | None = None, title: str = ""):
     """Minimum coaptation height against graft width, one curve per graft height."""
-    plt = _pyplot()
     grafts = [r for r in rows if r.get("graft_width_pct") is not None]
     normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
     heights = sorted({r["graft_height_pct"] for r in grafts})
-    colours = plt.cm.viridis(np.linspace(0.0, 0.85, max(len(heights), 1)))
-    fig, ax = plt.subplots(figsize=(7.5, 5.0), constrained_layout=True)
-    for colour, h in zip(colours, heights, strict=False):
+    fig = new_figure(7.5, 5.0)
+    ax = fig.add_subplot()
+    for k, h in enumerate(heights):
+        colour = _CURVE_COLOURS[k % len(_CURVE_COLOURS)]
         curve = sorted((r for r in grafts if r["graft_height_pct"] == h),
                        key=lambda r: r["graft_width_pct"])
         w = np.array([r["graft_width_pct"] for r in curve], dtype=float)
@@ -71,7 +75,7 @@ def plot_coaptation_vs_width(rows: list[dict], path: Path, *, target_mm: float |
                    label=f"normal valve {_num(normal[FIGURE]):.2f} mm"
                    + ("" if _sound(normal) else " (not converged/sealed)"))
     if target_mm is not None:
-        ax.axhline(target_mm, color="tab:red", ls="--", lw=1.0,
+        ax.axhline(target_mm, color=_TARGET_COLOUR, ls="--", lw=1.2,
                    label=f"target {target_mm:.2f} mm")
     ax.plot([], [], "o", mfc="white", mec="0.3", label="not converged or leaking")
     ax.set_xlabel("graft width enlargement W (%)")
@@ -82,44 +86,38 @@ def plot_coaptation_vs_width(rows: list[dict], path: Path, *, target_mm: float |
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     ax.set_title(title or "Minimum coaptation height of the native leaflets")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=130)
 
 
-def plot_sizing_map(rows: list[dict], path: Path, *, recommended: str | None = None,
-                    title: str = "") -> Path:
+def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
+                    recommended: str | None = None, title: str = ""):
     """The W × H grid coloured by minimum coaptation height; leaks and failures marked."""
-    plt = _pyplot()
     grafts = [r for r in rows if r.get("graft_width_pct") is not None]
     widths = sorted({r["graft_width_pct"] for r in grafts})
     heights = sorted({r["graft_height_pct"] for r in grafts})
     if not grafts:
-        fig, ax = plt.subplots(figsize=(5, 3))
+        fig = new_figure(5, 3)
+        ax = fig.add_subplot()
         ax.text(0.5, 0.5, "no graft case finished yet", ha="center", va="center")
         ax.set_axis_off()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        return path
+        return save_figure(fig, path, dpi=100)
     grid = np.full((len(heights), len(widths)), np.nan)
     by_cell = {}
     for r in grafts:
         j, i = widths.index(r["graft_width_pct"]), heights.index(r["graft_height_pct"])
         grid[i, j] = _num(r.get(FIGURE))
         by_cell[(i, j)] = r
-    fig, ax = plt.subplots(figsize=(1.4 * len(widths) + 3.2, 1.1 * len(heights) + 2.2),
-                           constrained_layout=True)
-    cmap = plt.cm.viridis.with_extremes(bad="0.85")
+    fig = new_figure(1.4 * len(widths) + 3.2, 1.1 * len(heights) + 2.2)
+    ax = fig.add_subplot()
+    cmap = colormaps[SEQUENTIAL_CMAP].with_extremes(bad="0.85")
     image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto")
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("minimum coaptation height (mm)")
     normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
-    note = "red hatched: leaks (regurgitant orifice area > 0)"
+    note = "vermillion hatched: leaks (regurgitant orifice area > 0)"
     if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
         bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
-        note += f"; black bar line: normal valve {_num(normal[FIGURE]):.2f} mm"
+        note += f"; black line on the colour bar: normal valve {_num(normal[FIGURE]):.2f} mm"
     finite = grid[np.isfinite(grid)]
     middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
     for (i, j), r in by_cell.items():
@@ -134,26 +132,24 @@ def plot_sizing_map(rows: list[dict], path: Path, *, recommended: str | None = N
         ax.text(j, i, "\n".join(lines), ha="center", va="center", fontsize=8, color=colour,
                 fontweight="bold" if math.isfinite(roa) and roa > 0 else "normal")
         if math.isfinite(roa) and roa > 0:
-            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="tab:red",
-                                       lw=2.5, hatch="//", alpha=0.8))
+            ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
+                                   lw=2.5, hatch="//", alpha=0.8))
         label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"
         if label == recommended:
-            ax.add_patch(plt.Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False,
-                                       ec="gold", lw=3.0))
+            for colour, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
+                ax.add_patch(Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False,
+                                       ec=colour, lw=width))
     ax.set_xticks(range(len(widths)), [f"+{w:g}" for w in widths])
     ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("graft height enlargement H (%)")
     if recommended:
-        note += f"; gold: recommended {recommended}"
+        note += f"\nblack-and-white frame: recommended {recommended}"
     ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=130)
 
 
-def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path | None:
+def plot_case_panel(case_folder: Path, path: Path | None = None, *, title: str = ""):
     """One case's ventricular view, axial cuts and coaptation map side by side.
 
     Returns None (and draws nothing) if the case folder holds none of the pictures.
@@ -163,7 +159,6 @@ def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path |
     if not images:
         log.debug("no pictures in %s: no panel drawn", case_folder)
         return None
-    plt = _pyplot()
     import matplotlib.image as mpimg
 
     pictures = [(mpimg.imread(p), caption) for p, caption in images]
@@ -172,7 +167,7 @@ def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path |
     width, caption_h, title_h = 12.0, 0.3, 0.45 if title else 0.0
     heights = [width / sum(img.shape[1] / img.shape[0] for img, _ in row) for row in rows]
     total = title_h + sum(h + caption_h for h in heights)
-    fig = plt.figure(figsize=(width, total))
+    fig = new_figure(width, total, layout=None)
     top = total - title_h
     for row, h in zip(rows, heights, strict=True):
         left = 0.0
@@ -186,7 +181,4 @@ def plot_case_panel(case_folder: Path, path: Path, *, title: str = "") -> Path |
             left += w
     if title:
         fig.suptitle(title, y=1.0 - 0.2 * title_h / total, fontsize=13)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=200)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=200)

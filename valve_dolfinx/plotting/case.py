@@ -1,0 +1,101 @@
+"""Every figure of one closed valve, written into its case folder.
+
+:data:`CASE_FIGURES` names the files and says what each shows; the titles
+carry the case's key numbers (minimum and central coaptation height,
+regurgitant orifice area, competence).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from valve_dolfinx.plotting.flat import plot_coaptation_map
+from valve_dolfinx.plotting.orifice import plot_orifice_map
+from valve_dolfinx.plotting.scene import plot_gap_3d, plot_valve_3d
+from valve_dolfinx.plotting.sections import plot_cross_sections, plot_cut_planes
+from valve_dolfinx.plotting.style import key_numbers
+
+__all__ = ["CASE_FIGURES", "case_label", "write_case_figures"]
+
+log = logging.getLogger(__name__)
+
+#: file name -> what it shows
+CASE_FIGURES = {
+    "closed_valve.png": "the closed valve, oblique view from the aortic side",
+    "closed_valve_aortic.png": "the closed valve seen from the aorta (the surgeon's view)",
+    "closed_valve_ventricular.png": "the closed valve seen from the ventricle, with the "
+                                    "regurgitant orifice when there is one",
+    "coaptation_gap.png": "the closed valve coloured by the gap to the nearest other leaflet",
+    "cut_planes.png": "axial cuts through the graft's (NC's) midline and through its commissure",
+    "cross_sections.png": "horizontal sections, with the regurgitant orifice when there is one",
+    "coaptation_map.png": "the coaptation region on the flat leaflets and the height profiles",
+    "orifice_map.png": "the orifice raster seen along the axis: footprints, orifice, pockets",
+}
+
+
+def _get(result, key: str):
+    return result.get(key) if isinstance(result, Mapping) else getattr(result, key, None)
+
+
+def case_label(result) -> str:
+    """``normal valve`` or ``graft W21/H27``."""
+    width = _get(result, "graft_width_pct")
+    if width is None:
+        return "normal valve"
+    return f"graft W{width:g}/H{_get(result, 'graft_height_pct'):g}"
+
+
+def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation, result, *,
+                       mirrored: bool = False) -> list[Path]:
+    """Draw the figures of :data:`CASE_FIGURES` of a closed valve into ``out``.
+
+    ``positions`` are the loaded node positions of ``valve``, ``coaptation``
+    its :class:`~valve_dolfinx.analysis.coaptation.CoaptationResult` (the
+    orifice raster in ``coaptation.orifice``), ``result`` the case result
+    (``CaseResult`` or its dict) whose key numbers go into the titles;
+    ``mirrored`` says the valve is one solved leaflet and its mirror images.
+    The coaptation figures need at least two leaflets.  Returns the files
+    written.
+    """
+    out = Path(out)
+    name = case_label(result) + (" (one leaflet and its mirror images)" if mirrored else "")
+    pressure = (_get(result, "parameters") or {}).get("pressure_mmhg")
+    numbers = key_numbers(result)
+    orifice = getattr(coaptation, "orifice", None) if coaptation is not None else None
+    written = []
+
+    def title(what: str) -> str:
+        return f"{name}: {what}\n{numbers}"
+
+    closed = "closed" + (f" under {pressure:g} mmHg" if isinstance(pressure, int | float)
+                         and math.isfinite(pressure) else "")
+    for file, view, what in (("closed_valve.png", "iso", f"{closed}, oblique from the aorta"),
+                             ("closed_valve_aortic.png", "aortic", f"{closed}, from the aorta"),
+                             ("closed_valve_ventricular.png", "ventricular",
+                              f"{closed}, from the ventricle")):
+        plot_valve_3d(positions, valve, out / file, view=view, title=title(what),
+                      orifice=orifice)
+        written.append(out / file)
+    plot_cut_planes(positions, valve, out / "cut_planes.png", title=name, result=result)
+    plot_cross_sections(positions, valve, out / "cross_sections.png", title=name,
+                        result=result, orifice=orifice)
+    written += [out / "cut_planes.png", out / "cross_sections.png"]
+    if coaptation is not None and len(valve.leaflets) > 1:
+        plot_gap_3d(positions, valve, coaptation, out / "coaptation_gap.png",
+                    title=title("gap to the nearest other leaflet"))
+        plot_coaptation_map(coaptation, valve, out / "coaptation_map.png", title=name,
+                            result=result)
+        written += [out / "coaptation_gap.png", out / "coaptation_map.png"]
+        if orifice is not None:
+            plot_orifice_map(orifice, valve, out / "orifice_map.png",
+                             title=f"{name}: regurgitant orifice, seen along the axis "
+                                   "from the aorta", result=result)
+            written.append(out / "orifice_map.png")
+    for path in written:
+        log.debug("wrote %s", path)
+    return written
