@@ -31,17 +31,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from valve_dolfinx import CaseConfig, load_case, run_case
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.analysis import analyse_coaptation
-from valve_dolfinx.closure import CaseConfig, run_case
-from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, ValveParameters, build_valve
+from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, ValveParameters
 from valve_dolfinx.plotting import (
     key_numbers,
     plot_coaptation_map,
@@ -62,7 +61,7 @@ out: Path = args.out
 
 # %% [markdown]
 # ## Close the valve
-# `run_case` builds the mesh, solves and writes `result.json`, `config.json`,
+# `run_case` builds the mesh, solves and writes `result.json`, `config.toml`,
 # `history.csv`, `loaded_state.npz`, the ParaView fields and the case figures
 # into `out`.
 
@@ -76,18 +75,15 @@ if comm.rank == 0:
 
 # %% [markdown]
 # ## Load the closed surface
-# `loaded_state.npz` holds the loaded node positions with the mesh's topology;
-# the valve description (leaflets, flat coordinates, free edges) is rebuilt from
-# the configuration that ran, and the coaptation analysis is repeated on it
-# (it is serial and takes seconds).  Under `mpirun` every rank draws, rank 0
-# writes the files.
+# `load_case` reads a finished case folder: the result, the configuration that
+# ran, the valve mesh (rebuilt from that configuration) and the loaded node
+# positions.  The coaptation analysis is repeated on them to draw it (it is
+# serial and takes seconds).  Under `mpirun` every rank draws, rank 0 writes the
+# files.
 
 # %%
-ran = CaseConfig.from_dict(json.loads((out / "config.json").read_text()))
-valve = build_valve(ran.geometry)
-state = np.load(out / "loaded_state.npz")
-assert np.allclose(state["reference"], valve.points)  # the same mesh
-positions = state["positions"]
+case = load_case(out)
+ran, valve, positions = case.config, case.valve, case.positions
 coaptation = analyse_coaptation(positions, valve, threshold_mm=ran.coaptation_threshold_mm,
                                 pixel_mm=ran.orifice_pixel_mm,
                                 nodulus_length_mm=ran.nodulus_length_mm)

@@ -105,7 +105,7 @@ def leaking_case(tmp_path_factory):
     """W27/H0 closed at 1.6 mm through run_case, its figures written; what they were drawn
     from is recorded on the way."""
     from valve_dolfinx import plotting
-    from valve_dolfinx.closure import CaseConfig, run_case
+    from valve_dolfinx import CaseConfig, run_case
     from valve_dolfinx.geometry.valve import ValveParameters
 
     out = tmp_path_factory.mktemp("W27_H0")
