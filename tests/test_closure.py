@@ -274,9 +274,10 @@ def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases,
 def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mesh_cases):
     """SPEC §1: two placements of the slack W21/H27 graft, 1.5 mm apart at the graft's
     free-edge midpoint, close to the same coaptation: figure of merit within 0.05 mm.
-    (Their loaded nodes differ by up to 0.25 mm where the slack graft edge folds:
-    benchmarks/independence.py reports it.)"""
-    (r_in, f_in, _, valve_in), (r_out, f_out, _, valve_out) = (
+    The graft itself forgets its placement: its loaded nodes agree within 0.1 mm.  (The
+    native LC and RC tips at the triple point do not: they rest up to 0.25 mm apart in
+    the two cases, with the same coaptation; benchmarks/independence.py reports it.)"""
+    (r_in, f_in, x_in, valve_in), (r_out, f_out, x_out, valve_out) = (
         default_mesh_cases["W21/H27"], default_mesh_cases["W21/H27 outward"])
     assert r_in.converged and r_out.converged
     graft = next(p for p in valve_in.leaflets if p.is_graft)
@@ -284,6 +285,7 @@ def test_slack_graft_coaptation_independent_of_its_initial_placement(default_mes
     assert np.linalg.norm(valve_in.points[mid] - valve_out.points[mid]) >= 1.0
     assert f_in["min_coaptation_height_mm"] == pytest.approx(f_out["min_coaptation_height_mm"],
                                                              abs=0.05)
+    assert np.max(np.linalg.norm(x_in[graft.nodes] - x_out[graft.nodes], axis=1)) < 0.1
 
 
 @pytest.mark.mpi
