@@ -21,6 +21,8 @@ import logging
 import sys
 from pathlib import Path
 
+from valve_dolfinx.exceptions import ExitCode
+
 __all__ = ["main"]
 
 log = logging.getLogger("valve_dolfinx")
@@ -84,9 +86,10 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress_bar(comm):
-    """A tqdm status line of the closure on rank 0 (a no-op callback elsewhere)."""
-    if comm.rank != 0:
+def _progress_bar(comm, enabled: bool = True):
+    """A tqdm status line of the closure on rank 0 (a no-op callback elsewhere, and with
+    ``enabled`` false: ``-q``)."""
+    if comm.rank != 0 or not enabled:
         return lambda entry: None, lambda: None
     from tqdm import tqdm
 
@@ -185,8 +188,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if comm.rank == 0:
             print(f"{args.out}/result.json already holds this case (converged: "
                   f"{done['converged']}); --force recomputes it")
-        return 0 if done["converged"] else 3
-    update, close = _progress_bar(comm)
+        return ExitCode.OK if done["converged"] else ExitCode.NOT_CONVERGED
+    update, close = _progress_bar(comm, enabled=not args.quiet)
     try:
         result = run_case(config, args.out, comm=comm, progress=update)
     finally:
@@ -197,7 +200,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
               f"minimum {result.min_coaptation_height_mm:.2f} mm, regurgitant orifice "
               f"{result.regurgitant_orifice_area_mm2:.2f} mm², root diameter "
               f"{result.root_diameter_mm:.2f} mm; {result.wall_time_s:.0f} s -> {args.out}")
-    return 0 if result.converged else 3
+    return ExitCode.OK if result.converged else ExitCode.NOT_CONVERGED
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
