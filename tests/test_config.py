@@ -26,7 +26,7 @@ from valve_dolfinx.config import (
 )
 from valve_dolfinx.exceptions import ExitCode, ParameterError
 from valve_dolfinx.geometry.valve import ValveParameters
-from valve_dolfinx.root import RootParameters
+from valve_dolfinx.mechanics.root import RootParameters
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 
 #: the case the real run computes: cheap, and every file of a case is written

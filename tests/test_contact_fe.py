@@ -15,7 +15,7 @@ from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.contact import ContactParameters, SurfaceContact
 from valve_dolfinx.geometry.verification import membrane_domain_from_arrays, tangent_frames
 from valve_dolfinx.materials import FungMaterial
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters

@@ -17,7 +17,7 @@ from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.verification import flat_sheet_domain
 from valve_dolfinx.materials import NATIVE_LEAFLET, FungMaterial
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
 from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver

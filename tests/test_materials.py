@@ -23,7 +23,7 @@ from valve_dolfinx.materials import (
     equibiaxial_response,
     preset,
 )
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 
 SPEC_TABLE = {  # SPEC §3: c, A1..A6
     "native_leaflet": (9.7, 49.56, 5.29, -3.12, 16.03, -0.004, -0.02),

@@ -21,7 +21,7 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.geometry.verification import flat_sheet_domain, sphere_domain
 from valve_dolfinx.materials import NATIVE_LEAFLET
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 
 EPS = 1e-3 * 0.5 ** np.arange(6)
 

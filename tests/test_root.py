@@ -20,7 +20,7 @@ import pytest
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.exceptions import ParameterError, SolverError
-from valve_dolfinx.root import RootParameters, distend_root
+from valve_dolfinx.mechanics.root import RootParameters, distend_root
 
 #: 80 mmHg in kPa, spelled out (1 mmHg = 0.133322 kPa)
 P80 = 80 * 0.133322

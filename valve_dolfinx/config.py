@@ -30,7 +30,7 @@ from valve_dolfinx.exceptions import (
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.materials import BOVINE_PERICARDIUM, NATIVE_LEAFLET, FungMaterial
-from valve_dolfinx.root import RootParameters
+from valve_dolfinx.mechanics.root import RootParameters
 from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
 
 __all__ = [
@@ -98,7 +98,7 @@ class CaseConfig:
     contact law sees the distance to the mirror image, as between leaflets).
 
     ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
-    ``D = E_b·t³/12`` (:mod:`valve_dolfinx.bending`; 0 = pure membrane): it
+    ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
     regularises the slack free-edge tip at the triple point, without which the
     three-leaflet valve does not converge (docs/closure.md).
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:

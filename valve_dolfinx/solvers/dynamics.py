@@ -43,7 +43,7 @@ import ufl
 
 from valve_dolfinx._compat import PETSc, dolfinx
 from valve_dolfinx.geometry.distributed import node_to_dof
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
 from valve_dolfinx.solvers.report import DynamicsReport

@@ -54,7 +54,7 @@ import ufl
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
-from valve_dolfinx.membrane import MembraneModel
+from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.nodal import NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport

@@ -33,7 +33,7 @@ import ufl
 from valve_dolfinx._compat import dolfinx
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.domain import MembraneDomain
-from valve_dolfinx.kinematics import (
+from valve_dolfinx.mechanics.kinematics import (
     area_vector,
     deformation_gradient,
     green_lagrange,
