@@ -112,17 +112,39 @@ def test_broken_toml_is_a_configuration_error(tmp_path):
     assert not (tmp_path / "study").exists()
 
 
-def test_unreadable_mesh_file_is_an_input_error(tmp_path):
-    from valve_dolfinx.geometry.valve import load_valve_mesh
+def test_missing_or_broken_mesh_file_is_an_input_error(tmp_path):
+    """``run --mesh``: a missing file and a file that is not a valve mesh each stop the run
+    before any computation, with status 4 and one line naming the file."""
+    missing = tmp_path / "valve.npz"
+    proc = _cli("run", "--mesh", str(missing), "--out", str(tmp_path / "a"), timeout=120)
+    assert proc.returncode == ExitCode.INPUT, proc.stderr[-2000:]
+    _assert_one_error_line(proc.stderr, str(missing), "valve-dolfinx mesh")
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(b"not a mesh")
+    proc = _cli("run", "--mesh", str(broken), "--out", str(tmp_path / "b"), timeout=120)
+    assert proc.returncode == ExitCode.INPUT, proc.stderr[-2000:]
+    _assert_one_error_line(proc.stderr, str(broken), "valve-dolfinx mesh")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
-    with pytest.raises(FileNotFoundError) as missing:
-        load_valve_mesh(tmp_path / "valve.npz")
-    assert exit_code(missing.value) == ExitCode.INPUT
-    (tmp_path / "valve.npz").write_bytes(b"not a mesh")
-    with pytest.raises(MeshError) as broken:
-        load_valve_mesh(tmp_path / "valve.npz")
-    assert exit_code(broken.value) == ExitCode.INPUT
-    assert "valve-dolfinx mesh" in str(broken.value)
+
+def test_run_closes_a_mesh_file_with_its_geometry(tmp_path):
+    """``run --mesh`` takes the geometry (here a 1.6 mm W21/H27 graft valve) from the file:
+    the result records it, whatever the configuration's geometry says."""
+    import json
+
+    from valve_dolfinx.geometry.valve import ValveParameters, build_valve, save_valve_mesh
+
+    mesh = save_valve_mesh(build_valve(ValveParameters(
+        mesh_size=1.6, graft_width_pct=21, graft_height_pct=27)), tmp_path / "graft.npz")
+    out = tmp_path / "case"
+    proc = _cli("run", "--mesh", str(mesh), "--set", "pseudo_transient.max_steps=1",
+                "--out", str(out))
+    assert proc.returncode == ExitCode.NOT_CONVERGED, proc.stderr[-2000:]
+    geometry = json.loads((out / "result.json").read_text())["parameters"]["geometry"]
+    assert (geometry["mesh_size"], geometry["graft_width_pct"],
+            geometry["graft_height_pct"]) == (1.6, 21, 27)
+    proc = _cli("run", "--mesh", str(mesh), "--mesh-size", "1.2", "--out", str(out))
+    assert proc.returncode == ExitCode.USAGE and "--mesh" in proc.stderr
 
 
 @pytest.mark.parametrize("width,reason", [("500", "typing error"),

@@ -197,8 +197,13 @@ def analyse_case(state: CaseState, config: CaseConfig):
 
 def run_case(config: CaseConfig, out_dir: str | Path | None = None,
              comm: MPI.Comm = MPI.COMM_WORLD, progress: Callable[[dict], None] | None = None,
-             figures: bool = True, fields_output: bool = True) -> CaseResult:
+             figures: bool = True, fields_output: bool = True,
+             valve: ValveMesh | None = None) -> CaseResult:
     """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
+
+    ``valve``: the valve mesh to close (rank 0's is used), e.g. one read with
+    :func:`~valve_dolfinx.geometry.valve.load_valve_mesh`; by default it is built from
+    ``config.geometry``, which should describe it either way (the result records it).
 
     Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
     hash), ``config.toml`` (the configuration that ran, reloadable with
@@ -209,7 +214,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
 
     t0 = time.perf_counter()
     g = config.geometry
-    state = solve_case(config, comm, progress)
+    state = solve_case(config, comm, progress, valve=valve)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
     report = state.report

@@ -179,6 +179,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
         args.parser.error("--symmetric-reference is the normal valve: drop --graft-width/"
                           "--graft-height, or drop --symmetric-reference")
     config = _case_config(args)  # a bad setting stops here, before DOLFINx is imported
+    valve = None
+    if args.mesh is not None:
+        if graft is not None or args.mesh_size is not None or args.symmetric_reference:
+            args.parser.error("--mesh gives the valve and its geometry: drop --graft-width/"
+                              "--graft-height/--mesh-size/--symmetric-reference")
+        from dataclasses import replace
+
+        from valve_dolfinx.geometry.valve import load_valve_mesh
+
+        valve = load_valve_mesh(args.mesh)  # a missing or broken file stops here
+        config = replace(config, geometry=valve.parameters)
     done = _existing_result(args.out, config, args.force)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.case import run_case
@@ -191,7 +202,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return ExitCode.OK if done["converged"] else ExitCode.NOT_CONVERGED
     update, close = _progress_bar(comm, enabled=not args.quiet)
     try:
-        result = run_case(config, args.out, comm=comm, progress=update)
+        result = run_case(config, args.out, comm=comm, progress=update, valve=valve)
     finally:
         close()
     if comm.rank == 0:
@@ -448,6 +459,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true",
                    help="recompute even if --out already holds this case's result.json, or "
                    "overwrite another case's result there")
+    p.add_argument("--mesh", type=Path, default=None, metavar="VALVE.npz",
+                   help="close this valve mesh (written by `valve-dolfinx mesh`) instead of "
+                   "building one; its geometry replaces the configuration's")
     _add_config_args(p)
     _add_geometry_args(p)
     p.set_defaults(func=_cmd_run, parser=p)
