@@ -93,9 +93,9 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
     from valve_dolfinx import case as closure
     from valve_dolfinx import output
     from valve_dolfinx._compat import MPI, dolfinx
-    from valve_dolfinx.mechanics.bending import BendingHook
     from valve_dolfinx.config import CaseConfig
     from valve_dolfinx.geometry.valve import ValveParameters
+    from valve_dolfinx.solvers.bending_hook import BendingHook
     from valve_dolfinx.solvers.contact_hook import ContactHook
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 

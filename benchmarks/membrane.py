@@ -48,9 +48,9 @@ def run_one(h: float) -> dict:
     import numpy as np
 
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.mechanics.boundary_conditions import point_supports
     from valve_dolfinx.geometry.verification import sphere_domain
     from valve_dolfinx.materials import FungMaterial
+    from valve_dolfinx.mechanics.boundary_conditions import point_supports
     from valve_dolfinx.mechanics.membrane import MembraneModel
     from valve_dolfinx.solvers.parameters import PseudoTransientParameters
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from valve_dolfinx.mechanics.bending import bending_stiffness_matrix, flexural_rigidity
 from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.mechanics.bending import bending_stiffness_matrix, flexural_rigidity
 
 D = flexural_rigidity(200.0, 0.5)  # 2.083 mN·mm
 
@@ -115,7 +115,7 @@ def test_hook_adds_K_to_the_momentum_rows_of_a_state_matrix():
     import basix.ufl
 
     from valve_dolfinx._compat import MPI, PETSc, dolfinx
-    from valve_dolfinx.mechanics.bending import BendingHook
+    from valve_dolfinx.solvers.bending_hook import BendingHook
     from valve_dolfinx.solvers.dynamics import STATE_LAYOUT
     from valve_dolfinx.solvers.nodal import NodalCoupling
 

@@ -22,7 +22,6 @@ import pytest
 from scipy.optimize import brentq, fsolve
 
 from valve_dolfinx._compat import MPI, dolfinx
-from valve_dolfinx.mechanics.boundary_conditions import point_supports
 from valve_dolfinx.geometry.verification import (
     CAP_TAG,
     TUBE_TAG,
@@ -31,6 +30,7 @@ from valve_dolfinx.geometry.verification import (
     sphere_domain,
 )
 from valve_dolfinx.materials import NATIVE_LEAFLET, FungMaterial
+from valve_dolfinx.mechanics.boundary_conditions import point_supports
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver

@@ -104,8 +104,7 @@ def test_drawn_synthetic_orifice_has_its_area(tmp_path):
 def leaking_case(tmp_path_factory):
     """W27/H0 closed at 1.6 mm through run_case, its figures written; what they were drawn
     from is recorded on the way."""
-    from valve_dolfinx import plotting
-    from valve_dolfinx import CaseConfig, run_case
+    from valve_dolfinx import CaseConfig, plotting, run_case
     from valve_dolfinx.geometry.valve import ValveParameters
 
     out = tmp_path_factory.mktemp("W27_H0")

@@ -24,16 +24,17 @@ import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx, package_versions
 from valve_dolfinx._version import __version__, git_commit
-from valve_dolfinx.mechanics.bending import BendingHook, bending_stiffness_matrix, flexural_rigidity
-from valve_dolfinx.mechanics.boundary_conditions import clamp_edges
 from valve_dolfinx.config import CaseConfig, case_name
 from valve_dolfinx.contact import PlaneContact, SurfaceContact
 from valve_dolfinx.geometry.distributed import ValveDomain, create_valve_domain
 from valve_dolfinx.geometry.symmetry import mirror_leaflet, single_leaflet, symmetry_planes
 from valve_dolfinx.geometry.valve import ATTACHMENT, ValveMesh, build_valve
+from valve_dolfinx.mechanics.bending import bending_stiffness_matrix, flexural_rigidity
+from valve_dolfinx.mechanics.boundary_conditions import clamp_edges
 from valve_dolfinx.mechanics.membrane import MembraneModel
-from valve_dolfinx.result import CaseResult
 from valve_dolfinx.mechanics.root import RootState, distend_root
+from valve_dolfinx.result import CaseResult
+from valve_dolfinx.solvers.bending_hook import BendingHook
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
@@ -85,8 +86,9 @@ def _leaflet_energy_on_cylinder(model: MembraneModel, wrap_radius: float
 
 
 def leaflet_bending_matrix(valve: ValveMesh, model: MembraneModel, modulus_kpa: float):
-    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.mechanics.bending`), D = E_b·t³/12 with
-    the thickness of each node's tissue; no curvature is measured on the boundary."""
+    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.mechanics.bending`),
+    D = E_b·t³/12 with the thickness of each node's tissue; no curvature is measured on
+    the boundary."""
     node_rigidity = np.zeros(valve.num_nodes)
     for tag, material in model.materials.items():
         cells = valve.cells[valve.cell_tags == tag]

@@ -33,6 +33,7 @@ import ufl
 from valve_dolfinx._compat import dolfinx
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.domain import MembraneDomain
+from valve_dolfinx.materials import FungMaterial, fung_energy, relaxed_energy
 from valve_dolfinx.mechanics.kinematics import (
     area_vector,
     deformation_gradient,
@@ -40,7 +41,6 @@ from valve_dolfinx.mechanics.kinematics import (
     reference_area_factor,
     to_material_axes,
 )
-from valve_dolfinx.materials import FungMaterial, fung_energy, relaxed_energy
 
 __all__ = ["MembraneModel"]
 

@@ -110,9 +110,10 @@ class NodalCoupling:
         """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block (duplicates add).
 
         The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), then
-        inserted with one PETSc call per block row: a plain displacement space (block size 3) takes the blocks
-        whole (``MatSetValuesBlocked``, the blocks of a row one after the other), a
-        state with other components interleaved (the dynamics' (u, v)) row by row
+        inserted with one PETSc call per block row: a plain displacement space (block
+        size 3) takes the blocks whole (``MatSetValuesBlocked``, the blocks of a row one
+        after the other), a state with other components interleaved (the dynamics'
+        (u, v)) row by row
         (:meth:`block_csr`).
         """
         if len(row_nodes) == 0:
