@@ -24,7 +24,7 @@ import pytest
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.case import run_case, solve_case
-from valve_dolfinx.config import CaseConfig, load_config
+from valve_dolfinx.config import MMHG_TO_KPA, CaseConfig, load_config
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
@@ -118,6 +118,27 @@ def test_two_runs_are_bit_for_bit_equal():
     first, second = (solve_case(config, MPI.COMM_SELF) for _ in range(2))
     assert first.report.steps == 30 and first.report.history[-1]["contacts"] > 0
     assert (first.positions == second.positions).all()
+
+
+def test_pressure_ramp_reaches_the_unique_equilibrium_at_full_pressure():
+    """A 20-step pressure ramp on the reference (1.6 mm, one equilibrium): the pressure
+    rises in equal steps to 80 mmHg, the case converges only at full pressure, and it
+    converges to the state the full pressure from the first step reaches."""
+    full, ramped = (run_case(_reference_config(mesh_size=1.6, pseudo_transient=_ptc(
+        pressure_ramp_steps=n)), comm=MPI.COMM_SELF, figures=False, fields_output=False)
+        for n in (0, 20))
+    for result in (full, ramped):
+        _assert_converged_and_sealed(result)
+    target = 80 * MMHG_TO_KPA
+    state = solve_case(_reference_config(mesh_size=1.6, pseudo_transient=_ptc(
+        pressure_ramp_steps=20, max_steps=25)), MPI.COMM_SELF)
+    pressures = [entry["pressure_kpa"] for entry in state.report.history]
+    assert pressures[:20] == pytest.approx([target * (k + 1) / 20 for k in range(20)])
+    assert pressures[20:] == pytest.approx([target] * (len(pressures) - 20))
+    assert ramped.time_steps >= 20
+    assert ramped.min_coaptation_height_mm == pytest.approx(full.min_coaptation_height_mm,
+                                                            abs=SAME)
+    assert ramped.coaptation_area_mm2 == pytest.approx(full.coaptation_area_mm2, rel=0.01)
 
 
 def test_failed_solve_is_reported_and_written(tmp_path):

@@ -257,6 +257,8 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
     "pseudo_transient": {
         "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
         "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
+        "pressure_ramp_steps": ("", "pseudo-time steps over which the pressure rises to its "
+                                "target (0: the full pressure from the first step)"),
         "dt_initial": ("", "first pseudo-time step"),
         "dt_min": ("", "pseudo-time step below which the run has stalled"),
         "dt_max": ("", "largest pseudo-time step"),

@@ -294,6 +294,8 @@ class PseudoTransientSolver:
         self._last_displacement = displacement
         motion = float(np.max(step, initial=0.0))
         watched = float(np.max(step[self.watch_nodes], initial=0.0))
+        solved_pressure = float(self.model.pressure.value)
+        self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
         for hook in self.hooks:  # contact sides and driving forces of this state
             accept = getattr(hook, "accept_state", None)
             if accept is not None:
@@ -305,6 +307,7 @@ class PseudoTransientSolver:
         r.newton_iterations += ts.getSNES().getIterationNumber()
         r.residual_mN, r.last_dt = r_inf, dt
         entry = {"step": r.steps, "pseudo_time": r.time, "dt": dt,
+                 "pressure_kpa": solved_pressure,
                  "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
                  "watched_motion_mm": watched,
                  "newton_iterations": ts.getSNES().getIterationNumber()}
@@ -317,7 +320,7 @@ class PseudoTransientSolver:
             self._progress(entry)
         self._lap("post_step", t0)
         elapsed = time.perf_counter() - self._t0
-        if r_inf < p.residual_tolerance:
+        if r_inf < p.residual_tolerance and ts.getStepNumber() >= p.pressure_ramp_steps:
             r.converged = True
             r.reason = (f"static residual {r_inf:.3g} mN < {p.residual_tolerance:g} mN after "
                         f"{r.steps} pseudo-time steps, {r.newton_iterations} Newton iterations")
@@ -336,6 +339,12 @@ class PseudoTransientSolver:
         self._r_prev = r_two
         ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
 
+    def _ramped_pressure(self, step: int) -> float:
+        """The pressure of the step after ``step`` accepted ones: the target reached in
+        ``pressure_ramp_steps`` equal increments (0: the target from the first step)."""
+        n = self.params.pressure_ramp_steps
+        return self.target_pressure * (1.0 if n <= 0 else min(1.0, (step + 1) / n))
+
     def solve(self, progress: Callable[[dict], None] | None = None) -> SolveReport:
         """Step to the static equilibrium; never raises because the solve failed.
 
@@ -346,7 +355,7 @@ class PseudoTransientSolver:
         self._t0 = time.perf_counter()
         self._clock = {}
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
-        self.model.pressure.value = self.target_pressure
+        self.model.pressure.value = self._ramped_pressure(0)
         self._last_displacement = self.coupling.displacements(self.u)
         _, self._r_prev = self.static_residual()
         ts = self._make_ts()
