@@ -152,6 +152,14 @@ def test_settings_hash_is_the_physics_and_numerics():
 
 
 # --- the package -------------------------------------------------------------------------------
+def _python(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter from the repository root; it must succeed."""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc
+
+
 def test_import_is_light_and_the_api_is_complete():
     code = ("import sys, valve_dolfinx as vd\n"
             "heavy = [m for m in ('dolfinx', 'petsc4py', 'matplotlib', 'pyvista', 'gmsh') "
@@ -163,9 +171,7 @@ def test_import_is_light_and_the_api_is_complete():
             "assert not heavy, heavy\n"
             "assert all(callable(getattr(vd, n)) for n in vd.__all__ if n != '__version__')\n"
             "print(vd.__version__)\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, cwd=Path(__file__).resolve().parents[1])
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = _python(code)
     import valve_dolfinx
 
     assert proc.stdout.strip() == valve_dolfinx.__version__
@@ -188,9 +194,7 @@ def test_config_needs_no_dolfinx():
             "from valve_dolfinx.config import load_config, config_toml\n"
             "config_toml(load_config(overrides=['pressure_mmhg=90']))\n"
             "assert not {'dolfinx', 'petsc4py', 'gmsh'} & set(sys.modules)\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, cwd=Path(__file__).resolve().parents[1])
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    _python(code)
 
 
 # --- a run from a configuration file -----------------------------------------------------------
