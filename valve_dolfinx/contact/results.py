@@ -257,9 +257,10 @@ class ContactRows:
         # a row without force, force slope or driving-force turning has no blocks of its own
         # (about half the rows: in range of the search, out of reach of the law); it may
         # still take part in its group's coupling above
-        live = np.flatnonzero((f != 0.0) | (self.dfdd != 0.0) if self.grad_f is None else
-                              (f != 0.0) | (self.dfdd != 0.0)
-                              | np.any(self.grad_f != 0.0, axis=(1, 2)))
+        acting = (f != 0.0) | (self.dfdd != 0.0)
+        if self.grad_f is not None:
+            acting |= np.any(self.grad_f != 0.0, axis=(1, 2))
+        live = np.flatnonzero(acting)
         ids_live, B_live, own, magnitude_live = ids[live], B[live], own[live], magnitude[live]
         # one allocation for all blocks: at 10^5 triangles they take hundreds of MB
         size = len(live) * m * m
