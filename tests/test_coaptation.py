@@ -223,7 +223,7 @@ def test_band_missing_on_one_side_shows_on_that_side_only():
     # B now covers 3-D x >= 0 only: A's columns x >= 0 keep the 4 mm band; A's nodes at
     # flat x <= -1 (3-D x <= -1.1) are >= sqrt(0.3² + 1.1²) > 0.5 from B, so h = 0 there.
     valve, x = _band_valve(b_x_from=0.0)
-    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False)
+    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False, nodulus_length_mm=0.0)
     a = res.leaflets["left_coronary"]
     assert np.allclose(a.height_mm[a.x_mm >= -1e-9], 4.0, atol=1e-9)
     assert np.all(a.height_mm[a.x_mm <= -1.0] == 0.0)
@@ -244,9 +244,9 @@ DIP_WIDTH = 0.5
 @pytest.mark.parametrize("dip_at, low_sides", [(0.0, {"left", "right"}), (3.0, {"right"}),
                                                 (-3.0, {"left"})])
 def test_narrow_dip_is_found_on_its_own_side(dip_at, low_sides):
-    """A 0.5 mm wide dip at the midline or 3 mm off it, with no nodulus (the default)."""
+    """A 0.5 mm wide dip at the midline or 3 mm off it, with no nodulus (l = 0)."""
     valve, x = _band_valve(dip_at=dip_at, depth=DIP_DEPTH, width=DIP_WIDTH)
-    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False)
+    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False, nodulus_length_mm=0.0)
     a = res.leaflets["left_coronary"]
     low = 4.0 - DIP_DEPTH
     for side in ("left", "right"):
@@ -264,12 +264,18 @@ def test_narrow_dip_is_found_on_its_own_side(dip_at, low_sides):
     assert fields["central_coaptation_height_mm"] == pytest.approx(central, abs=0.05)
 
 
-@pytest.mark.parametrize("nodulus", [0.3, 1.0])
+@pytest.mark.parametrize("nodulus", [0.3, 1.0, None])
 @pytest.mark.parametrize("dip_at", [0.0, 3.0])
 def test_nodulus_hides_only_a_dip_narrower_than_itself(nodulus, dip_at):
-    """The main minimum finds the dip when it is wider than the nodulus, the raw one always."""
+    """The main minimum finds the dip when it is wider than the nodulus, the raw one always.
+    ``None``: the default nodulus, one leaflet thickness (0.5 mm) either side of the
+    triple point."""
     valve, x = _band_valve(dip_at=dip_at, depth=DIP_DEPTH, width=DIP_WIDTH)
-    res = analyse_coaptation(x, valve, THRESHOLD, orifice=False, nodulus_length_mm=nodulus)
+    if nodulus is None:
+        res = analyse_coaptation(x, valve, THRESHOLD, orifice=False)
+        nodulus = 2 * 0.5
+    else:
+        res = analyse_coaptation(x, valve, THRESHOLD, orifice=False, nodulus_length_mm=nodulus)
     a = res.leaflets["left_coronary"]
     low = 4.0 - DIP_DEPTH
     # the dip is seen outside the nodulus if it is off the midline or wider than the nodulus
@@ -318,7 +324,10 @@ def test_sealed_sectors_have_no_orifice():
 
 def test_gap_narrower_than_threshold_is_sealed():
     valve, x = _three_sectors(rho=0.2)  # hole of inradius 0.2 < threshold/2
-    res = analyse_coaptation(x, valve, THRESHOLD, PIXEL)
+    # (each free edge is 0.69 mm long, shorter than the default nodulus)
+    with pytest.raises(ParameterError, match="nodulus_length_mm = 1 mm is not shorter"):
+        analyse_coaptation(x, valve, THRESHOLD, PIXEL)
+    res = analyse_coaptation(x, valve, THRESHOLD, PIXEL, nodulus_length_mm=0.0)
     assert res.competent and res.regurgitant_orifice_area_mm2 == 0.0
 
 
@@ -465,7 +474,9 @@ def test_folded_real_valve_smoke(tmp_path):
     assert np.ptp(heights) < 1e-6  # the fold is three-fold symmetric, so is the mesh
     assert math.isfinite(res.regurgitant_orifice_area_mm2) and res.regurgitant_orifice_area_mm2 >= 0
     assert 0.0 < res.min_native_height_mm <= res.central_native_height_mm
-    assert res.min_native_height_raw_mm == res.min_native_height_mm  # no nodulus by default
+    # the default nodulus (1 mm) leaves the tip out of the figure of merit only
+    assert res.nodulus_length_mm == 1.0
+    assert res.min_native_height_raw_mm <= res.min_native_height_mm
     for lc in res.leaflets.values():
         assert 0.0 < lc.area_mm2 and np.all(np.isfinite(lc.node_gap_mm))
     json.dumps(res.to_dict())

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from valve_dolfinx.analysis.coaptation import DEFAULT_NODULUS_LENGTH_MM
 from valve_dolfinx.contact.law import ContactParameters
 from valve_dolfinx.exceptions import (
     ConfigurationError,
@@ -107,9 +108,10 @@ class CaseConfig:
     :mod:`~valve_dolfinx.solvers.pseudo_transient`) or ``"bdf2"`` (SPEC §4: damped
     BDF2 dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`, the
     cross-check).  Both stop at a static equilibrium.
-    ``nodulus_length_mm`` (0 mm) is the free-edge length at the triple point
-    treated as the nodulus of Arantius by the coaptation heights
-    (:mod:`valve_dolfinx.analysis.coaptation`); 0 leaves nothing out.
+    ``nodulus_length_mm`` (1 mm: one leaflet thickness either side of the triple
+    point) is the free-edge length at the triple point treated as the nodulus of
+    Arantius by the coaptation heights (:mod:`valve_dolfinx.analysis.coaptation`);
+    0 leaves nothing out, and the raw minimum with the tip is always reported.
     """
 
     geometry: ValveParameters = field(default_factory=ValveParameters)
@@ -124,7 +126,7 @@ class CaseConfig:
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
     coaptation_threshold_mm: float = 0.5
     orifice_pixel_mm: float = 0.05
-    nodulus_length_mm: float = 0.0
+    nodulus_length_mm: float = DEFAULT_NODULUS_LENGTH_MM
     commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
     free_edge_band: float = FREE_EDGE_BAND
     quadrature_degree: int = 1

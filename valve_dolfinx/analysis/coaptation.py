@@ -19,10 +19,11 @@ Definitions (the reasoning is in ``docs/coaptation.md``):
 * **Minimum coaptation height**, each side of the midline ``x = m`` on its
   own: ``min_height_left = min h`` over ``x <= m - l/2`` and
   ``min_height_right = min h`` over ``x >= m + l/2``; ``min_height`` is the
-  smaller of the two.  ``l`` (``nodulus_length_mm``, default 0) is the length
-  along the free edge of the nodulus of Arantius, the thickened tip of a real
-  cusp at the triple point, which a membrane model does not have; with
-  ``l = 0`` nothing is left out.  ``min_height_raw = min h`` over the whole
+  smaller of the two.  ``l`` (``nodulus_length_mm``, default 1 mm: one leaflet
+  thickness either side of the triple point) is the length along the free edge
+  of the nodulus of Arantius, the thickened tip of a real cusp at the triple
+  point, which a membrane model does not have; with ``l = 0`` nothing is left
+  out.  ``min_height_raw = min h`` over the whole
   free edge, tip included, is reported beside it.  No fit, no extrapolation.
 * **Central coaptation height**: ``h(m)``; with a nodulus length ``l > 0``,
   the smaller of ``h(m - l/2)`` and ``h(m + l/2)`` (the edge of the tip, on
@@ -72,9 +73,10 @@ DEFAULT_PIXEL_MM = 0.05
 #: the profile's break points are added to them, so the minima do not depend on this.
 PROFILE_SAMPLES = 201
 #: Length (mm, flat, centred on the midline) of the free-edge tip treated as the nodulus
-#: of Arantius.  0: the membrane model has no nodulus, so nothing is left out
-#: (docs/coaptation.md §2).
-DEFAULT_NODULUS_LENGTH_MM = 0.0
+#: of Arantius: one leaflet thickness (0.5 mm, SPEC §3) either side of the triple point,
+#: where three 0.5 mm thick free edges meet and a zero-thickness membrane has no
+#: meaningful coaptation height (docs/coaptation.md §2).
+DEFAULT_NODULUS_LENGTH_MM = 1.0
 #: Round-off allowance (mm) when a sample is tested against the edge of the nodulus.
 _ON_POINT_MM = 1e-9
 
@@ -383,6 +385,11 @@ def _leaflet_coaptation(patch: LeafletPatch, loaded: np.ndarray, gap: np.ndarray
                         threshold: float, samples: int, nodulus: float) -> LeafletCoaptation:
     fx = patch.flat[patch.free_edge, 0]
     x_left, x_right = float(fx.min()), float(fx.max())
+    if x_right - x_left <= nodulus:
+        raise ParameterError(
+            f"nodulus_length_mm = {nodulus:g} mm is not shorter than the free edge of "
+            f"{patch.name} ({x_right - x_left:.3g} mm, flat); use a smaller one "
+            "(0 treats no tip)")
     midline = 0.5 * (x_left + x_right)  # x = 0 for the symmetric leaflet outlines
     tip = [midline - 0.5 * nodulus, midline, midline + 0.5 * nodulus]
     breaks = profile_break_points(patch.flat, patch.triangles, gap, threshold)
@@ -460,8 +467,9 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         Length ``l`` (flat mm along the free edge, centred on the midline) of
         the triple-point tip treated as the nodulus of Arantius: the side
         minima are taken over ``|x - m| >= l/2`` and the central height at
-        ``x = m ± l/2`` (the lower of the two).  0 (the default) leaves nothing
-        out; ``min_native_height_raw_mm`` always includes the tip.
+        ``x = m ± l/2`` (the lower of the two).  The default, 1 mm, is one leaflet
+        thickness either side of the triple point; 0 leaves nothing out;
+        ``min_native_height_raw_mm`` always includes the tip.
 
     Returns
     -------
@@ -477,7 +485,7 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
     threshold = float(threshold_mm)
     nodulus = check_range("nodulus_length_mm", nodulus_length_mm, 0.0, 5.0, unit="mm",
                           hint="the nodulus of Arantius is a small thickening at the middle "
-                          "of the free edge; 0 (the default) treats no tip")
+                          "of the free edge; the default is 1 mm, 0 treats no tip")
     pair_gaps = leaflet_pair_gaps(x, valve)
     leaflets = {}
     for i, patch in enumerate(valve.leaflets):

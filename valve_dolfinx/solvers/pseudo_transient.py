@@ -310,7 +310,8 @@ class PseudoTransientSolver:
                  "pressure_kpa": solved_pressure,
                  "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
                  "watched_motion_mm": watched,
-                 "newton_iterations": ts.getSNES().getIterationNumber()}
+                 "newton_iterations": ts.getSNES().getIterationNumber(),
+                 "rejected_steps": ts.getStepRejections()}
         for hook in self.hooks:
             diag = getattr(hook, "diagnostics", None)
             if diag is not None:
@@ -372,6 +373,11 @@ class PseudoTransientSolver:
                                   f"{ts.getStepNumber()} steps (max_steps = "
                                   f"{self.params.max_steps}): static residual "
                                   f"{self.report.residual_mN:.3g} mN")
+            if ts.getStepNumber() < self.params.pressure_ramp_steps:
+                self.report.reason += (
+                    f", during the pressure ramp ({self.model.pressure.value:.3g} of "
+                    f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
+                    f"{self.params.pressure_ramp_steps})")
         self.report.rejected_steps = ts.getStepRejections()
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
