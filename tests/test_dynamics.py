@@ -50,6 +50,7 @@ def stretched_sheet(comm=MPI.COMM_SELF, **params):
     bc = clamp_all_edges(model, exact)
     model.u.interpolate(lambda X: stretch @ X + 0.05 * np.sin(np.pi * X[0] / LX)
                         * np.sin(np.pi * X[1] / LY) * np.array([[1.0], [-0.5], [2.0]]))
+    params.setdefault("pressure_ramp_steps", 0)  # (no pressure to ramp)
     solver = PseudoTransientSolver(model, [bc], 0.0, PseudoTransientParameters(**params))
     report = solver.solve()
     return report, max_over_ranks(comm, model.u.x.array - exact.x.array)
@@ -67,6 +68,7 @@ def slack_sheet():
 def ptc_slack_sheet(**params) -> tuple[np.ndarray, object]:
     model, bc = slack_sheet()
     params.setdefault("residual_tolerance", 1e-9)
+    params.setdefault("pressure_ramp_steps", 0)  # a single equilibrium: the pressure at once
     report = PseudoTransientSolver(model, [bc], 2.0, PseudoTransientParameters(**params)).solve()
     assert report.converged, report.reason
     return model.u.x.array.copy(), report
@@ -129,11 +131,37 @@ def test_bdf2_reaches_the_ptc_equilibrium(slack_equilibrium):
     assert np.max(np.abs(model.u.x.array - reference)) < 1e-4
 
 
+@pytest.mark.parametrize("path", ["ptc", "bdf2"])
+def test_interrupt_stops_the_solve_instead_of_failing_it(path):
+    """A Ctrl-C inside a solve (here raised by the progress callback, which PETSc calls from
+    the post-step) comes out of ``solve`` as KeyboardInterrupt: PETSc turns an exception in
+    a callback into an error, and without the guard the solve would report an unconverged
+    case and a study would go on to the next one."""
+    model, bc = slack_sheet()
+    if path == "ptc":
+        solver = PseudoTransientSolver(model, [bc], 2.0,
+                                       PseudoTransientParameters(pressure_ramp_steps=0))
+    else:
+        solver = DampedDynamicsSolver(model, [bc], dolfinx.fem.Function(model.V), 2.0,
+                                      {1: ISO.stiffness_scale}, [0])
+    calls = []
+
+    def interrupt(entry):
+        calls.append(entry)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        solver.solve(progress=interrupt)
+    assert len(calls) == 2
+
+
 @pytest.mark.parametrize("bad", [
     {"residual_tolerance": 0.0}, {"mass_length_mm": -1.0}, {"dt_min": 0.0},
     {"dt_initial": 1e13}, {"increment": 0.5}, {"growth_limit": 1.0},
     {"max_step_motion_mm": 0.0}, {"newton_motion_mm": float("nan")}, {"newton_max_it": 0},
-    {"newton_rtol": 1.5}, {"max_steps": 0}, {"wall_time_limit_s": -1.0}])
+    {"newton_rtol": 1.5}, {"max_steps": 0}, {"wall_time_limit_s": -1.0},
+    {"pressure_ramp_steps": -1}])
 def test_ptc_parameters_name_the_bad_one(bad):
     (name, _), = bad.items()
     with pytest.raises(ParameterError, match=name):

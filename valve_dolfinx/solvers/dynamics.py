@@ -44,6 +44,7 @@ import ufl
 from valve_dolfinx._compat import PETSc, dolfinx
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
+from valve_dolfinx.solvers.callbacks import InterruptGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
 from valve_dolfinx.solvers.report import DynamicsReport
@@ -273,8 +274,9 @@ class DampedDynamicsSolver:
         }
         for key, value in {**defaults, **self.params.petsc_options, **self._snes_options}.items():
             opts[f"{prefix}{key}"] = value
-        ts.setIFunction(self.ifunction, self.F_vec)
-        ts.setIJacobian(self.ijacobian, self.J_mat)
+        guard = self._interrupts
+        ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
+        ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
         ts.setTimeStep(p.dt_initial)
         ts.setMaxTime(p.t_max)
@@ -287,7 +289,7 @@ class DampedDynamicsSolver:
             arr[:, 3:] = 1e30  # velocities are not error-controlled
         ts.setTolerances(rtol=0.0, atol=atol)
         ts.setFromOptions()
-        ts.setPostStep(self._post_step)
+        ts.setPostStep(guard.wrap(self._post_step))
         return ts
 
     def _post_step(self, ts: PETSc.TS) -> None:
@@ -370,6 +372,7 @@ class DampedDynamicsSolver:
         says whether it is the equilibrium and, if not, where it stopped.
         """
         self._progress = progress
+        self._interrupts = InterruptGuard()
         self._t0 = time.perf_counter()
         self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
         self._last_displacement = self.coupling.displacements(self.U)
@@ -379,6 +382,7 @@ class DampedDynamicsSolver:
         try:
             ts.solve(X)
         except PETSc.Error as err:
+            self._interrupts.reraise()  # Ctrl-C is not a failed solve
             if not self.report.reason:
                 self.report.reason = (f"PETSc error {err.ierr} at t = {ts.getTime():.4g} s, "
                                       f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")

@@ -55,6 +55,7 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
+from valve_dolfinx.solvers.callbacks import InterruptGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
@@ -272,16 +273,17 @@ class PseudoTransientSolver:
         opts = PETSc.Options()
         for key, value in {**options, **p.petsc_options}.items():
             opts[f"{prefix}{key}"] = value
-        ts.setIFunction(self.ifunction, self.F_vec)
-        ts.setIJacobian(self.ijacobian, self.J_mat)
+        guard = self._interrupts
+        ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
+        ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
         ts.setTimeStep(p.dt_initial)
         ts.setMaxTime(1e300)
         ts.setMaxSteps(p.max_steps)
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         ts.setFromOptions()
-        ts.getSNES().setLineSearchPreCheck(self._limit_update)
-        ts.setPostStep(self._post_step)
+        ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
+        ts.setPostStep(guard.wrap(self._post_step))
         return ts
 
     def _post_step(self, ts: PETSc.TS) -> None:
@@ -353,6 +355,7 @@ class PseudoTransientSolver:
         whether it is the equilibrium and, if not, where and why it stopped.
         """
         self._progress = progress
+        self._interrupts = InterruptGuard()
         self._t0 = time.perf_counter()
         self._clock = {}
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
@@ -364,6 +367,7 @@ class PseudoTransientSolver:
         try:
             ts.solve(X)
         except (PETSc.Error, MeshError, _Stop) as err:
+            self._interrupts.reraise()  # Ctrl-C is not a failed solve
             if not self.report.reason:
                 self.report.reason = (f"{type(err).__name__} at step {ts.getStepNumber()}, "
                                       f"Δτ = {ts.getTimeStep():.3g}: {err}")
