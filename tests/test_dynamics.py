@@ -50,7 +50,6 @@ def stretched_sheet(comm=MPI.COMM_SELF, **params):
     bc = clamp_all_edges(model, exact)
     model.u.interpolate(lambda X: stretch @ X + 0.05 * np.sin(np.pi * X[0] / LX)
                         * np.sin(np.pi * X[1] / LY) * np.array([[1.0], [-0.5], [2.0]]))
-    params.setdefault("pressure_ramp_steps", 0)  # (no pressure to ramp)
     solver = PseudoTransientSolver(model, [bc], 0.0, PseudoTransientParameters(**params))
     report = solver.solve()
     return report, max_over_ranks(comm, model.u.x.array - exact.x.array)
@@ -68,7 +67,6 @@ def slack_sheet():
 def ptc_slack_sheet(**params) -> tuple[np.ndarray, object]:
     model, bc = slack_sheet()
     params.setdefault("residual_tolerance", 1e-9)
-    params.setdefault("pressure_ramp_steps", 0)  # a single equilibrium: the pressure at once
     report = PseudoTransientSolver(model, [bc], 2.0, PseudoTransientParameters(**params)).solve()
     assert report.converged, report.reason
     return model.u.x.array.copy(), report
@@ -139,8 +137,7 @@ def test_interrupt_stops_the_solve_instead_of_failing_it(path):
     case and a study would go on to the next one."""
     model, bc = slack_sheet()
     if path == "ptc":
-        solver = PseudoTransientSolver(model, [bc], 2.0,
-                                       PseudoTransientParameters(pressure_ramp_steps=0))
+        solver = PseudoTransientSolver(model, [bc], 2.0, PseudoTransientParameters())
     else:
         solver = DampedDynamicsSolver(model, [bc], dolfinx.fem.Function(model.V), 2.0,
                                       {1: ISO.stiffness_scale}, [0])

@@ -329,8 +329,7 @@ def test_run_out_of_budget_is_reported(limit, words):
     limit and the static residual there, and leaves the last accepted state in ``model.u``."""
     model, bc = slack_sheet(6)
     solver = PseudoTransientSolver(model, [bc], 2.0,
-                                   PseudoTransientParameters(residual_tolerance=TIGHT,
-                                                             pressure_ramp_steps=0, **limit))
+                                   PseudoTransientParameters(residual_tolerance=TIGHT, **limit))
     states, keep = last_states(model)
     report = solver.solve(progress=keep)
     assert not report.converged

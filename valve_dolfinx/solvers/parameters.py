@@ -47,9 +47,7 @@ class PseudoTransientParameters:
     newton_max_it, newton_rtol
         Newton iterations per step and the relative residual reduction that ends
         a step's Newton solve; a step whose Newton solve fails is retried with
-        half the Δτ.  A step need not be solved tightly (only the final static
-        residual decides convergence): 0.2 took a quarter fewer Newton iterations
-        than 0.05 on W21/H27, to the same equilibrium (docs/numerics.md §7).
+        half the Δτ.
     max_steps
         Limit on pseudo-time steps (accepted + rejected).
     wall_time_limit_s
@@ -57,13 +55,11 @@ class PseudoTransientParameters:
     pressure_ramp_steps
         The pressure rises to its target in this many equal increments, one per
         accepted pseudo-time step, and a case converges only once it is at the target
-        (0: the target from the first step).  The default, 100, loads the valve
-        quasi-statically, as diastole does: the leaflets meet at a low pressure and
-        the pressure then rises to its target.  Where the loaded valve has more than
-        one equilibrium the path selects one: W21/H27 at the default mesh closes with
-        the graft slid under the native leaflets from the full pressure at once and
-        with a 30-step ramp, edge to edge (as at 0.7 and 0.6 mm) with 100 and 200
-        steps (docs/numerics.md, §7).
+        (0, the default: the target from the first step).  Where the loaded valve
+        has more than one equilibrium the path selects one: W21/H27 at the default
+        mesh closes with the graft slid under the native leaflets from the full
+        pressure at once and with a 30-step ramp, edge to edge (as at 0.7 and 0.6 mm)
+        with 100 and 200 steps (docs/numerics.md, §7).
     petsc_options
         Extra PETSc options (without prefix) for the TS/SNES/KSP.
     """
@@ -78,17 +74,17 @@ class PseudoTransientParameters:
     max_step_motion_mm: float = 0.5
     newton_motion_mm: float = 0.1
     newton_max_it: int = 12
-    newton_rtol: float = 0.2
+    newton_rtol: float = 0.05
     max_steps: int = 4000
     wall_time_limit_s: float = 900.0
-    pressure_ramp_steps: int = 100
+    pressure_ramp_steps: int = 0
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
                     unit="mN", hint="nodal pressure forces are ~1-10 mN; 1e-3 mN is the default")
         check_range("pressure_ramp_steps", self.pressure_ramp_steps, 0, 1e6, unit="",
-                    hint="0 applies the full pressure from the first step; 100 by default")
+                    hint="0 (the default) applies the full pressure from the first step")
         check_range("mass_length_mm", self.mass_length_mm, 0.0, 1e3, low_open=True, unit="mm")
         check_range("dt_min", self.dt_min, 0.0, self.dt_initial, low_open=True)
         check_range("dt_initial", self.dt_initial, self.dt_min, self.dt_max)

@@ -297,12 +297,12 @@ class PseudoTransientSolver:
         motion = float(np.max(step, initial=0.0))
         watched = float(np.max(step[self.watch_nodes], initial=0.0))
         solved_pressure = float(self.model.pressure.value)
-        self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
         for hook in self.hooks:  # contact sides and driving forces of this state
             accept = getattr(hook, "accept_state", None)
             if accept is not None:
                 accept(self.u)
-        r_inf, r_two = self.static_residual()
+        r_inf, r_two = self.static_residual()  # at the pressure the step was solved at
+        self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
         dt = ts.getTimeStep()
         r.steps = ts.getStepNumber()
         r.time = ts.getTime()
