@@ -114,9 +114,11 @@ def plot_coaptation_map(coaptation, valve, path=None, *, title: str = "", result
             bx.axvspan(lc.midline_mm - tip, lc.midline_mm + tip, color="0.85", zorder=0)
         for side, value in (("left", lc.min_height_left_mm), ("right", lc.min_height_right_mm)):
             bx.plot([lc.min_height_x(side)], [value], "v", color=_MARK_COLOUR, ms=7)
-            bx.annotate(f"{value:.2f}", (lc.min_height_x(side), value), xytext=(0, -11),
-                        textcoords="offset points", ha="center", va="top", fontsize=8,
-                        color=_MARK_COLOUR)
+            # each side's label outwards of its marker: the two minima may sit a nodulus apart
+            away = -1 if side == "left" else 1
+            bx.annotate(f"{value:.2f}", (lc.min_height_x(side), value), xytext=(6 * away, -9),
+                        textcoords="offset points", ha="right" if away < 0 else "left",
+                        va="top", fontsize=8, color=_MARK_COLOUR)
         bx.plot([lc.midline_mm], [lc.central_height_mm], "o", color="k", ms=5)
         bx.annotate(f"{lc.central_height_mm:.2f}", (lc.midline_mm, lc.central_height_mm),
                     xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8)
