@@ -142,6 +142,19 @@ def test_pressure_ramp_reaches_the_unique_equilibrium_at_full_pressure():
     assert ramped.coaptation_area_mm2 == pytest.approx(full.coaptation_area_mm2, rel=0.01)
 
 
+@pytest.mark.parametrize("limit, words", [({"max_steps": 3}, "max_steps = 3"),
+                                          ({"wall_time_limit_s": 1e-6}, "wall-clock limit")])
+def test_stop_during_the_pressure_ramp_says_so(limit, words):
+    """Whatever budget stops a ramped run before the target pressure, the reason names
+    the budget and says the ramp had not reached the target."""
+    state = solve_case(_reference_config(mesh_size=1.6, pseudo_transient=_ptc(
+        pressure_ramp_steps=10, **limit)), MPI.COMM_SELF)
+    assert not state.report.converged
+    assert words in state.report.reason
+    assert "during the pressure ramp" in state.report.reason
+    assert "pressure_ramp_steps = 10" in state.report.reason
+
+
 def test_failed_solve_is_reported_and_written(tmp_path):
     """A step limit that cannot be met: converged false, where and why, outputs written."""
     config = _reference_config(mesh_size=1.2, pseudo_transient=_ptc(max_steps=3))

@@ -377,11 +377,12 @@ class PseudoTransientSolver:
                                   f"{ts.getStepNumber()} steps (max_steps = "
                                   f"{self.params.max_steps}): static residual "
                                   f"{self.report.residual_mN:.3g} mN")
-            if ts.getStepNumber() < self.params.pressure_ramp_steps:
-                self.report.reason += (
-                    f", during the pressure ramp ({self.model.pressure.value:.3g} of "
-                    f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
-                    f"{self.params.pressure_ramp_steps})")
+        if not self.report.converged and ts.getStepNumber() < self.params.pressure_ramp_steps:
+            # whatever stopped it, say that the target pressure was never reached
+            self.report.reason += (
+                f", during the pressure ramp ({self.model.pressure.value:.3g} of "
+                f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
+                f"{self.params.pressure_ramp_steps})")
         self.report.rejected_steps = ts.getStepRejections()
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
