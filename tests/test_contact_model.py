@@ -193,6 +193,43 @@ def test_disjoint_node_sets_sum_to_the_all_nodes_result():
     assert abs(diff).max() <= 1e-12 * abs(assembled(whole)).max()
 
 
+def test_jacobian_after_a_forces_only_call_equals_a_fresh_one():
+    """A solver evaluates its residual (forces only), then its Jacobian at the same state:
+    the second call reuses the first's rows; its blocks are those of a one-shot call, and
+    a new accepted state (history) or new positions are not answered from the kept rows."""
+    x, triangles, body, f_ext = stacked_sheets()
+    x_prev = x.copy()  # sides from a state with the three sheets in the opposite order
+    per_sheet = len(x) // 3
+    for k in range(3):
+        x_prev[k * per_sheet:(k + 1) * per_sheet, 2] -= 2 * (k - 1) * 0.06
+    fresh = SurfaceContact(triangles, len(x), LITERAL, triangle_body=body)
+    fresh.update_history(x_prev)
+    reference = fresh.evaluate(x, f_ext)
+    assert reference.n_active > 100
+    contact = SurfaceContact(triangles, len(x), LITERAL, triangle_body=body)
+    contact.update_history(x_prev)
+    forces_only = contact.evaluate(x, f_ext, jacobian=False)
+    assert len(forces_only.jac_blocks) == 0
+    np.testing.assert_array_equal(forces_only.forces, reference.forces)
+    second = contact.evaluate(x, f_ext)
+    np.testing.assert_array_equal(second.forces, reference.forces)
+    for field in ("jac_rows", "jac_cols", "jac_blocks"):
+        np.testing.assert_array_equal(getattr(second, field), getattr(reference, field))
+    # moved positions: evaluated afresh, not from the kept rows
+    moved = x.copy()
+    moved[:, 2] *= 0.5
+    contact.evaluate(x, f_ext, jacobian=False)
+    np.testing.assert_array_equal(contact.evaluate(moved, f_ext).jac_blocks,
+                                  fresh.evaluate(moved, f_ext).jac_blocks)
+    # a new history flips sides (the forces change): the kept rows of the old one are dropped
+    contact.evaluate(x, f_ext, jacobian=False)
+    contact.update_history(x)
+    fresh.update_history(x)
+    flipped = fresh.evaluate(x, f_ext)
+    assert np.abs(flipped.forces - reference.forces).max() > 1.0
+    np.testing.assert_array_equal(contact.evaluate(x, f_ext).forces, flipped.forces)
+
+
 # -- (c) Jacobian blocks against finite differences (n, λ, F frozen) -----------------------
 
 

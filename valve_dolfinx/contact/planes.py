@@ -59,10 +59,10 @@ class PlaneContact:
         self.params = params
         self.mirror = bool(mirror)
 
-    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None
-                 ) -> ContactResult:
+    def evaluate(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray | None = None,
+                 jacobian: bool = True) -> ContactResult:
         """Contact forces of ``nodes`` (default: all) against the planes, with their Jacobian
-        blocks.
+        blocks (``jacobian=True``).
 
         Arguments as in :meth:`~valve_dolfinx.contact.surface.SurfaceContact.evaluate`.
         """
@@ -86,5 +86,5 @@ class PlaneContact:
         contacts = ContactRows(node=node[a], support=empty.astype(np.int64), weights=empty,
                              normal=normal[a], d=d[k, i][a], f=f[a], dfdd=scale * dfdd[a],
                              partner=-1 - i[a], surface_offset=offset)
-        return contacts.result(num_nodes)
+        return contacts.result(num_nodes, jacobian=jacobian)
 

@@ -126,6 +126,27 @@ def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
     return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
 
 
+@dataclass(frozen=True)
+class _RowGeometry:
+    """Per contact row, what its Jacobian terms need beyond :class:`ContactRows`: edge or
+    vertex contact, the law's pair weight, and the row's triangle plane: the barycentric
+    coordinates of the node's projection on it, the side, the plane's normal, the sided and
+    the unsided plane distance, the in-plane distance and the offset from the closest point
+    (edge rows), the smallest barycentric coordinate and the fade band (face rows)."""
+
+    edge: np.ndarray
+    weight: np.ndarray
+    plane_lam: np.ndarray
+    side: np.ndarray
+    plane_normal: np.ndarray
+    side_distance: np.ndarray
+    in_plane: np.ndarray
+    offset: np.ndarray
+    plane_distance: np.ndarray
+    face_lam_min: np.ndarray
+    band: np.ndarray
+
+
 class SurfaceContact:
     """Penalty contact of the nodes of a triangulated surface with its own triangles.
 
@@ -265,6 +286,8 @@ class SurfaceContact:
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
+        #: inputs and rows of the last forces-only evaluation (see :meth:`evaluate`)
+        self._last_rows: tuple | None = None
         self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
         #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
@@ -282,10 +305,12 @@ class SurfaceContact:
         t = self.triangles
         normals, _ = triangle_normals(x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
         self._history = (x, normals)
+        self._last_rows = None
 
     def clear_history(self) -> None:
         """Forget the recorded state (sides then follow the pressure direction)."""
         self._history = None
+        self._last_rows = None
 
     #: Record CPU (process) time laps in :attr:`cpu_timings` too (for benchmarks: each
     #: reading is a system call)
@@ -305,14 +330,31 @@ class SurfaceContact:
             disjoint sets sum to the result for their union: reactions on
             triangle vertices belong to the result of the contacting node.
         jacobian
-            False: forces and diagnostics only, no Jacobian blocks (an explicit
-            solver needs no more; about three times cheaper).
+            False: forces and diagnostics only, no Jacobian blocks (about three
+            times cheaper).  A call with ``True`` at the same ``x``, ``f_ext``
+            and ``nodes`` as the forces-only call before it (a solver that
+            evaluates its residual, then its Jacobian) reuses that call's
+            contact rows and adds only the blocks.
         """
         x = check_positions(x, self.num_nodes, "x")
         f_ext = check_positions(f_ext, self.num_nodes, "f_ext")
         nodes = check_nodes(nodes, self.num_nodes)
         clock = StepClock(cpu=self.record_cpu_time)
-        contacts = self._find_contacts(x, f_ext, nodes, clock, jacobian=jacobian)
+        last = self._last_rows
+        if (jacobian and last is not None and np.array_equal(last[0], x)
+                and np.array_equal(last[1], f_ext) and np.array_equal(last[2], nodes)):
+            # the Jacobian at the state of the last forces-only call (a solver's residual,
+            # then its Jacobian): its rows and their geometry stand, only the blocks are new
+            contacts = self._jacobian_terms(x, f_ext, *last[3:])
+        else:
+            contacts, geometry = self._find_contacts(x, f_ext, nodes, clock)
+            if jacobian:
+                contacts = self._jacobian_terms(x, f_ext, contacts, geometry)
+        if jacobian:
+            clock.add("jacobian")
+            self._last_rows = None
+        else:
+            self._last_rows = (x.copy(), f_ext.copy(), nodes.copy(), contacts, geometry)
         result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
         self.timings, self.cpu_timings = clock.laps, clock.cpu_laps
         log.debug("surface contact: %d active, max penetration %.3g mm, total force %.4g mN",
@@ -322,8 +364,11 @@ class SurfaceContact:
     # -- steps of evaluate -------------------------------------------------------------------
 
     def _find_contacts(self, x: np.ndarray, f_ext: np.ndarray, nodes: np.ndarray,
-                       clock: StepClock | None = None, jacobian: bool = True) -> ContactRows:
-        """Candidates → sides → window ``-penetration_depth < d < h`` → blend per body → law."""
+                       clock: StepClock | None = None) -> tuple[ContactRows, _RowGeometry]:
+        """Candidates → sides → window ``-penetration_depth < d < h`` → blend per body → law.
+
+        Returns the contact rows (forces, no derivatives) and the geometry of each row that
+        :meth:`_jacobian_terms` needs."""
         p = self.params
         clock = StepClock() if clock is None else clock
         node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
@@ -381,8 +426,22 @@ class SurfaceContact:
                              dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
                              blend_cutoff=p.cutoff, presence=presence,
                              surface_offset=p.thickness)
-        if not jacobian:
-            return contacts
+        geometry = _RowGeometry(
+            edge=edge, weight=weight, plane_lam=plane_lam[a], side=s[a], plane_normal=n_tri[a],
+            side_distance=side_distance[a], in_plane=in_plane[a], offset=offset[a],
+            plane_distance=d0[a], face_lam_min=face_lam_min[a], band=band[a])
+        return contacts, geometry
+
+    def _jacobian_terms(self, x: np.ndarray, f_ext: np.ndarray, contacts: ContactRows,
+                        geometry: _RowGeometry) -> ContactRows:
+        """The rows with the derivatives their blocks need: of the presence, of the driving
+        force and of the contact direction and point."""
+        p = self.params
+        eps = p.blend_distance
+        node, support, lam, normal, d = (contacts.node, contacts.support, contacts.weights,
+                                         contacts.normal, contacts.d)
+        g = geometry
+        edge = g.edge
         # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
         # the vertices through the barycentric coordinates of the plane projection
         B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
@@ -392,23 +451,22 @@ class SurfaceContact:
             grad_logp -= (_log_ramp_slope(p.cutoff - d, eps))[:, None, None] * grad_d
         on_edge = np.flatnonzero(edge)
         if len(on_edge):
-            plane_B = np.concatenate([np.ones((len(on_edge), 1)), -plane_lam[a][on_edge]], axis=1)
-            sided = (s[a][on_edge, None] * n_tri[a][on_edge])
-            grad_logp[on_edge] += (_log_ramp_slope(side_distance[a][on_edge], eps)[:, None, None]
+            plane_B = np.concatenate([np.ones((len(on_edge), 1)), -g.plane_lam[on_edge]], axis=1)
+            sided = g.side[on_edge, None] * g.plane_normal[on_edge]
+            grad_logp[on_edge] += (_log_ramp_slope(g.side_distance[on_edge], eps)[:, None, None]
                                    * plane_B[:, :, None] * sided[:, None, :])
-        if len(on_edge):
             # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
             # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
-            rho = in_plane[a][on_edge]
-            grad_rho = (B[on_edge][:, :, None] * offset[a][on_edge][:, None, :]
-                        - (d0[a][on_edge, None, None] * plane_B[:, :, None]
-                           * n_tri[a][on_edge][:, None, :]))
+            rho = g.in_plane[on_edge]
+            grad_rho = (B[on_edge][:, :, None] * g.offset[on_edge][:, None, :]
+                        - (g.plane_distance[on_edge, None, None] * plane_B[:, :, None]
+                           * g.plane_normal[on_edge][:, None, :]))
             grad_logp[on_edge] += ((_log_ramp_slope(rho, eps) / np.maximum(rho, 1e-300))
                                    [:, None, None] * grad_rho)
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
-        banded = np.flatnonzero(~edge & (face_lam_min[a] < 0.0))
+        banded = np.flatnonzero(~edge & (g.face_lam_min < 0.0))
         if len(banded):  # face rows fading out beyond their triangle's boundary
-            width = band[a][banded]
+            width = g.band[banded]
             slopes = _log_ramp_slope(lam[banded] + width, width)                      # (K, 3)
             grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
         grad_f = None
@@ -417,9 +475,8 @@ class SurfaceContact:
             F = -np.einsum("ij,ij->i", f_ext[node], normal)
             slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
                                              p.stiffness, p.cutoff, p.taper)
-            slope = np.where(F > p.min_driving_force, weight * slope, 0.0)
+            slope = np.where(F > p.min_driving_force, g.weight * slope, 0.0)
             grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
-        clock.add("jacobian")
         return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f,
                        geometric=(dn, dlam))
 

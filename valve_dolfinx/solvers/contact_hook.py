@@ -4,8 +4,10 @@ At every residual evaluation the hook gathers the nodal positions of the
 whole surface (:class:`~valve_dolfinx.solvers.nodal.NodalCoupling`),
 evaluates the contact models for the nodes this rank owns, and adds
 ``−f_contact`` to the residual (contact forces are external forces) and
-``−∂f_contact/∂x`` to the Jacobian.  The Jacobian evaluation at the same
-positions reuses the forces and blocks of the residual evaluation.
+``−∂f_contact/∂x`` to the Jacobian.  The residual's evaluation computes
+forces only; the Jacobian's, at the same positions, adds the blocks to the
+contact rows the residual's found (a Newton solve evaluates its residual at
+every iterate, its Jacobian at all but the last).
 
 Driving force.  The law's force scale is the nodal pressure force
 ``f_ext`` (SPEC §5).  Two treatments (``lag_driving_force``):
@@ -71,28 +73,35 @@ class ContactHook:
         self.pressure = pressure
         self.side = float(pressure_side)
         self._key: np.ndarray | None = None
+        self._has_jacobian = False
         self._results: list = []
         self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
 
-    def _evaluate(self, state: dolfinx.fem.Function) -> list:
+    def _evaluate(self, state: dolfinx.fem.Function, jacobian: bool) -> list:
+        """The models' results at ``state``: forces only, or with the Jacobian blocks.
+
+        A solver evaluates its residual at every state and its Jacobian at most of them:
+        the residual's evaluation computes no blocks, and the Jacobian's at the same state
+        adds them to it (the surface contact keeps its rows)."""
         x = self.coupling.positions(state)
         p = float(self.pressure.value)
-        if self._key is not None and self._pressure_key == p and np.array_equal(x, self._key):
+        if (self._key is not None and self._pressure_key == p and np.array_equal(x, self._key)
+                and (self._has_jacobian or not jacobian)):
             return self._results
         if self._unit_forces is None or not self.lag_driving_force:
             self._unit_forces = pressure_nodal_forces(x, self.triangles, 1.0, self.side)
         f_ext = p * self._unit_forces
         nodes = self.contact_nodes
-        self._results = [m.evaluate(x, f_ext, nodes) for m in self.models]
-        self._key, self._pressure_key = x, p
+        self._results = [m.evaluate(x, f_ext, nodes, jacobian=jacobian) for m in self.models]
+        self._key, self._pressure_key, self._has_jacobian = x, p, jacobian
         return self._results
 
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
-        for result in self._evaluate(state):
+        for result in self._evaluate(state, jacobian=False):
             self.coupling.add_forces(b, result.forces, scale=-1.0)
 
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
-        for result in self._evaluate(state):
+        for result in self._evaluate(state, jacobian=True):
             self.coupling.add_blocks(A, result.jac_rows, result.jac_cols, result.jac_blocks,
                                      scale=-1.0)
 
@@ -109,7 +118,7 @@ class ContactHook:
 
     def contact_forces(self, state: dolfinx.fem.Function) -> np.ndarray:
         """(N, 3) total contact force on every node (summed over ranks), e.g. for output."""
-        local = sum(r.forces for r in self._evaluate(state))
+        local = sum(r.forces for r in self._evaluate(state, jacobian=False))
         if isinstance(local, int):
             return np.zeros((self.coupling.num_nodes, 3))
         return self.coupling.comm.allreduce(local, op=MPI.SUM)

@@ -137,17 +137,21 @@ class NodalCoupling:
         all-zero blocks left out.  The valve's contact Jacobian repeats each pair about
         eight times (a node's blended triangles share their corners), and a PETSc
         insertion costs per block, so summing first makes the insertion that much cheaper."""
-        nonzero = np.any(blocks != 0.0, axis=(1, 2))
-        rows, cols, blocks = row_nodes[nonzero], col_nodes[nonzero], blocks[nonzero]
-        if len(rows) == 0:
-            return rows, cols, blocks
-        key = rows.astype(np.int64) * self.num_nodes + cols
-        order = np.argsort(key, kind="stable")
+        if len(row_nodes) == 0:
+            return row_nodes, col_nodes, blocks
+        key = np.asarray(row_nodes, dtype=np.int64) * self.num_nodes + col_nodes
+        order = np.argsort(key)
         key = key[order]
-        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-        summed = np.add.reduceat(blocks[order], starts, axis=0)
-        first = order[starts]
-        return rows[first], cols[first], summed
+        first = np.concatenate([[True], key[1:] != key[:-1]])
+        pair = np.empty(len(key), dtype=np.intp)  # distinct (row, col) pair of every block
+        pair[order] = np.cumsum(first) - 1
+        count = int(pair.max()) + 1
+        entries = blocks.reshape(-1, 9).T  # one bincount per entry: no copy of the blocks
+        summed = np.stack([np.bincount(pair, entries[j], minlength=count) for j in range(9)],
+                          axis=1).reshape(count, 3, 3)
+        nonzero = np.any(summed != 0.0, axis=(1, 2))
+        key = key[first][nonzero]
+        return key // self.num_nodes, key % self.num_nodes, summed[nonzero]
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
