@@ -1,4 +1,4 @@
-"""PETSc callbacks that let an interrupt through.
+"""PETSc callbacks: letting an interrupt through, and ending a Newton solve that cycles.
 
 PETSc calls the solvers' Python callbacks (residual, Jacobian, post-step) from C.  An
 exception raised in one comes back from ``TS.solve`` as a ``PETSc.Error`` (code 101),
@@ -6,6 +6,11 @@ which the solvers report as a failed solve.  A Ctrl-C or a ``SystemExit`` is not
 failed solve: :class:`InterruptGuard` records it in the callback and the solver raises
 it again once ``TS.solve`` has returned, so an interrupted study stops (exit status 130)
 instead of recording the interrupted case as unconverged.
+
+A Newton solve whose iterates have settled into a two-cycle (the residual norms repeat
+every second iteration) cannot converge any more, but it runs on to ``snes_max_it``
+before the time stepper retries the step with a shorter one.  :class:`NewtonCycleStop`,
+an SNES monitor, ends it as diverged as soon as the cycle shows.
 """
 
 from __future__ import annotations
@@ -13,7 +18,9 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 
-__all__ = ["InterruptGuard"]
+from valve_dolfinx._compat import PETSc
+
+__all__ = ["InterruptGuard", "NewtonCycleStop"]
 
 
 class InterruptGuard:
@@ -38,3 +45,39 @@ class InterruptGuard:
         interrupt, self.caught = self.caught, None
         if interrupt is not None:
             raise interrupt
+
+
+class NewtonCycleStop:
+    """SNES monitor that ends a Newton solve caught in a two-cycle as diverged.
+
+    At iteration ``k ≥ 4`` the solve has cycled when both
+    ``|r_k − r_{k−2}| ≤ tolerance·r_k`` and ``|r_{k−1} − r_{k−3}| ≤ tolerance·r_{k−1}``
+    (``r`` the residual norms) and the convergence test has not stopped it.  The
+    reason is then ``DIVERGED_DTOL`` (PETSc has none for a cycle); the time stepper
+    treats it as any failed solve.  PETSc calls the monitors after the convergence
+    test of an iteration and stops on the reason they leave.  A solve that converges
+    is never cut, so the path and the result are those without the monitor.  The
+    residual norm is global, so every rank decides alike.
+
+    Parameters
+    ----------
+    tolerance
+        Relative repetition of the norms that counts as a cycle; 0 disables it.
+    """
+
+    def __init__(self, tolerance: float) -> None:
+        self.tolerance = float(tolerance)
+        self.norms: list[float] = []
+        #: solves ended by a cycle
+        self.stopped = 0
+
+    def __call__(self, snes: PETSc.SNES, its: int, fnorm: float) -> None:
+        if its == 0:
+            self.norms.clear()
+        self.norms.append(float(fnorm))
+        r, tol = self.norms, self.tolerance
+        if tol <= 0.0 or its < 4 or snes.getConvergedReason() != 0:
+            return
+        if abs(r[-1] - r[-3]) <= tol * r[-1] and abs(r[-2] - r[-4]) <= tol * r[-2]:
+            snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
+            self.stopped += 1

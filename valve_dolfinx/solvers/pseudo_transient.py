@@ -55,7 +55,7 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
-from valve_dolfinx.solvers.callbacks import InterruptGuard
+from valve_dolfinx.solvers.callbacks import InterruptGuard, NewtonCycleStop
 from valve_dolfinx.solvers.nodal import NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
@@ -283,6 +283,7 @@ class PseudoTransientSolver:
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         ts.setFromOptions()
         ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
+        ts.getSNES().setMonitor(guard.wrap(self._cycles))
         ts.setPostStep(guard.wrap(self._post_step))
         return ts
 
@@ -356,6 +357,7 @@ class PseudoTransientSolver:
         """
         self._progress = progress
         self._interrupts = InterruptGuard()
+        self._cycles = NewtonCycleStop(self.params.newton_cycle_tolerance)
         self._t0 = time.perf_counter()
         self._clock = {}
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)

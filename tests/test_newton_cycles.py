@@ -1,0 +1,94 @@
+"""Ending a Newton solve caught in a two-cycle (valve_dolfinx.solvers.callbacks).
+
+Newton's method on f(x) = arctan x has an exact two-cycle: from x₀ with
+2x₀ = (1 + x₀²)·arctan x₀ (x₀ = 1.39174520027...) the iterates alternate between x₀
+and −x₀ for ever; from |x₀| < x₀* they converge to 0, beyond it they diverge.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from scipy.optimize import brentq
+
+from valve_dolfinx._compat import PETSc
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.solvers.callbacks import NewtonCycleStop
+from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+
+#: the two-cycle's point, from 2x = (1 + x²) arctan x
+CYCLE = brentq(lambda x: 2.0 * x - (1.0 + x * x) * math.atan(x), 1.0, 2.0, xtol=1e-15)
+
+
+def newton_on_arctan(x0: float, monitor=None, max_it: int = 30):
+    """(converged reason, iterations, residual norms) of PETSc's Newton method on arctan."""
+    snes = PETSc.SNES().create(PETSc.COMM_SELF)
+    x = PETSc.Vec().createSeq(1, comm=PETSc.COMM_SELF)
+    r = x.duplicate()
+    J = PETSc.Mat().createDense((1, 1), comm=PETSc.COMM_SELF)
+    J.setUp()
+
+    def residual(snes, X, R):
+        R[0] = math.atan(X[0])
+        R.assemble()
+
+    def jacobian(snes, X, A, P):
+        P[0, 0] = 1.0 / (1.0 + X[0] ** 2)
+        P.assemble()
+
+    snes.setFunction(residual, r)
+    snes.setJacobian(jacobian, J)
+    snes.setType("newtonls")
+    snes.getLineSearch().setType("basic")
+    snes.getKSP().setType("preonly")
+    snes.getKSP().getPC().setType("lu")
+    snes.setTolerances(rtol=1e-10, atol=1e-14, stol=0.0, max_it=max_it)
+    norms = []
+    snes.setMonitor(lambda s, its, fnorm: norms.append(fnorm))
+    if monitor is not None:
+        snes.setMonitor(monitor)
+    x[0] = x0
+    x.assemble()
+    snes.solve(None, x)
+    result = snes.getConvergedReason(), snes.getIterationNumber(), norms
+    for obj in (snes, x, r, J):
+        obj.destroy()
+    return result
+
+
+def test_the_cycle_point_cycles_without_the_monitor():
+    reason, its, norms = newton_on_arctan(CYCLE, max_it=30)
+    assert reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and its == 30
+    # the norms repeat: |arctan(±x₀)| = arctan x₀ (round-off lets the cycle drift slowly)
+    assert norms[3] == pytest.approx(math.atan(CYCLE), rel=1e-9)
+
+
+def test_a_cycling_solve_ends_at_the_fourth_iteration():
+    stop = NewtonCycleStop(1e-3)
+    reason, its, _ = newton_on_arctan(CYCLE, monitor=stop, max_it=30)
+    assert reason < 0 and its == 4
+    assert stop.stopped == 1
+
+
+@pytest.mark.parametrize("x0", [0.5, 1.2, -1.35])
+def test_a_converging_solve_is_not_touched(x0):
+    """Inside the cycle the iterates converge (slowly near it): same iterations, same
+    norms with and without the monitor."""
+    stop = NewtonCycleStop(1e-3)
+    plain = newton_on_arctan(x0)
+    watched = newton_on_arctan(x0, monitor=stop)
+    assert plain[0] > 0 and watched[0] == plain[0]
+    assert watched[1] == plain[1] and watched[2] == plain[2]
+    assert stop.stopped == 0
+
+
+def test_tolerance_zero_disables_it():
+    stop = NewtonCycleStop(0.0)
+    reason, its, _ = newton_on_arctan(CYCLE, monitor=stop, max_it=10)
+    assert reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and its == 10
+
+
+def test_out_of_range_tolerance_names_the_parameter():
+    with pytest.raises(ParameterError, match="newton_cycle_tolerance"):
+        PseudoTransientParameters(newton_cycle_tolerance=-1.0)
