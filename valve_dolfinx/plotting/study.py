@@ -110,10 +110,16 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
     fig = new_figure(1.4 * len(widths) + 3.2, 1.1 * len(heights) + 2.2)
     ax = fig.add_subplot()
     cmap = colormaps[SEQUENTIAL_CMAP].with_extremes(bad="0.85")
-    image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto")
+    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+    # the colour range takes in the normal valve, so that its mark lies on the bar
+    values = [v for v in [*grid[np.isfinite(grid)],
+                          _num(normal.get(FIGURE)) if normal is not None else math.nan]
+              if math.isfinite(v)]
+    limits = (min(values), max(values)) if values else (None, None)
+    image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto",
+                      vmin=limits[0], vmax=limits[1])
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("minimum coaptation height (mm)")
-    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
     note = "vermillion hatched: leaks (regurgitant orifice area > 0)"
     if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
         bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
