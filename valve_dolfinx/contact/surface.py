@@ -286,7 +286,8 @@ class SurfaceContact:
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
-        #: inputs and rows of the last forces-only evaluation (see :meth:`evaluate`)
+        #: ``(x, f_ext, nodes, rows, geometry)`` of the last forces-only evaluation
+        #: (see :meth:`evaluate`)
         self._last_rows: tuple | None = None
         self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
@@ -340,12 +341,13 @@ class SurfaceContact:
         f_ext = check_positions(f_ext, self.num_nodes, "f_ext")
         nodes = check_nodes(nodes, self.num_nodes)
         clock = StepClock(cpu=self.record_cpu_time)
-        last = self._last_rows
-        if (jacobian and last is not None and np.array_equal(last[0], x)
-                and np.array_equal(last[1], f_ext) and np.array_equal(last[2], nodes)):
+        kept = self._last_rows
+        if jacobian and kept is not None and all(
+                np.array_equal(a, b) for a, b in zip(kept[:3], (x, f_ext, nodes), strict=True)):
             # the Jacobian at the state of the last forces-only call (a solver's residual,
             # then its Jacobian): its rows and their geometry stand, only the blocks are new
-            contacts = self._jacobian_terms(x, f_ext, *last[3:])
+            _, _, _, contacts, geometry = kept
+            contacts = self._jacobian_terms(x, f_ext, contacts, geometry)
         else:
             contacts, geometry = self._find_contacts(x, f_ext, nodes, clock)
             if jacobian:

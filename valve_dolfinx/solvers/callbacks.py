@@ -16,6 +16,7 @@ an SNES monitor, ends it as diverged as soon as the cycle shows.
 from __future__ import annotations
 
 import functools
+from collections import deque
 from collections.abc import Callable
 
 from valve_dolfinx._compat import PETSc
@@ -67,8 +68,8 @@ class NewtonCycleStop:
 
     def __init__(self, tolerance: float) -> None:
         self.tolerance = float(tolerance)
-        self.norms: list[float] = []
-        #: solves ended by a cycle
+        self.norms: deque[float] = deque(maxlen=4)  # the last four of this solve
+        #: solves ended by a cycle (reported by the solver's log)
         self.stopped = 0
 
     def __call__(self, snes: PETSc.SNES, its: int, fnorm: float) -> None:
@@ -78,6 +79,6 @@ class NewtonCycleStop:
         r, tol = self.norms, self.tolerance
         if tol <= 0.0 or its < 4 or snes.getConvergedReason() != 0:
             return
-        if abs(r[-1] - r[-3]) <= tol * r[-1] and abs(r[-2] - r[-4]) <= tol * r[-2]:
+        if abs(r[3] - r[1]) <= tol * r[3] and abs(r[2] - r[0]) <= tol * r[2]:
             snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
             self.stopped += 1

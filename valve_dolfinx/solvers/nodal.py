@@ -134,7 +134,7 @@ class NodalCoupling:
     def _merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The blocks summed per (row node, column node) pair, sorted by row then column,
-        all-zero blocks left out.  The valve's contact Jacobian repeats each pair about
+        all-zero blocks left out.  The valve's contact Jacobian repeats each pair six to
         eight times (a node's blended triangles share their corners), and a PETSc
         insertion costs per block, so summing first makes the insertion that much cheaper."""
         if len(row_nodes) == 0:

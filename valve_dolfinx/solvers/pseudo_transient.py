@@ -392,7 +392,7 @@ class PseudoTransientSolver:
         self.report.timings = dict(self._clock)
         ts.destroy()
         X.destroy()
-        log.info("pseudo-transient continuation: %s (%s; %.1f s)",
-                 "converged" if self.report.converged else "NOT converged", self.report.reason,
-                 self.report.wall_time_s)
+        log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton solves ended "
+                 "in a two-cycle)", "converged" if self.report.converged else "NOT converged",
+                 self.report.reason, self.report.wall_time_s, self._cycles.stopped)
         return self.report
