@@ -90,8 +90,12 @@ def plot_coaptation_vs_width(rows: list[dict], path: Path | None = None, *,
 
 
 def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
-                    recommended: str | None = None, title: str = ""):
-    """The W × H grid coloured by minimum coaptation height; leaks and failures marked."""
+                    recommended: str | None = None, best: str | None = None,
+                    title: str = ""):
+    """The W × H grid coloured by minimum coaptation height; leaks and failures marked.
+
+    The ``recommended`` cell is framed; when there is none, the ``best`` one is, labelled
+    as short of the target."""
     grafts = [r for r in rows if r.get("graft_width_pct") is not None]
     widths = sorted({r["graft_width_pct"] for r in grafts})
     heights = sorted({r["graft_height_pct"] for r in grafts})
@@ -141,7 +145,7 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
                                    lw=2.5, hatch="//", alpha=0.8))
         label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"
-        if label == recommended:
+        if label == (recommended or best):
             for colour, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
                 ax.add_patch(Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False,
                                        ec=colour, lw=width))
@@ -151,6 +155,8 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
     ax.set_ylabel("graft height enlargement H (%)")
     if recommended:
         note += f"\nblack-and-white frame: recommended {recommended}"
+    elif best:
+        note += f"\nblack-and-white frame: best {best}, short of the target"
     ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
     return save_figure(fig, path, dpi=130)
 

@@ -165,7 +165,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         "settings": settings.to_dict() if settings else None, "recommendation": rec.to_dict(),
         "cases": len(rows), "missing": missing}))
     plot_coaptation_vs_width(rows, out / "coaptation_vs_width.png", target_mm=target_mm)
-    plot_sizing_map(rows, out / "sizing_map.png", recommended=rec.recommended or rec.best)
+    plot_sizing_map(rows, out / "sizing_map.png", recommended=rec.recommended, best=rec.best)
     files += [out / "coaptation_vs_width.png", out / "sizing_map.png"]
     panels = []
     wanted = [NORMAL_CASE, *(settings.panel_cases if settings else ())]
