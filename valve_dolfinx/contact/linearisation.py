@@ -32,16 +32,20 @@ adds the other two:
   Vertex: no sliding.
 
 All terms are exact first derivatives (checked against finite differences in
-``tests/test_contact_model.py``).
+``tests/test_contact_model.py``).  They are written as loops over the contacts, compiled
+by Numba (:mod:`~valve_dolfinx.contact.kernels`): a contact's terms are a few dozen
+3-vectors, and as NumPy expressions over all contacts they cost ten times as much in
+temporaries as in arithmetic.
 The dependence of the driving force on the positions is not here: the hook
 freezes it within a step (see :mod:`valve_dolfinx.solvers.contact_hook`).
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from valve_dolfinx.contact.geometry import barycentric_gradients
+import numba
+import numpy as np
 
 __all__ = ["direction_derivatives"]
 
@@ -50,71 +54,134 @@ __all__ = ["direction_derivatives"]
 _ON_FEATURE = 1e-12
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrices ``[v]×`` of ``(K, 3)`` vectors, ``(K, 3, 3)``: ``[v]×·u = v × u``."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
+@numba.njit(cache=True)
+def _dot(a, b):  # pragma: no cover
+    """``a·b`` of 3-vectors summed as ``(a₀b₀ + a₂b₂) + a₁b₁``, the order of NumPy's
+    ``einsum("ij,ij->i")`` in :func:`~valve_dolfinx.contact.geometry.barycentric_gradients`
+    and the narrow phase, so that the same triangle gets the same bits here and there."""
+    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
 
 
-def _face_terms(x, node, support, lam, normal):
-    """``∂n/∂x_m`` ``(F, 4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(F, 3, 4, 3)`` of face contacts."""
-    X = x[support]
-    e1, e2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
-    N = np.cross(e1, e2)
-    length = np.linalg.norm(N, axis=1)
-    nhat = N / length[:, None]
-    side = np.sign(np.einsum("ij,ij->i", nhat, normal))
-    P = np.eye(3) - nhat[:, :, None] * nhat[:, None, :]
-    K = np.stack([_skew(e2 - e1), -_skew(e2), _skew(e1)], axis=1)          # (F, 3k, 3, 3)
-    dnhat = np.einsum("fij,fkjl->fkil", P, K) / length[:, None, None, None]
-    dn = np.zeros((len(node), 4, 3, 3))
-    dn[:, 1:] = side[:, None, None, None] * dnhat
-    _, grad = barycentric_gradients(X[:, 0], X[:, 1], X[:, 2])          # (F, 3j, 3)
-    d0 = np.einsum("ij,ij->i", nhat, x[node] - X[:, 0])
-    g_dn = np.einsum("fji,fkil->fjkl", grad, dnhat)                       # g_jᵀ ∂n̂/∂x_k
-    dlam = np.zeros((len(node), 3, 4, 3))
-    dlam[:, :, 0] = grad
-    dlam[:, :, 1:] = (-lam[:, None, :, None] * grad[:, :, None, :]
-                      - d0[:, None, None, None] * g_dn)
-    return dn, dlam
+@numba.njit(cache=True)
+def _face_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
+    """``∂n/∂x_m`` ``(4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(3, 4, 3)`` of a face contact of node
+    ``p`` with triangle ``tri``, written into ``dn``, ``dlam`` (zero on entry)."""
+    a, b, c = tri[0], tri[1], tri[2]
+    e1 = x[b] - x[a]
+    e2 = x[c] - x[a]
+    N = np.empty(3)
+    N[0] = e1[1] * e2[2] - e1[2] * e2[1]
+    N[1] = e1[2] * e2[0] - e1[0] * e2[2]
+    N[2] = e1[0] * e2[1] - e1[1] * e2[0]
+    length = math.sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2])
+    nhat = N / length
+    side = np.sign(nhat[0] * normal[0] + nhat[1] * normal[1] + nhat[2] * normal[2])
+    # K_a = [e2 - e1]×, K_b = -[e2]×, K_c = [e1]×
+    K = np.zeros((3, 3, 3))
+    for k in range(3):
+        v = e2 - e1 if k == 0 else (e2 if k == 1 else e1)
+        sign = -1.0 if k == 1 else 1.0
+        K[k, 0, 1], K[k, 0, 2] = sign * -v[2], sign * v[1]
+        K[k, 1, 0], K[k, 1, 2] = sign * v[2], sign * -v[0]
+        K[k, 2, 0], K[k, 2, 1] = sign * -v[1], sign * v[0]
+    # ∂n̂/∂x_k = (I - n̂ n̂ᵀ) K_k / |N|
+    P = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            P[i, j] = (1.0 if i == j else 0.0) - nhat[i] * nhat[j]
+    dnhat = np.empty((3, 3, 3))
+    for k in range(3):
+        for i in range(3):
+            for s in range(3):
+                total = P[i, 0] * K[k, 0, s] + P[i, 1] * K[k, 1, s] + P[i, 2] * K[k, 2, s]
+                dnhat[k, i, s] = total / length
+                dn[1 + k, i, s] = side * dnhat[k, i, s]
+    # in-plane gradients g_j of the barycentric coordinates (geometry.barycentric_gradients)
+    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    det = g11 * g22 - g12 * g12
+    grad = np.empty((3, 3))
+    for i in range(3):
+        grad[1, i] = (g22 * e1[i] - g12 * e2[i]) / det
+        grad[2, i] = (g11 * e2[i] - g12 * e1[i]) / det
+        grad[0, i] = -grad[1, i] - grad[2, i]
+    d0 = _dot(nhat, x[p] - x[a])
+    # dλ_j = g_j·(dx_p - Σ_k λ_k dx_k - d₀ dn̂)
+    for j in range(3):
+        for s in range(3):
+            dlam[j, 0, s] = grad[j, s]
+        for k in range(3):
+            for s in range(3):
+                g_dn = (grad[j, 0] * dnhat[k, 0, s] + grad[j, 1] * dnhat[k, 1, s]
+                        + grad[j, 2] * dnhat[k, 2, s])
+                dlam[j, 1 + k, s] = -lam[k] * grad[j, s] - d0 * g_dn
 
 
-def _feature_terms(x, node, support, lam, normal):
-    """``∂n/∂x_m`` and ``∂λ_j/∂x_m`` of edge and vertex contacts (shapes as above)."""
-    B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
-    q = np.einsum("ij,ijk->ik", lam, x[support])
-    gap = np.linalg.norm(x[node] - q, axis=1)
-    carrying = lam > _ON_FEATURE
-    on_edge = carrying.sum(axis=1) == 2
-    Q = np.eye(3) - normal[:, :, None] * normal[:, None, :]
-    dlam = np.zeros((len(node), 3, 4, 3))
-    if on_edge.any():
-        rows = np.flatnonzero(on_edge)
-        # the two carrying vertices, u before v
-        u = np.argmax(carrying[rows], axis=1)
-        v = 2 - np.argmax(carrying[rows][:, ::-1], axis=1)
-        xu, xv = x[support[rows, u]], x[support[rows, v]]
-        edge_length = np.linalg.norm(xv - xu, axis=1)
-        t = (xv - xu) / edge_length[:, None]
-        Q[rows] -= t[:, :, None] * t[:, None, :]
+@numba.njit(cache=True)
+def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
+    """The same for an edge or vertex contact (``dn``, ``dlam`` zero on entry)."""
+    B = np.empty(4)
+    B[0] = 1.0
+    for j in range(3):
+        B[1 + j] = -lam[j]
+    q = np.zeros(3)
+    for j in range(3):
+        q += lam[j] * x[tri[j]]
+    offset = x[p] - q
+    gap = math.sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2])
+    # the projector normal to n (and, on an edge, to its direction t)
+    Q = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            Q[i, j] = (1.0 if i == j else 0.0) - normal[i] * normal[j]
+    u, v, carrying = -1, -1, 0
+    for j in range(3):
+        if lam[j] > _ON_FEATURE:
+            carrying += 1
+            if u < 0:
+                u = j
+            v = j
+    on_edge = carrying == 2
+    t = np.zeros(3)
+    ell = 1.0
+    if on_edge:
+        edge = x[tri[v]] - x[tri[u]]
+        ell = math.sqrt(edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2])
+        t = edge / ell
+        for i in range(3):
+            for j in range(3):
+                Q[i, j] -= t[i] * t[j]
         # the edge turning (dt = P(dx_v - dx_u)/ℓ) drags the foot point along t
-        n, ell = normal[rows], edge_length[:, None]
-        slide = B[rows][:, :, None] * (t / ell)[:, None, :]                      # (E, 4, 3)
-        turn = (gap[rows, None] / ell) * n / ell
-        slide[np.arange(len(rows)), 1 + u] -= turn
-        slide[np.arange(len(rows)), 1 + v] += turn
-        dlam[rows, v] = slide
-        dlam[rows, u] = -slide
-    dn = B[:, :, None, None] * (Q / np.maximum(gap, 1e-300)[:, None, None])[:, None]
-    if on_edge.any():
+        for m in range(4):
+            for s in range(3):
+                dlam[v, m, s] = B[m] * (t[s] / ell)
+        for s in range(3):
+            turn = (gap / ell) * normal[s] / ell
+            dlam[v, 1 + u, s] -= turn
+            dlam[v, 1 + v, s] += turn
+        for m in range(4):
+            for s in range(3):
+                dlam[u, m, s] = -dlam[v, m, s]
+    scale = max(gap, 1e-300)
+    for m in range(4):
+        for i in range(3):
+            for j in range(3):
+                dn[m, i, j] = B[m] * (Q[i, j] / scale)
+    if on_edge:
         # ... and turns the direction within the plane of t and n: dn = -t (n·(dx_v - dx_u))/ℓ
-        tn = t[:, :, None] * (n / ell)[:, None, :]
-        dn[rows, 1 + u] += tn
-        dn[rows, 1 + v] -= tn
-    return dn, dlam
+        for i in range(3):
+            for j in range(3):
+                tn = t[i] * (normal[j] / ell)
+                dn[1 + u, i, j] += tn
+                dn[1 + v, i, j] -= tn
+
+
+@numba.njit(cache=True)
+def _all_terms(x, node, support, lam, normal, edge, dn, dlam):  # pragma: no cover
+    for i in range(len(node)):
+        if edge[i]:
+            _feature_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
+        else:
+            _face_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
 
 
 def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
@@ -136,7 +203,9 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
     count = len(node)
     dn = np.zeros((count, 4, 3, 3))
     dlam = np.zeros((count, 3, 4, 3))
-    for mask, terms in ((~edge, _face_terms), (edge, _feature_terms)):
-        if mask.any():
-            dn[mask], dlam[mask] = terms(x, node[mask], support[mask], lam[mask], normal[mask])
+    _all_terms(np.ascontiguousarray(x, dtype=np.float64), np.asarray(node, dtype=np.int64),
+               np.ascontiguousarray(support, dtype=np.int64),
+               np.ascontiguousarray(lam, dtype=np.float64),
+               np.ascontiguousarray(normal, dtype=np.float64), np.asarray(edge, dtype=np.bool_),
+               dn, dlam)
     return dn, dlam

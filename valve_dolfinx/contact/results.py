@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from valve_dolfinx.contact.kernels import outer_blocks, row_blocks
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 __all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
@@ -261,33 +262,24 @@ class ContactRows:
         if self.grad_f is not None:
             acting |= np.any(self.grad_f != 0.0, axis=(1, 2))
         live = np.flatnonzero(acting)
-        ids_live, B_live, own, magnitude_live = ids[live], B[live], own[live], magnitude[live]
-        # one allocation for all blocks: at 10^5 triangles they take hundreds of MB
         size = len(live) * m * m
         total = size + (0 if outer is None else len(outer[0]))
         rows = np.empty(total, dtype=np.int64)
         cols = np.empty(total, dtype=np.int64)
         blocks = np.empty((total, 3, 3))
-        row_blocks = blocks[:size].reshape(len(live), m, m, 3, 3)
+        # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m, with the
+        # turning direction and the sliding point (linearisation module); B_r n ⊗ own_m without
         if self.geometric is None:
-            np.multiply(Bn[live][:, :, None, :, None], own[:, None, :, None, :], out=row_blocks)
+            dn, dlam = np.empty((0, m, 3, 3)), np.empty((0, m - 1, m, 3))
         else:
-            # with the turning direction and the sliding point (linearisation module):
-            # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m
-            dn, dlam = (g[live] for g in self.geometric)
-            T = B_live[:, :, None, None] * own[:, None, :, :]                      # (A, m, m, 3)
-            T[:, 1:] -= magnitude_live[:, None, None, None] * dlam
-            np.multiply(self.normal[live][:, None, None, :, None], T[:, :, :, None, :],
-                        out=row_blocks)
-            scratch = np.empty((len(live), m, 3, 3))
-            for r in range(m):  # one row node at a time: a temporary of a quarter of the size
-                np.multiply((B_live[:, r] * magnitude_live)[:, None, None, None], dn,
-                            out=scratch)
-                row_blocks[:, r] += scratch
-        rows[:size] = np.repeat(ids_live, m, axis=1).ravel()
-        cols[:size] = np.tile(ids_live, (1, m)).ravel()
+            dn, dlam = (np.ascontiguousarray(g[live]) for g in self.geometric)
+        row_blocks(np.ascontiguousarray(ids[live]), np.ascontiguousarray(B[live]),
+                   np.ascontiguousarray(self.normal[live]), np.ascontiguousarray(own[live]),
+                   np.ascontiguousarray(magnitude[live]), self.geometric is not None, dn, dlam,
+                   rows[:size], cols[:size], blocks[:size])
         if outer is not None:
-            rows[size:], cols[size:], blocks[size:] = outer
+            rows[size:], cols[size:], factors = outer
+            outer_blocks(*factors, blocks[size:])
         if clock is not None:
             clock.add("jacobian")
         return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
@@ -315,7 +307,7 @@ class ContactRows:
 def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_nodes: int,
                         left: tuple[np.ndarray, np.ndarray],
                         right: tuple[np.ndarray, np.ndarray]
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
     r"""Blocks coupling the rows of each group: ``Σ_{i,k} Bn_i[r] ⊗ (α_i U_k[m] + β_i V_k[m])``.
 
     The sum runs over all ordered pairs of rows ``(i, k)`` with the same
@@ -339,8 +331,10 @@ def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_
 
     Returns
     -------
-    rows, cols, blocks
-        Node ids and ``(K, 3, 3)`` blocks.
+    rows, cols, factors
+        Node ids of the ``K`` blocks, and ``(P, Q, P', Q', a, b)``: block ``k`` is
+        ``P[a_k] ⊗ Q[b_k] + P'[a_k] ⊗ Q'[b_k]``
+        (:func:`~valve_dolfinx.contact.kernels.outer_blocks` writes them).
     """
     alpha, beta = left
     U, V = right
@@ -365,6 +359,5 @@ def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_
     pushed = np.any(P != 0.0, axis=1) | np.any(P2 != 0.0, axis=1)
     keep = pushed[a]
     a, b = a[keep], b[keep]
-    blocks = P[a, :, None] * Q[b, None, :] + P2[a, :, None] * Q2[b, None, :]
-    return entry_node[a], entry_node[b], blocks
+    return entry_node[a], entry_node[b], (P, Q, P2, Q2, a, b)
 

@@ -41,6 +41,7 @@ from valve_dolfinx.contact.geometry import (
     closest_point_on_triangles,
     triangle_normals,
 )
+from valve_dolfinx.contact.kernels import near_pairs
 from valve_dolfinx.contact.law import (
     DEFAULT_PARAMETERS,
     ContactParameters,
@@ -289,7 +290,6 @@ class SurfaceContact:
         #: ``(x, f_ext, nodes, rows, geometry)`` of the last forces-only evaluation
         #: (see :meth:`evaluate`)
         self._last_rows: tuple | None = None
-        self._excluded_by_column: tuple[np.ndarray, np.ndarray] | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
         #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
         #: the law, nodal forces) and "jacobian" (all derivative blocks).
@@ -513,8 +513,8 @@ class SurfaceContact:
         hi += lateral
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
-        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0),) * 5
-                 + (np.empty(0, dtype=bool),)]
+        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0), np.empty((0, 3)),
+                                                       np.empty(0), np.empty(0, dtype=bool))]
         for first in range(0, len(self.triangles), BLOCK_SIZE):
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
@@ -526,37 +526,19 @@ class SurfaceContact:
     def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
               tri: np.ndarray) -> tuple[np.ndarray, ...]:
         """The cheap tests of :meth:`_narrow`: near the plane, within reach of the triangle
-        or in its fade band, and not in its neighbourhood.  Returns ``node, tri``, the plane
-        distance ``d0``, the barycentric coordinates ``lam0, lam1, lam2`` of the projection,
+        or in its fade band, and not in its neighbourhood
+        (:func:`~valve_dolfinx.contact.kernels.near_pairs`).  Returns ``node, tri``, the
+        plane distance ``d0``, the barycentric coordinates ``lam (K, 3)`` of the projection,
         ``beyond``, a lower bound on its in-plane distance from the triangle, and
         ``in_band`` (projection in the triangle or its fade band)."""
-        o, g1, g2 = frames.origin, frames.grad1, frames.grad2
-        r = [xt[i][node] - o[i][tri] for i in range(3)]
-        n = frames.normal
-        d0 = r[0] * n[0][tri] + r[1] * n[1][tri] + r[2] * n[2][tri]
-        near = np.flatnonzero(np.abs(d0) < self.search_distance)
-        node, tri, d0 = node[near], tri[near], d0[near]
-        r = [ri[near] for ri in r]
-        lam1 = r[0] * g1[0][tri] + r[1] * g1[1][tri] + r[2] * g1[2][tri]
-        lam2 = r[0] * g2[0][tri] + r[1] * g2[1][tri] + r[2] * g2[2][tri]
-        lam0 = 1.0 - lam1 - lam2
-        # in the plane, the projection lies at least -λ_j/|∇λ_j| from the line of the edge
-        # opposite vertex j: a cheap lower bound on the distance to the triangle that
-        # discards most outside pairs before the exact closest-point computation
-        alt = frames.altitudes
-        beyond = np.maximum(np.maximum(-lam0 * alt[0][tri], -lam1 * alt[1][tri]),
-                            -lam2 * alt[2][tri])
-        band = self._row_bands(node, tri)
-        in_band = (lam0 > -band[:, 0]) & (lam1 > -band[:, 1]) & (lam2 > -band[:, 2])
-        h = self.params.reach
-        reach = np.flatnonzero(in_band | ((beyond < h) & (np.abs(d0) < h)))
-        keep = ~self._in_neighbourhood(node[reach], tri[reach])
-        return tuple(v[reach][keep] for v in (node, tri, d0, lam0, lam1, lam2, beyond, in_band))
+        return near_pairs(node, tri, xt, frames.origin, frames.normal, frames.grad1,
+                          frames.grad2, frames.altitudes, self.node_body, self.triangle_body,
+                          self.side_band, FACE_BAND, self.excluded_nodes,
+                          self.search_distance, self.params.reach)
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-                tri: np.ndarray, d0: np.ndarray, lam0: np.ndarray, lam1: np.ndarray,
-                lam2: np.ndarray, beyond: np.ndarray, in_band: np.ndarray
-                ) -> tuple[np.ndarray, ...]:
+                tri: np.ndarray, d0: np.ndarray, lam: np.ndarray, beyond: np.ndarray,
+                in_band: np.ndarray) -> tuple[np.ndarray, ...]:
         """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
 
         A node whose projection falls inside the triangle meets its face: the
@@ -574,7 +556,6 @@ class SurfaceContact:
         the barycentric coordinates ``(K, 3)`` of the closest point and the
         offset ``x_p - q`` ``(K, 3)``.
         """
-        lam = np.stack([lam0, lam1, lam2], axis=1)
         lam_min = lam.min(axis=1)
         n = frames.normal
         h = self.params.reach
@@ -603,17 +584,6 @@ class SurfaceContact:
         """``(K, 3)`` fade bands of face rows: wide beyond another body's free edge."""
         other = self.node_body[node] != self.triangle_body[tri]
         return np.where(other[:, None], self.side_band[tri], FACE_BAND)
-
-    def _in_neighbourhood(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
-        """True where the node is a vertex of the triangle or an edge-neighbour of one."""
-        table = self.excluded_nodes
-        if self._excluded_by_column is None or self._excluded_by_column[0] is not table:
-            self._excluded_by_column = (table, np.ascontiguousarray(table.T))
-        columns = self._excluded_by_column[1]       # one contiguous gather per column: 3x faster
-        hit = np.zeros(len(node), dtype=bool)
-        for column in columns:
-            hit |= column[tri] == node
-        return hit
 
     def _side(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, f_ext: np.ndarray,
               n_tri: np.ndarray) -> np.ndarray:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
+from valve_dolfinx.contact.kernels import sum_blocks
 from valve_dolfinx.geometry.distributed import node_to_dof
 
 __all__ = ["NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
@@ -109,19 +110,18 @@ class NodalCoupling:
                    blocks: np.ndarray, scale: float = 1.0) -> None:
         """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block (duplicates add).
 
-        The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), then
-        inserted with one PETSc call per block row: a plain displacement space (block
-        size 3) takes the blocks whole (``MatSetValuesBlocked``, the blocks of a row one
-        after the other), a state with other components interleaved (the dynamics'
-        (u, v)) row by row
-        (:meth:`block_csr`).
+        The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), the
+        sums scaled, then inserted with one PETSc call per block row: a plain displacement
+        space (block size 3) takes the blocks whole (``MatSetValuesBlocked``, the blocks of
+        a row one after the other), a state with other components interleaved (the
+        dynamics' (u, v)) row by row (:meth:`block_csr`).
         """
         if len(row_nodes) == 0:
             return
-        blocks = scale * np.asarray(blocks, dtype=PETSc.ScalarType)
         rows, cols, blocks = self._merge_blocks(row_nodes, col_nodes, blocks)
         if len(rows) == 0:
             return
+        blocks *= scale
         if self.layout != NodalLayout() or A.getBlockSize() != 3:
             self.add_csr(A, self.block_csr(rows, cols, blocks))
             return
@@ -136,22 +136,13 @@ class NodalCoupling:
         """The blocks summed per (row node, column node) pair, sorted by row then column,
         all-zero blocks left out.  The valve's contact Jacobian repeats each pair six to
         eight times (a node's blended triangles share their corners), and a PETSc
-        insertion costs per block, so summing first makes the insertion that much cheaper."""
+        insertion costs per block, so summing first makes the insertion that much cheaper
+        (:func:`~valve_dolfinx.contact.kernels.sum_blocks`: each sum in the blocks' order)."""
         if len(row_nodes) == 0:
             return row_nodes, col_nodes, blocks
-        key = np.asarray(row_nodes, dtype=np.int64) * self.num_nodes + col_nodes
-        order = np.argsort(key)
-        key = key[order]
-        first = np.concatenate([[True], key[1:] != key[:-1]])
-        pair = np.empty(len(key), dtype=np.intp)  # distinct (row, col) pair of every block
-        pair[order] = np.cumsum(first) - 1
-        count = int(pair.max()) + 1
-        entries = blocks.reshape(-1, 9).T  # one bincount per entry: no copy of the blocks
-        summed = np.stack([np.bincount(pair, entries[j], minlength=count) for j in range(9)],
-                          axis=1).reshape(count, 3, 3)
-        nonzero = np.any(summed != 0.0, axis=(1, 2))
-        key = key[first][nonzero]
-        return key // self.num_nodes, key % self.num_nodes, summed[nonzero]
+        return sum_blocks(np.asarray(row_nodes, dtype=np.int64),
+                          np.asarray(col_nodes, dtype=np.int64),
+                          np.ascontiguousarray(blocks, dtype=np.float64), self.num_nodes)
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
