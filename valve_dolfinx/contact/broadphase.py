@@ -12,7 +12,8 @@ against the nodes with a uniform grid built from NumPy sorts and prefix sums:
 * a box covers a few columns, and in each of them the nodes between its two
   faces across the sweep axis form one contiguous run of the sorted nodes,
   read from the table in O(1) (sweep and prune within a column);
-* the runs are expanded into pairs and filtered with the exact box test.
+* the runs are expanded into pairs and filtered with the exact box test (a
+  loop compiled by Numba).
 
 The work is ``O(S log S)`` for the sort of the ``S`` queried nodes, linear in
 the number of grid cells (bounded by a multiple of the nodes and boxes), of
@@ -27,6 +28,7 @@ import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from valve_dolfinx.contact.geometry import triangle_normals
@@ -170,6 +172,29 @@ class CellGrid:
         return box, base + level_lo[box], base + level_hi[box]
 
 
+@numba.njit(cache=True)
+def _run_pairs(start, stop, box, sorted_nodes, sorted_xt, lo, hi):  # pragma: no cover
+    """The nodes ``sorted_nodes[start[j]:stop[j]]`` of each run ``j`` inside the closed box
+    ``box[j]`` (corners ``lo``, ``hi`` ``(3, M)``): ``(node, box)`` pairs, run by run."""
+    total = 0
+    for j in range(len(start)):
+        total += stop[j] - start[j]
+    node = np.empty(total, dtype=np.int64)
+    owner = np.empty(total, dtype=np.int64)
+    kept = 0
+    for j in range(len(start)):
+        b = box[j]
+        for position in range(start[j], stop[j]):
+            inside = True
+            for axis in range(3):
+                coordinate = sorted_xt[axis, position]
+                inside = inside and lo[axis, b] <= coordinate <= hi[axis, b]
+            if inside:
+                node[kept], owner[kept] = sorted_nodes[position], b
+                kept += 1
+    return node[:kept], owner[:kept]
+
+
 def _segment_offsets(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For segments of the given lengths: owner segment and rank within it of each item."""
     owner = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
@@ -217,19 +242,8 @@ class CellIndex:
         if self.grid is None or len(self.sorted_nodes) == 0 or lo.shape[1] == 0:
             return empty, empty.copy()
         box, key_lo, key_hi = self.grid.box_runs(lo, hi)
-        start = self.first[key_lo]
-        count = self.first[key_hi + 1] - start
-        offsets = np.cumsum(count) - count
-        position = np.arange(int(offsets[-1] + count[-1]), dtype=np.int64) \
-            + np.repeat(start - offsets, count)
-        box = np.repeat(box, count)
-        inside = np.ones(len(position), dtype=bool)
-        for axis in self.grid.axes:
-            coordinate = self.sorted_xt[axis][position]
-            inside &= coordinate >= lo[axis][box]
-            inside &= coordinate <= hi[axis][box]
-        keep = np.flatnonzero(inside)
-        return self.sorted_nodes[position[keep]], box[keep]
+        return _run_pairs(self.first[key_lo], self.first[key_hi + 1], box, self.sorted_nodes,
+                          self.sorted_xt, np.ascontiguousarray(lo), np.ascontiguousarray(hi))
 
     def blocks(self, lo: np.ndarray, hi: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """:meth:`box_pairs` for consecutive blocks of boxes; box ids are global.

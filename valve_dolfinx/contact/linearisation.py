@@ -63,48 +63,49 @@ def _dot(a, b):  # pragma: no cover
 
 
 @numba.njit(cache=True)
-def _face_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
+def _face_terms(x, p, tri, lam, normal, dn, dlam, work):  # pragma: no cover
     """``∂n/∂x_m`` ``(4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(3, 4, 3)`` of a face contact of node
-    ``p`` with triangle ``tri``, written into ``dn``, ``dlam`` (zero on entry)."""
+    ``p`` with triangle ``tri``, written into ``dn``, ``dlam`` (zero on entry); ``work``
+    a scratch buffer of 64 values."""
     a, b, c = tri[0], tri[1], tri[2]
-    e1 = x[b] - x[a]
-    e2 = x[c] - x[a]
-    N = np.empty(3)
-    N[0] = e1[1] * e2[2] - e1[2] * e2[1]
-    N[1] = e1[2] * e2[0] - e1[0] * e2[2]
-    N[2] = e1[0] * e2[1] - e1[1] * e2[0]
-    length = math.sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2])
-    nhat = N / length
-    side = np.sign(nhat[0] * normal[0] + nhat[1] * normal[1] + nhat[2] * normal[2])
-    # K_a = [e2 - e1]×, K_b = -[e2]×, K_c = [e1]×
-    K = np.zeros((3, 3, 3))
-    for k in range(3):
-        v = e2 - e1 if k == 0 else (e2 if k == 1 else e1)
-        sign = -1.0 if k == 1 else 1.0
-        K[k, 0, 1], K[k, 0, 2] = sign * -v[2], sign * v[1]
-        K[k, 1, 0], K[k, 1, 2] = sign * v[2], sign * -v[0]
-        K[k, 2, 0], K[k, 2, 1] = sign * -v[1], sign * v[0]
-    # ∂n̂/∂x_k = (I - n̂ n̂ᵀ) K_k / |N|
-    P = np.empty((3, 3))
+    e1, e2, nhat, r = work[0:3], work[3:6], work[6:9], work[9:12]
     for i in range(3):
-        for j in range(3):
-            P[i, j] = (1.0 if i == j else 0.0) - nhat[i] * nhat[j]
-    dnhat = np.empty((3, 3, 3))
+        e1[i] = x[b, i] - x[a, i]
+        e2[i] = x[c, i] - x[a, i]
+        r[i] = x[p, i] - x[a, i]
+    N0 = e1[1] * e2[2] - e1[2] * e2[1]
+    N1 = e1[2] * e2[0] - e1[0] * e2[2]
+    N2 = e1[0] * e2[1] - e1[1] * e2[0]
+    length = math.sqrt(N0 * N0 + N1 * N1 + N2 * N2)
+    nhat[0], nhat[1], nhat[2] = N0 / length, N1 / length, N2 / length
+    side = np.sign(nhat[0] * normal[0] + nhat[1] * normal[1] + nhat[2] * normal[2])
+    # ∂n̂/∂x_k = (I - n̂ n̂ᵀ) K_k / |N|, K_a = [e2 - e1]×, K_b = -[e2]×, K_c = [e1]×
+    dnhat = work[12:39].reshape((3, 3, 3))
+    K = work[39:48].reshape((3, 3))
     for k in range(3):
+        sign = -1.0 if k == 1 else 1.0
+        v0 = e2[0] - e1[0] if k == 0 else (e2[0] if k == 1 else e1[0])
+        v1 = e2[1] - e1[1] if k == 0 else (e2[1] if k == 1 else e1[1])
+        v2 = e2[2] - e1[2] if k == 0 else (e2[2] if k == 1 else e1[2])
+        K[0, 0], K[0, 1], K[0, 2] = 0.0, sign * -v2, sign * v1
+        K[1, 0], K[1, 1], K[1, 2] = sign * v2, 0.0, sign * -v0
+        K[2, 0], K[2, 1], K[2, 2] = sign * -v1, sign * v0, 0.0
         for i in range(3):
+            P0 = (1.0 if i == 0 else 0.0) - nhat[i] * nhat[0]
+            P1 = (1.0 if i == 1 else 0.0) - nhat[i] * nhat[1]
+            P2 = (1.0 if i == 2 else 0.0) - nhat[i] * nhat[2]
             for s in range(3):
-                total = P[i, 0] * K[k, 0, s] + P[i, 1] * K[k, 1, s] + P[i, 2] * K[k, 2, s]
-                dnhat[k, i, s] = total / length
+                dnhat[k, i, s] = (P0 * K[0, s] + P1 * K[1, s] + P2 * K[2, s]) / length
                 dn[1 + k, i, s] = side * dnhat[k, i, s]
     # in-plane gradients g_j of the barycentric coordinates (geometry.barycentric_gradients)
     g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
     det = g11 * g22 - g12 * g12
-    grad = np.empty((3, 3))
+    grad = work[48:57].reshape((3, 3))
     for i in range(3):
         grad[1, i] = (g22 * e1[i] - g12 * e2[i]) / det
         grad[2, i] = (g11 * e2[i] - g12 * e1[i]) / det
         grad[0, i] = -grad[1, i] - grad[2, i]
-    d0 = _dot(nhat, x[p] - x[a])
+    d0 = _dot(nhat, r)
     # dλ_j = g_j·(dx_p - Σ_k λ_k dx_k - d₀ dn̂)
     for j in range(3):
         for s in range(3):
@@ -119,20 +120,11 @@ def _face_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
 @numba.njit(cache=True)
 def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
     """The same for an edge or vertex contact (``dn``, ``dlam`` zero on entry)."""
-    B = np.empty(4)
-    B[0] = 1.0
-    for j in range(3):
-        B[1 + j] = -lam[j]
-    q = np.zeros(3)
-    for j in range(3):
-        q += lam[j] * x[tri[j]]
-    offset = x[p] - q
-    gap = math.sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2])
-    # the projector normal to n (and, on an edge, to its direction t)
-    Q = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            Q[i, j] = (1.0 if i == j else 0.0) - normal[i] * normal[j]
+    q0 = 0.0 + lam[0] * x[tri[0], 0] + lam[1] * x[tri[1], 0] + lam[2] * x[tri[2], 0]
+    q1 = 0.0 + lam[0] * x[tri[0], 1] + lam[1] * x[tri[1], 1] + lam[2] * x[tri[2], 1]
+    q2 = 0.0 + lam[0] * x[tri[0], 2] + lam[1] * x[tri[1], 2] + lam[2] * x[tri[2], 2]
+    o0, o1, o2 = x[p, 0] - q0, x[p, 1] - q1, x[p, 2] - q2
+    gap = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
     u, v, carrying = -1, -1, 0
     for j in range(3):
         if lam[j] > _ON_FEATURE:
@@ -141,19 +133,20 @@ def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
                 u = j
             v = j
     on_edge = carrying == 2
-    t = np.zeros(3)
+    t0 = t1 = t2 = 0.0
     ell = 1.0
     if on_edge:
-        edge = x[tri[v]] - x[tri[u]]
-        ell = math.sqrt(edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2])
-        t = edge / ell
-        for i in range(3):
-            for j in range(3):
-                Q[i, j] -= t[i] * t[j]
+        d0 = x[tri[v], 0] - x[tri[u], 0]
+        d1 = x[tri[v], 1] - x[tri[u], 1]
+        d2 = x[tri[v], 2] - x[tri[u], 2]
+        ell = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        t0, t1, t2 = d0 / ell, d1 / ell, d2 / ell
         # the edge turning (dt = P(dx_v - dx_u)/ℓ) drags the foot point along t
         for m in range(4):
-            for s in range(3):
-                dlam[v, m, s] = B[m] * (t[s] / ell)
+            Bm = 1.0 if m == 0 else -lam[m - 1]
+            dlam[v, m, 0] = Bm * (t0 / ell)
+            dlam[v, m, 1] = Bm * (t1 / ell)
+            dlam[v, m, 2] = Bm * (t2 / ell)
         for s in range(3):
             turn = (gap / ell) * normal[s] / ell
             dlam[v, 1 + u, s] -= turn
@@ -161,27 +154,33 @@ def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
         for m in range(4):
             for s in range(3):
                 dlam[u, m, s] = -dlam[v, m, s]
+    # ∂n/∂x_m = B_m Q/gap, Q the projector normal to n (and, on an edge, to t)
     scale = max(gap, 1e-300)
-    for m in range(4):
-        for i in range(3):
-            for j in range(3):
-                dn[m, i, j] = B[m] * (Q[i, j] / scale)
-    if on_edge:
-        # ... and turns the direction within the plane of t and n: dn = -t (n·(dx_v - dx_u))/ℓ
-        for i in range(3):
-            for j in range(3):
-                tn = t[i] * (normal[j] / ell)
+    for i in range(3):
+        ti = t0 if i == 0 else (t1 if i == 1 else t2)
+        for j in range(3):
+            tj = t0 if j == 0 else (t1 if j == 1 else t2)
+            Q = (1.0 if i == j else 0.0) - normal[i] * normal[j]
+            if on_edge:
+                Q -= ti * tj
+            for m in range(4):
+                Bm = 1.0 if m == 0 else -lam[m - 1]
+                dn[m, i, j] = Bm * (Q / scale)
+            if on_edge:
+                # ... and turns within the plane of t and n: dn = -t (n·(dx_v - dx_u))/ℓ
+                tn = ti * (normal[j] / ell)
                 dn[1 + u, i, j] += tn
                 dn[1 + v, i, j] -= tn
 
 
 @numba.njit(cache=True)
 def _all_terms(x, node, support, lam, normal, edge, dn, dlam):  # pragma: no cover
+    work = np.empty(64)
     for i in range(len(node)):
         if edge[i]:
             _feature_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
         else:
-            _face_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
+            _face_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i], work)
 
 
 def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,

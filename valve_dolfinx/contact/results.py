@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from valve_dolfinx.contact.kernels import outer_blocks, row_blocks
+from valve_dolfinx.contact.kernels import group_blocks, row_blocks
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 __all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
@@ -205,8 +205,8 @@ class ContactRows:
         ``B_r n ⊗ ∂s/∂x_m``, plus the turning of ``n`` and the sliding of ``λ``
         (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).  The
         couplings between the rows of a group are summed per group over the
-        distinct nodes it touches (:func:`_group_outer_blocks`), not pair by
-        pair; the blocks may repeat a (row, col) pair and are to be summed.
+        distinct nodes it touches (:func:`~valve_dolfinx.contact.kernels.group_blocks`),
+        not pair by pair; the blocks may repeat a (row, col) pair and are to be summed.
         """
         count = len(self.node)
         w = np.ones(count) if self.blend is None else self.blend
@@ -250,19 +250,18 @@ class ContactRows:
                            - (w * f * c)[multi, None, None] * grad_p[multi])
         outer = None
         if multi is not None and len(multi):
-            outer = _group_outer_blocks(
-                inverse[multi], ids[multi], Bn[multi], num_nodes,
-                left=(-(G * f * w)[multi], (w * f)[multi]),
-                right=(w[multi, None, None] * grad_L[multi],
-                       c[multi, None, None] * grad_p[multi]))
+            outer = group_blocks(
+                inverse[multi], ids[multi], Bn[multi], -(G * f * w)[multi], (w * f)[multi],
+                w[multi, None, None] * grad_L[multi], c[multi, None, None] * grad_p[multi],
+                num_nodes)
         # a row without force, force slope or driving-force turning has no blocks of its own
-        # (about half the rows: in range of the search, out of reach of the law); it may
-        # still take part in its group's coupling above
+        # (in range of the search, out of reach of the law); it may still take part in its
+        # group's coupling above
         acting = (f != 0.0) | (self.dfdd != 0.0)
         if self.grad_f is not None:
             acting |= np.any(self.grad_f != 0.0, axis=(1, 2))
-        live = np.flatnonzero(acting)
-        size = len(live) * m * m
+        live = slice(None) if acting.all() else np.flatnonzero(acting)
+        size = int(acting.sum()) * m * m
         total = size + (0 if outer is None else len(outer[0]))
         rows = np.empty(total, dtype=np.int64)
         cols = np.empty(total, dtype=np.int64)
@@ -278,8 +277,7 @@ class ContactRows:
                    np.ascontiguousarray(magnitude[live]), self.geometric is not None, dn, dlam,
                    rows[:size], cols[:size], blocks[:size])
         if outer is not None:
-            rows[size:], cols[size:], factors = outer
-            outer_blocks(*factors, blocks[size:])
+            rows[size:], cols[size:], blocks[size:] = outer
         if clock is not None:
             clock.add("jacobian")
         return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
@@ -301,63 +299,3 @@ class ContactRows:
             pairs=np.stack([self.node[active], self.partner[active]], axis=1),
             max_crossing=float(np.max(-(self.d[over] + self.surface_offset), initial=0.0)),
         )
-
-
-
-def _group_outer_blocks(group: np.ndarray, ids: np.ndarray, Bn: np.ndarray, num_nodes: int,
-                        left: tuple[np.ndarray, np.ndarray],
-                        right: tuple[np.ndarray, np.ndarray]
-                        ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
-    r"""Blocks coupling the rows of each group: ``Σ_{i,k} Bn_i[r] ⊗ (α_i U_k[m] + β_i V_k[m])``.
-
-    The sum runs over all ordered pairs of rows ``(i, k)`` with the same
-    ``group`` label, ``i = k`` included, and puts the block at
-    ``(ids[i, r], ids[k, m])``.  It factorises into
-    :math:`P\otimes Q + P'\otimes Q'` over the distinct nodes the group's rows
-    touch, with :math:`P_a = Σ_{(i,r): ids[i,r]=a} α_i Bn_i[r]`,
-    :math:`Q_b = Σ_{(k,m): ids[k,m]=b} U_k[m]` (and β, V for the primed
-    vectors), so a group of ``r`` rows over ``u`` distinct nodes costs ``u²``
-    blocks instead of the ``16 r²`` of the pair-by-pair sum (about 12 times
-    fewer on the meshes of ``benchmarks/contact.py``).
-
-    Parameters
-    ----------
-    group
-        ``(A,)`` group index of every row.
-    ids, Bn
-        ``(A, m)`` node ids of each row and ``(A, m, 3)`` the row vectors ``Bn_i[r]``.
-    left, right
-        ``(α, β)``, each ``(A,)``, and ``(U, V)``, each ``(A, m, 3)``.
-
-    Returns
-    -------
-    rows, cols, factors
-        Node ids of the ``K`` blocks, and ``(P, Q, P', Q', a, b)``: block ``k`` is
-        ``P[a_k] ⊗ Q[b_k] + P'[a_k] ⊗ Q'[b_k]``
-        (:func:`~valve_dolfinx.contact.kernels.outer_blocks` writes them).
-    """
-    alpha, beta = left
-    U, V = right
-    key = group[:, None] * np.int64(num_nodes) + ids
-    entry_key, entry = np.unique(key.ravel(), return_inverse=True)
-    count = len(entry_key)
-
-    def gather(values: np.ndarray) -> np.ndarray:
-        flat = values.reshape(-1, 3)
-        return np.stack([np.bincount(entry, flat[:, j], minlength=count) for j in range(3)],
-                        axis=1)
-
-    P, P2 = gather(alpha[:, None, None] * Bn), gather(beta[:, None, None] * Bn)
-    Q, Q2 = gather(U), gather(V)
-    entry_group, entry_node = np.divmod(entry_key, num_nodes)
-    # entries are sorted by key, so those of one group are contiguous
-    start = np.searchsorted(entry_group, entry_group, side="left")
-    size = np.bincount(entry_group)[entry_group]
-    a = np.repeat(np.arange(count), size)
-    b = np.repeat(start, size) + np.arange(len(a)) - np.repeat(np.cumsum(size) - size, size)
-    # a node whose rows carry no force (α = β = 0) takes no coupling blocks
-    pushed = np.any(P != 0.0, axis=1) | np.any(P2 != 0.0, axis=1)
-    keep = pushed[a]
-    a, b = a[keep], b[keep]
-    return entry_node[a], entry_node[b], (P, Q, P2, Q2, a, b)
-
