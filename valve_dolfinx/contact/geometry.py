@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 __all__ = [
@@ -88,43 +89,59 @@ def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: n
     """Closest point of each triangle ``(a, b, c)[i]`` to ``p[i]`` (all ``(K, 3)``).
 
     Region-based algorithm (vertex, edge or face Voronoi region of the
-    triangle; Ericson, *Real-Time Collision Detection*, §5.1.5), evaluated for
-    all pairs at once with masks.  Returns the closest points ``(K, 3)`` and
-    their barycentric coordinates ``(K, 3)``.
+    triangle; Ericson, *Real-Time Collision Detection*, §5.1.5), a loop over the
+    pairs compiled by Numba.  Returns the closest points ``(K, 3)`` and their
+    barycentric coordinates ``(K, 3)``.
     """
-    p, a, b, c = (np.asarray(v, dtype=float) for v in (p, a, b, c))
-    ab, ac, ap = b - a, c - a, p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-
-    vc = d1 * d4 - d3 * d2
-    vb = d5 * d2 - d1 * d6
-    va = d3 * d6 - d5 * d4
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        denom = 1.0 / (va + vb + vc)
-        v, w = vb * denom, vc * denom
-        face = 1 - v - w
-    # the regions in Ericson's order; the first that holds wins (np.select)
-    regions = [(d1 <= 0) & (d2 <= 0),                                   # vertex a
-               (d3 >= 0) & (d4 <= d3),                                  # vertex b
-               (vc <= 0) & (d1 >= 0) & (d3 <= 0),                       # edge ab
-               (d6 >= 0) & (d5 <= d6),                                  # vertex c
-               (vb <= 0) & (d2 >= 0) & (d6 <= 0),                       # edge ac
-               (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)]         # edge bc
-    #              a    b    ab        c    ac        bc          face interior
-    weights = ([1.0, 0.0, 1 - t_ab, 0.0, 1 - t_ac, 0.0], face), \
-              ([0.0, 1.0, t_ab, 0.0, 0.0, 1 - t_bc], v), \
-              ([0.0, 0.0, 0.0, 1.0, t_ac, t_bc], w)
-    bary = np.stack([np.select(regions, choices, default=inside)
-                     for choices, inside in weights], axis=1)
-    q = bary[:, [0]] * a + bary[:, [1]] * b + bary[:, [2]] * c
+    p, a, b, c = (np.ascontiguousarray(v, dtype=float).reshape(-1, 3) for v in (p, a, b, c))
+    q, bary = np.empty_like(p), np.empty_like(p)
+    _closest_points(p, a, b, c, q, bary)
     return q, bary
+
+
+@numba.njit(cache=True)
+def _dot3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
+    """``u·v`` summed as ``(u₀v₀ + u₂v₂) + u₁v₁``, as ``np.einsum("ij,ij->i")`` does."""
+    return (u0 * v0 + u2 * v2) + u1 * v1
+
+
+@numba.njit(cache=True)
+def _closest_points(p, a, b, c, q, bary):  # pragma: no cover
+    for i in range(len(p)):
+        ab0, ab1, ab2 = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2]
+        ac0, ac1, ac2 = c[i, 0] - a[i, 0], c[i, 1] - a[i, 1], c[i, 2] - a[i, 2]
+        ap0, ap1, ap2 = p[i, 0] - a[i, 0], p[i, 1] - a[i, 1], p[i, 2] - a[i, 2]
+        bp0, bp1, bp2 = p[i, 0] - b[i, 0], p[i, 1] - b[i, 1], p[i, 2] - b[i, 2]
+        cp0, cp1, cp2 = p[i, 0] - c[i, 0], p[i, 1] - c[i, 1], p[i, 2] - c[i, 2]
+        d1 = _dot3(ab0, ab1, ab2, ap0, ap1, ap2)
+        d2 = _dot3(ac0, ac1, ac2, ap0, ap1, ap2)
+        d3 = _dot3(ab0, ab1, ab2, bp0, bp1, bp2)
+        d4 = _dot3(ac0, ac1, ac2, bp0, bp1, bp2)
+        d5 = _dot3(ab0, ab1, ab2, cp0, cp1, cp2)
+        d6 = _dot3(ac0, ac1, ac2, cp0, cp1, cp2)
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        # the regions in Ericson's order; the first that holds wins
+        if d1 <= 0 and d2 <= 0:                                      # vertex a
+            u, v, w = 1.0, 0.0, 0.0
+        elif d3 >= 0 and d4 <= d3:                                   # vertex b
+            u, v, w = 0.0, 1.0, 0.0
+        elif vc <= 0 and d1 >= 0 and d3 <= 0:                        # edge ab
+            t = d1 / (d1 - d3)
+            u, v, w = 1 - t, t, 0.0
+        elif d6 >= 0 and d5 <= d6:                                   # vertex c
+            u, v, w = 0.0, 0.0, 1.0
+        elif vb <= 0 and d2 >= 0 and d6 <= 0:                        # edge ac
+            t = d2 / (d2 - d6)
+            u, v, w = 1 - t, 0.0, t
+        elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:          # edge bc
+            t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            u, v, w = 0.0, 1 - t, t
+        else:                                                        # face interior
+            denom = 1.0 / (va + vb + vc)
+            v, w = vb * denom, vc * denom
+            u = 1 - v - w
+        bary[i, 0], bary[i, 1], bary[i, 2] = u, v, w
+        for k in range(3):
+            q[i, k] = u * a[i, k] + v * b[i, k] + w * c[i, k]
