@@ -507,6 +507,10 @@ def test_recommendation_when_none_qualifies():
     assert rec.shortfall_mm == pytest.approx(0.6)
     assert "0.60 mm short" in rec.text and "W7/H0" in rec.text
     assert rec.neighbours == pytest.approx({"W0/H0": -0.9, "W14/H0": 0.9})
+    # a shortfall below 0.005 mm is printed to the digit where it shows, not as "0.00 mm"
+    tie = recommend([_row(None, None, 2.90391), _row(0, 0, 2.0), _row(7, 0, 2.90381)])
+    assert tie.best == "W7/H0" and tie.shortfall_mm == pytest.approx(1e-4)
+    assert "0.00010 mm short" in tie.text and "2.90381 mm" in tie.text
     no_normal = recommend(rows[1:])
     assert no_normal.target_mm is None and "--target-coaptation" in no_normal.target_source
     assert no_normal.best == "W7/H0"

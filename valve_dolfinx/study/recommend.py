@@ -161,11 +161,15 @@ def recommend(rows: list[dict], target_mm: float | None = None) -> Recommendatio
                              f"**{rec.best}** ({quality}): {rec.best_height_mm:.2f} mm.")
             else:
                 rec.shortfall_mm = rec.target_mm - rec.best_height_mm
+                # a shortfall that rounds to 0.00 mm is shown to the digit where it shows
+                digits = 2 if rec.shortfall_mm >= 0.005 else max(
+                    3, 1 - math.floor(math.log10(max(rec.shortfall_mm, 1e-12))))
                 lines.append(
                     f"No graft on the grid converges, seals and reaches the target minimum "
-                    f"coaptation height {rec.target_mm:.2f} mm ({rec.target_source}). The best "
-                    f"is **{rec.best}** ({quality}) with {rec.best_height_mm:.2f} mm, "
-                    f"{max(rec.shortfall_mm, 0.0):.2f} mm short.")
+                    f"coaptation height {rec.target_mm:.{digits}f} mm ({rec.target_source}). "
+                    f"The best is **{rec.best}** ({quality}) with "
+                    f"{rec.best_height_mm:.{digits}f} mm, "
+                    f"{max(rec.shortfall_mm, 0.0):.{digits}f} mm short.")
     if centre is not None:
         by_size = {(r["graft_width_pct"], r["graft_height_pct"]): r for r in grafts}
         here = _value(centre)
