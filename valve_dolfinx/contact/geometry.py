@@ -1,4 +1,4 @@
-"""Vectorised point–triangle geometry (closest point, barycentric coordinates, normals)."""
+"""Point–triangle geometry of arrays of pairs (closest point, barycentric coordinates, normals)."""
 
 from __future__ import annotations
 

@@ -19,8 +19,10 @@ Every call to :meth:`SurfaceContact.evaluate` searches the whole surface:
    ``-λ_j f n`` (``λ`` the barycentric coordinates of the closest point), so
    that forces and moments balance.
 
-All of it is vectorised over the candidate pairs, processed in blocks of
-triangles so that temporaries stay cache-sized.  The work of one call is
+All of it works on all candidate pairs at once -- NumPy expressions, and loops
+compiled by Numba where a pair's work is a few dozen flops
+(:mod:`~valve_dolfinx.contact.kernels`) -- processed in blocks of triangles so
+that temporaries stay cache-sized.  The work of one call is
 linear in the number of candidate pairs (plus an ``S log S`` sort of the
 queried nodes), and the pairs of a node depend only on that node, so the sum
 of the results for disjoint node sets (one per MPI rank) is the result for
