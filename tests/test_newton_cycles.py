@@ -1,4 +1,5 @@
-"""Ending a Newton solve caught in a two-cycle (valve_dolfinx.solvers.callbacks).
+"""Newton solves that cycle: ending them, damping the update that starts one
+(valve_dolfinx.solvers.callbacks).
 
 Newton's method on f(x) = arctan x has an exact two-cycle: from x₀ with
 2x₀ = (1 + x₀²)·arctan x₀ (x₀ = 1.39174520027...) the iterates alternate between x₀
@@ -14,15 +15,16 @@ from scipy.optimize import brentq
 
 from valve_dolfinx._compat import PETSc
 from valve_dolfinx.exceptions import ParameterError
-from valve_dolfinx.solvers.callbacks import NewtonCycleStop
+from valve_dolfinx.solvers.callbacks import NewtonCycleStop, NewtonReversalDamping
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 
 #: the two-cycle's point, from 2x = (1 + x²) arctan x
 CYCLE = brentq(lambda x: 2.0 * x - (1.0 + x * x) * math.atan(x), 1.0, 2.0, xtol=1e-15)
 
 
-def newton_on_arctan(x0: float, monitor=None, max_it: int = 30):
-    """(converged reason, iterations, residual norms) of PETSc's Newton method on arctan."""
+def newton_on_arctan(x0: float, monitor=None, max_it: int = 30, damping=None):
+    """(converged reason, iterations, residual norms) of PETSc's Newton method on arctan;
+    ``damping`` (a :class:`NewtonReversalDamping`) as the line search's pre-check."""
     snes = PETSc.SNES().create(PETSc.COMM_SELF)
     x = PETSc.Vec().createSeq(1, comm=PETSc.COMM_SELF)
     r = x.duplicate()
@@ -48,6 +50,8 @@ def newton_on_arctan(x0: float, monitor=None, max_it: int = 30):
     snes.setMonitor(lambda s, its, fnorm: norms.append(fnorm))
     if monitor is not None:
         snes.setMonitor(monitor)
+    if damping is not None:
+        snes.setLineSearchPreCheck(lambda X, Y: damping(snes.getIterationNumber(), Y))
     x[0] = x0
     x.assemble()
     snes.solve(None, x)
@@ -92,3 +96,34 @@ def test_tolerance_zero_disables_it():
 def test_out_of_range_tolerance_names_the_parameter():
     with pytest.raises(ParameterError, match="newton_cycle_tolerance"):
         PseudoTransientParameters(newton_cycle_tolerance=-1.0)
+
+
+def test_halving_the_reversing_update_lands_the_cycle_on_the_root():
+    """x₀ → −x₀ is Newton's first update; the second, +2x₀, reverses it and is halved:
+    the iterate lands on 0, the root."""
+    damping = NewtonReversalDamping(0.5)
+    reason, its, norms = newton_on_arctan(CYCLE, damping=damping, max_it=30)
+    assert reason > 0 and its == 2 and norms[-1] < 1e-14
+    assert damping.damped == 1
+
+
+def test_damping_rescues_a_start_beyond_the_cycle():
+    """From |x₀| > x₀* plain Newton on arctan diverges; the damped one converges."""
+    _, _, plain = newton_on_arctan(1.5, max_it=4)
+    assert all(b > a for a, b in zip(plain, plain[1:]))  # |arctan x_k| grows
+    damping = NewtonReversalDamping(0.5)
+    reason, _, norms = newton_on_arctan(1.5, damping=damping, max_it=30)
+    assert reason > 0 and norms[-1] < 1e-14 and damping.damped >= 1
+
+
+def test_damping_factor_one_disables_it():
+    damping = NewtonReversalDamping(1.0)
+    reason, its, _ = newton_on_arctan(CYCLE, damping=damping, max_it=10)
+    assert reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and its == 10
+    assert damping.damped == 0
+
+
+@pytest.mark.parametrize("factor", [0.0, 1.5])
+def test_out_of_range_damping_names_the_parameter(factor):
+    with pytest.raises(ParameterError, match="newton_reversal_damping"):
+        PseudoTransientParameters(newton_reversal_damping=factor)

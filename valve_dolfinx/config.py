@@ -272,6 +272,8 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "newton_rtol": ("", "relative residual reduction that ends a step's Newton solve"),
         "newton_cycle_tolerance": ("", "relative repetition of the residual norms that ends "
                                    "a Newton solve caught in a two-cycle (0: never)"),
+        "newton_reversal_damping": ("", "factor on a Newton update that points back along "
+                                    "the previous one (1: never)"),
         "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),
         "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
         "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),

@@ -1,4 +1,4 @@
-"""PETSc callbacks: letting an interrupt through, and ending a Newton solve that cycles.
+"""PETSc callbacks: letting an interrupt through, and Newton solves that cycle.
 
 PETSc calls the solvers' Python callbacks (residual, Jacobian, post-step) from C.  An
 exception raised in one comes back from ``TS.solve`` as a ``PETSc.Error`` (code 101),
@@ -10,7 +10,9 @@ instead of recording the interrupted case as unconverged.
 A Newton solve whose iterates have settled into a two-cycle (the residual norms repeat
 every second iteration) cannot converge any more, but it runs on to ``snes_max_it``
 before the time stepper retries the step with a shorter one.  :class:`NewtonCycleStop`,
-an SNES monitor, ends it as diverged as soon as the cycle shows.
+an SNES monitor, ends it as diverged as soon as the cycle shows;
+:class:`NewtonReversalDamping`, part of the line-search pre-check, damps the update that
+would start one.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Callable
 
 from valve_dolfinx._compat import PETSc
 
-__all__ = ["InterruptGuard", "NewtonCycleStop"]
+__all__ = ["InterruptGuard", "NewtonCycleStop", "NewtonReversalDamping"]
 
 
 class InterruptGuard:
@@ -82,3 +84,40 @@ class NewtonCycleStop:
         if abs(r[3] - r[1]) <= tol * r[3] and abs(r[2] - r[0]) <= tol * r[2]:
             snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
             self.stopped += 1
+
+
+#: An update counts as reversing the previous one when the cosine of their angle is below
+#: minus this.
+REVERSAL_COSINE = 0.9
+
+
+class NewtonReversalDamping:
+    """Line-search pre-check step that damps a Newton update reversing the previous one.
+
+    Where the residual has a kink at the solution (its Jacobian jumps, as the relaxed
+    membrane energy's tangent does between taut and wrinkled) Newton's method jumps to
+    and fro across it, each update nearly the negative of the one before.  Call it with
+    the SNES iteration number and the update ``y`` of every iteration: from the second
+    iteration of a solve on, an update whose cosine with the previous one is below
+    ``-REVERSAL_COSINE`` is scaled by ``factor``, so that the iterate lands between the
+    two sides of the cycle.  On Newton's exact two-cycle of ``f(x) = arctan x``
+    (``x₀ → −x₀ → x₀``) ``factor = 1/2`` lands on the root.  The dot products are global,
+    so every rank decides alike; ``factor = 1`` disables it.
+    """
+
+    def __init__(self, factor: float) -> None:
+        self.factor = float(factor)
+        self.previous: PETSc.Vec | None = None
+        #: updates damped (reported by the solver's log)
+        self.damped = 0
+
+    def __call__(self, iteration: int, y: PETSc.Vec) -> None:
+        previous = self.previous
+        if self.factor < 1.0 and iteration >= 1 and previous is not None:
+            scale = y.norm() * previous.norm()
+            if scale > 0.0 and y.dot(previous) < -REVERSAL_COSINE * scale:
+                y.scale(self.factor)
+                self.damped += 1
+        if previous is None:
+            self.previous = previous = y.duplicate()
+        y.copy(previous)

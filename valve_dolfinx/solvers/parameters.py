@@ -54,6 +54,12 @@ class PseudoTransientParameters:
         instead of at ``newton_max_it`` (0: never); in the runs measured no solve
         that went on to converge was ever cut at 1e-3, so the result does not
         depend on it.
+    newton_reversal_damping
+        A Newton update that points back along the previous one of the same solve
+        (cosine below -0.9: the iterates jump to and fro across a kink of the
+        residual, such as the relaxed membrane energy's taut/wrinkled switch) is
+        scaled by this factor, so that the iterate lands between the two sides
+        instead of on the other one (1: never).
     max_steps
         Limit on pseudo-time steps (accepted + rejected).
     wall_time_limit_s
@@ -82,6 +88,7 @@ class PseudoTransientParameters:
     newton_max_it: int = 12
     newton_rtol: float = 0.05
     newton_cycle_tolerance: float = 1e-3
+    newton_reversal_damping: float = 0.5
     max_steps: int = 4000
     wall_time_limit_s: float = 900.0
     pressure_ramp_steps: int = 0
@@ -105,6 +112,9 @@ class PseudoTransientParameters:
         check_range("newton_rtol", self.newton_rtol, 0.0, 1.0, low_open=True)
         check_range("newton_cycle_tolerance", self.newton_cycle_tolerance, 0.0, 0.1,
                     hint="1e-3 is the default; 0 lets cycling solves run to newton_max_it")
+        check_range("newton_reversal_damping", self.newton_reversal_damping, 0.0, 1.0,
+                    low_open=True, unit="",
+                    hint="0.5 (the default) halves a reversing update; 1 leaves it as it is")
         check_range("max_steps", self.max_steps, 1, 1e7)
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
                     unit="s")

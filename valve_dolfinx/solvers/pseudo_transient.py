@@ -55,7 +55,11 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
-from valve_dolfinx.solvers.callbacks import InterruptGuard, NewtonCycleStop
+from valve_dolfinx.solvers.callbacks import (
+    InterruptGuard,
+    NewtonCycleStop,
+    NewtonReversalDamping,
+)
 from valve_dolfinx.solvers.nodal import NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
@@ -221,11 +225,13 @@ class PseudoTransientSolver:
 
     def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """Line-search pre-check: scale the Newton update so that no node moves further
-        than ``newton_motion_mm``."""
+        than ``newton_motion_mm``, then damp it if it reverses the previous one
+        (``newton_reversal_damping``)."""
         motion = self._largest_node_motion(y.array_r)
         cap = self.params.newton_motion_mm
         if motion > cap:
             y.scale(cap / motion)
+        self._reversals(self._snes.getIterationNumber(), y)
 
     def _largest_node_motion(self, owned: np.ndarray) -> float:
         local = owned.reshape(-1, 3)
@@ -282,6 +288,7 @@ class PseudoTransientSolver:
         ts.setMaxSteps(p.max_steps)
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         ts.setFromOptions()
+        self._snes = ts.getSNES()
         ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
         ts.getSNES().setMonitor(guard.wrap(self._cycles))
         ts.setPostStep(guard.wrap(self._post_step))
@@ -358,6 +365,7 @@ class PseudoTransientSolver:
         self._progress = progress
         self._interrupts = InterruptGuard()
         self._cycles = NewtonCycleStop(self.params.newton_cycle_tolerance)
+        self._reversals = NewtonReversalDamping(self.params.newton_reversal_damping)
         self._t0 = time.perf_counter()
         self._clock = {}
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
@@ -392,7 +400,9 @@ class PseudoTransientSolver:
         self.report.timings = dict(self._clock)
         ts.destroy()
         X.destroy()
-        log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton solves ended "
-                 "in a two-cycle)", "converged" if self.report.converged else "NOT converged",
-                 self.report.reason, self.report.wall_time_s, self._cycles.stopped)
+        log.info("pseudo-transient continuation: %s (%s; %.1f s; %d reversing Newton "
+                 "updates damped, %d Newton solves ended in a two-cycle)",
+                 "converged" if self.report.converged else "NOT converged",
+                 self.report.reason, self.report.wall_time_s, self._reversals.damped,
+                 self._cycles.stopped)
         return self.report
