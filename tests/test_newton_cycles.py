@@ -110,7 +110,7 @@ def test_halving_the_reversing_update_lands_the_cycle_on_the_root():
 def test_damping_rescues_a_start_beyond_the_cycle():
     """From |x₀| > x₀* plain Newton on arctan diverges; the damped one converges."""
     _, _, plain = newton_on_arctan(1.5, max_it=4)
-    assert all(b > a for a, b in zip(plain, plain[1:]))  # |arctan x_k| grows
+    assert all(b > a for a, b in zip(plain[:-1], plain[1:], strict=True))  # |arctan x_k| grows
     damping = NewtonReversalDamping(0.5)
     reason, _, norms = newton_on_arctan(1.5, damping=damping, max_it=30)
     assert reason > 0 and norms[-1] < 1e-14 and damping.damped >= 1
