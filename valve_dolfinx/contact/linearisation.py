@@ -33,9 +33,9 @@ adds the other two:
 
 All terms are exact first derivatives (checked against finite differences in
 ``tests/test_contact_model.py``).  They are written as loops over the contacts, compiled
-by Numba (:mod:`~valve_dolfinx.contact.kernels`): a contact's terms are a few dozen
-3-vectors, and as NumPy expressions over all contacts they cost ten times as much in
-temporaries as in arithmetic.
+by Numba like those of :mod:`~valve_dolfinx.contact.kernels`: a contact's terms are a few
+dozen 3-vectors, and as NumPy expressions over all contacts most of their cost would be
+temporaries.
 The dependence of the driving force on the positions is not here: the hook
 freezes it within a step (see :mod:`valve_dolfinx.solvers.contact_hook`).
 """
