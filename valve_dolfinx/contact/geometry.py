@@ -100,8 +100,10 @@ def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: n
 
 
 @numba.njit(cache=True)
-def _dot3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
-    """``u·v`` summed as ``(u₀v₀ + u₂v₂) + u₁v₁``, as ``np.einsum("ij,ij->i")`` does."""
+def dot3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
+    """``u·v`` of 3-vectors for compiled loops, summed as ``(u₀v₀ + u₂v₂) + u₁v₁``: the
+    order of ``np.einsum("ij,ij->i")`` (:func:`barycentric_gradients`, the narrow phase),
+    so that a triangle's geometry has the same bits in compiled and NumPy code."""
     return (u0 * v0 + u2 * v2) + u1 * v1
 
 
@@ -113,12 +115,12 @@ def _closest_points(p, a, b, c, q, bary):  # pragma: no cover
         ap0, ap1, ap2 = p[i, 0] - a[i, 0], p[i, 1] - a[i, 1], p[i, 2] - a[i, 2]
         bp0, bp1, bp2 = p[i, 0] - b[i, 0], p[i, 1] - b[i, 1], p[i, 2] - b[i, 2]
         cp0, cp1, cp2 = p[i, 0] - c[i, 0], p[i, 1] - c[i, 1], p[i, 2] - c[i, 2]
-        d1 = _dot3(ab0, ab1, ab2, ap0, ap1, ap2)
-        d2 = _dot3(ac0, ac1, ac2, ap0, ap1, ap2)
-        d3 = _dot3(ab0, ab1, ab2, bp0, bp1, bp2)
-        d4 = _dot3(ac0, ac1, ac2, bp0, bp1, bp2)
-        d5 = _dot3(ab0, ab1, ab2, cp0, cp1, cp2)
-        d6 = _dot3(ac0, ac1, ac2, cp0, cp1, cp2)
+        d1 = dot3(ab0, ab1, ab2, ap0, ap1, ap2)
+        d2 = dot3(ac0, ac1, ac2, ap0, ap1, ap2)
+        d3 = dot3(ab0, ab1, ab2, bp0, bp1, bp2)
+        d4 = dot3(ac0, ac1, ac2, bp0, bp1, bp2)
+        d5 = dot3(ab0, ab1, ab2, cp0, cp1, cp2)
+        d6 = dot3(ac0, ac1, ac2, cp0, cp1, cp2)
         vc = d1 * d4 - d3 * d2
         vb = d5 * d2 - d1 * d6
         va = d3 * d6 - d5 * d4

@@ -47,19 +47,13 @@ import math
 import numba
 import numpy as np
 
+from valve_dolfinx.contact.geometry import dot3
+
 __all__ = ["direction_derivatives"]
 
 #: Barycentric coordinates below this count as zero when telling an edge contact
 #: (two vertices carry the contact point) from a vertex contact (one does).
 _ON_FEATURE = 1e-12
-
-
-@numba.njit(cache=True)
-def _dot(a, b):  # pragma: no cover
-    """``a·b`` of 3-vectors summed as ``(a₀b₀ + a₂b₂) + a₁b₁``, the order of NumPy's
-    ``einsum("ij,ij->i")`` in :func:`~valve_dolfinx.contact.geometry.barycentric_gradients`
-    and the narrow phase, so that the same triangle gets the same bits here and there."""
-    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
 
 
 @numba.njit(cache=True)
@@ -98,14 +92,16 @@ def _face_terms(x, p, tri, lam, normal, dn, dlam, work):  # pragma: no cover
                 dnhat[k, i, s] = (P0 * K[0, s] + P1 * K[1, s] + P2 * K[2, s]) / length
                 dn[1 + k, i, s] = side * dnhat[k, i, s]
     # in-plane gradients g_j of the barycentric coordinates (geometry.barycentric_gradients)
-    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    g11 = dot3(e1[0], e1[1], e1[2], e1[0], e1[1], e1[2])
+    g12 = dot3(e1[0], e1[1], e1[2], e2[0], e2[1], e2[2])
+    g22 = dot3(e2[0], e2[1], e2[2], e2[0], e2[1], e2[2])
     det = g11 * g22 - g12 * g12
     grad = work[48:57].reshape((3, 3))
     for i in range(3):
         grad[1, i] = (g22 * e1[i] - g12 * e2[i]) / det
         grad[2, i] = (g11 * e2[i] - g12 * e1[i]) / det
         grad[0, i] = -grad[1, i] - grad[2, i]
-    d0 = _dot(nhat, r)
+    d0 = dot3(nhat[0], nhat[1], nhat[2], r[0], r[1], r[2])
     # dλ_j = g_j·(dx_p - Σ_k λ_k dx_k - d₀ dn̂)
     for j in range(3):
         for s in range(3):
