@@ -190,7 +190,10 @@ def test_disjoint_node_sets_sum_to_the_all_nodes_result():
                              shape=(n, n)).tocsr()
 
     diff = assembled(summed) - assembled(whole)
-    assert abs(diff).max() <= 1e-12 * abs(assembled(whole)).max()
+    # the sums differ in order only: each entry cancels terms up to ~2000 times larger
+    # than the largest entry (1.9e5 against 103 mN/mm here), so its round-off is ~1e-12
+    # of the largest entry
+    assert abs(diff).max() <= 1e-11 * abs(assembled(whole)).max()
 
 
 def test_jacobian_after_a_forces_only_call_equals_a_fresh_one():

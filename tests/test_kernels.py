@@ -7,8 +7,11 @@ own, against loops written from the definitions."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from valve_dolfinx.contact.kernels import near_pairs, sum_blocks
+from valve_dolfinx.contact.geometry import triangle_frames
+from valve_dolfinx.contact.kernels import group_blocks, near_pairs, row_block_sums, sum_blocks
+from valve_dolfinx.contact.linearisation import turning_load
 
 
 def test_block_sums_per_pair_in_input_order_sorted_and_without_zero_sums():
@@ -29,6 +32,109 @@ def test_block_sums_per_pair_in_input_order_sorted_and_without_zero_sums():
     assert list(zip(out_rows, out_cols, strict=True)) == sorted(expected)
     for r, c, s in zip(out_rows, out_cols, summed, strict=True):
         assert np.array_equal(s, expected[(r, c)])  # bit for bit
+
+
+def _summed_in_order(rows, cols, blocks):
+    """{(row, col): sum of its blocks, left to right}, the all-zero sums left out."""
+    expected = {}
+    for r, c, b in zip(rows, cols, blocks, strict=True):
+        expected[(r, c)] = expected.get((r, c), 0.0) + b
+    return {key: value for key, value in expected.items() if np.any(value != 0.0)}
+
+
+@pytest.mark.parametrize("geometric", [True, False])
+def test_row_block_sums_are_the_row_blocks_from_their_formula_summed_in_order(geometric):
+    rng = np.random.default_rng(11)
+    count, m, n = 60, 4, 15
+    ids = np.stack([rng.choice(n, m, replace=False) for _ in range(count)])
+    B = np.concatenate([np.ones((count, 1)), -rng.uniform(0, 1, (count, m - 1))], axis=1)
+    normal = rng.normal(size=(count, 3))
+    own = rng.normal(size=(count, m, 3))
+    magnitude = rng.uniform(0, 2, count)
+    dn, dlam = rng.normal(size=(count, m, 3, 3)), rng.normal(size=(count, m - 1, m, 3))
+    live = np.flatnonzero(rng.uniform(size=count) < 0.8)
+    extra_rows, extra_cols = rng.integers(0, n, 50), rng.integers(0, n, 50)
+    extra = rng.normal(size=(50, 3, 3))
+    rows, cols, blocks = row_block_sums(live, ids, B, normal, own, magnitude, geometric, dn,
+                                        dlam, extra_rows, extra_cols, extra, n)
+    # the blocks one by one from the documented formula, then the extra ones
+    ref_rows, ref_cols, ref_blocks = [], [], []
+    for i in live:
+        for r in range(m):
+            for c in range(m):
+                if geometric:
+                    T = B[i, r] * own[i, c] - (magnitude[i] * dlam[i, r - 1, c] if r else 0.0)
+                    block = np.outer(normal[i], T) + (B[i, r] * magnitude[i]) * dn[i, c]
+                else:
+                    block = np.outer(B[i, r] * normal[i], own[i, c])
+                ref_rows.append(ids[i, r])
+                ref_cols.append(ids[i, c])
+                ref_blocks.append(block)
+    expected = _summed_in_order([*ref_rows, *extra_rows], [*ref_cols, *extra_cols],
+                                [*ref_blocks, *extra])
+    assert list(zip(rows, cols, strict=True)) == sorted(expected)
+    for r, c, s in zip(rows, cols, blocks, strict=True):
+        assert np.allclose(s, expected[(r, c)], rtol=1e-14, atol=1e-13)
+
+
+def test_group_blocks_are_the_pairwise_group_sums():
+    rng = np.random.default_rng(2)
+    count, m, n = 40, 4, 12
+    group = rng.integers(0, 6, count)
+    ids = np.stack([rng.choice(n, m, replace=False) for _ in range(count)])
+    Bn, U, V = (rng.normal(size=(count, m, 3)) for _ in range(3))
+    alpha, beta = rng.normal(size=count), rng.normal(size=count)
+    alpha[:3] = beta[:3] = 0.0  # rows that push nothing
+    rows, cols, blocks = group_blocks(group, ids, Bn, alpha, beta, U, V, n)
+    expected = {}
+    for i in range(count):
+        for k in range(count):
+            if group[i] != group[k]:
+                continue
+            for r in range(m):
+                for c in range(m):
+                    key = (group[i], ids[i, r], ids[k, c])
+                    block = np.outer(alpha[i] * Bn[i, r], U[k, c]) \
+                        + np.outer(beta[i] * Bn[i, r], V[k, c])
+                    expected[key] = expected.get(key, 0.0) + block
+    got = {}  # the blocks come per group: sum them per node pair
+    for r, c, b in zip(rows, cols, blocks, strict=True):
+        got[(r, c)] = got.get((r, c), 0.0) + b
+    summed = {}
+    for (_, r, c), b in expected.items():
+        summed[(r, c)] = summed.get((r, c), 0.0) + b
+    assert set(got) <= set(summed)
+    for key, value in summed.items():
+        assert np.allclose(got.get(key, 0.0), value, rtol=1e-12, atol=1e-12)
+
+
+def test_turning_load_is_minus_the_slope_times_the_transposed_direction_derivative():
+    rng = np.random.default_rng(4)
+    dn, load, slope = rng.normal(size=(20, 4, 3, 3)), rng.normal(size=(20, 3)), rng.normal(size=20)
+    expected = np.array([[-slope[a] * dn[a, m].T @ load[a] for m in range(4)]
+                         for a in range(20)])
+    assert np.allclose(turning_load(dn, load, slope), expected, rtol=1e-14, atol=1e-14)
+
+
+def test_triangle_frames_are_the_unit_normal_the_dual_edge_basis_and_the_altitudes():
+    rng = np.random.default_rng(8)
+    a, b, c = (rng.normal(size=(3, 25)) for _ in range(3))
+    normal, grad, altitudes = triangle_frames(a, b, c)
+    for t in range(25):
+        e1, e2 = b[:, t] - a[:, t], c[:, t] - a[:, t]
+        n = np.cross(e1, e2)
+        assert np.allclose(normal[:, t], n / np.linalg.norm(n), atol=1e-14)
+        g = grad[:, :, t]
+        # g_j·e_k = δ_jk (j, k = 1, 2), g_j ⊥ n, g_0 = -g_1 - g_2
+        assert np.allclose([[g[1] @ e1, g[1] @ e2], [g[2] @ e1, g[2] @ e2]], np.eye(2),
+                           atol=1e-10)
+        assert np.allclose(g @ n, 0.0, atol=1e-10)
+        assert np.allclose(g[0], -g[1] - g[2], atol=1e-14)
+        # altitude at vertex j: twice the area over the opposite edge's length
+        area2 = np.linalg.norm(n)
+        opposite = [c[:, t] - b[:, t], e2, e1]
+        assert np.allclose(altitudes[:, t], area2 / np.linalg.norm(opposite, axis=1),
+                           rtol=1e-10)
 
 
 def test_near_pairs_keeps_exactly_the_pairs_the_definitions_keep():

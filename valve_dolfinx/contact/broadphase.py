@@ -12,8 +12,8 @@ against the nodes with a uniform grid built from NumPy sorts and prefix sums:
 * a box covers a few columns, and in each of them the nodes between its two
   faces across the sweep axis form one contiguous run of the sorted nodes,
   read from the table in O(1) (sweep and prune within a column);
-* the runs are expanded into pairs and filtered with the exact box test (a
-  loop compiled by Numba).
+* the runs are walked and their nodes filtered with the exact box test, box by
+  box (a loop compiled by Numba).
 
 The work is ``O(S log S)`` for the sort of the ``S`` queried nodes, linear in
 the number of grid cells (bounded by a multiple of the nodes and boxes), of
@@ -25,6 +25,7 @@ temporaries cache-sized.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -159,47 +160,45 @@ class CellGrid:
             & (level >= 0) & (level < self.shape[2])
         return (i * self.shape[1] + j) * self.shape[2] + level, inside
 
-    def box_runs(self, lo: np.ndarray, hi: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For every (box, covered column): the box id and the first and last key to match."""
-        i0, j0, level_lo = self._index(lo)
-        i1, j1, level_hi = self._index(hi)
-        nj = j1 - j0 + 1
-        box, rank = _segment_offsets((i1 - i0 + 1) * nj)
-        nj_box = nj[box]
-        column = (i0[box] + rank // nj_box) * self.shape[1] + j0[box] + rank % nj_box
-        base = column * self.shape[2]
-        return box, base + level_lo[box], base + level_hi[box]
-
 
 @numba.njit(cache=True)
-def _run_pairs(start, stop, box, sorted_nodes, sorted_xt, lo, hi):  # pragma: no cover
-    """The nodes ``sorted_nodes[start[j]:stop[j]]`` of each run ``j`` inside the closed box
-    ``box[j]`` (corners ``lo``, ``hi`` ``(3, M)``): ``(node, box)`` pairs, run by run."""
+def _box_pairs(lo, hi, origin, cell, step, shape, axes, first, sorted_nodes,
+               sorted_xt):  # pragma: no cover
+    """The indexed nodes inside each closed box ``[lo[:, b], hi[:, b]]`` (``(3, M)``):
+    ``(node, box)`` pairs, box by box, and within a box column by column (the
+    :class:`CellGrid` ``cell``/``step``/``shape``/``axes`` at ``origin``), each column's
+    run of nodes between the box's two levels tested against the box."""
+    ax, bx, cx = axes[0], axes[1], axes[2]
     total = 0
-    for j in range(len(start)):
-        total += stop[j] - start[j]
-    node = np.empty(total, dtype=np.int64)
-    owner = np.empty(total, dtype=np.int64)
-    kept = 0
-    for j in range(len(start)):
-        b = box[j]
-        for position in range(start[j], stop[j]):
-            inside = True
-            for axis in range(3):
-                coordinate = sorted_xt[axis, position]
-                inside = inside and lo[axis, b] <= coordinate <= hi[axis, b]
-            if inside:
-                node[kept], owner[kept] = sorted_nodes[position], b
-                kept += 1
+    for phase in range(2):  # 0: count the run lengths, 1: test and write the pairs
+        if phase == 1:
+            node = np.empty(total, dtype=np.int64)
+            owner = np.empty(total, dtype=np.int64)
+        kept = 0
+        for b in range(lo.shape[1]):
+            # the cell index of a corner, rounded as CellGrid._index rounds
+            i0 = np.int64(math.floor((lo[ax, b] - origin[ax]) / cell))
+            i1 = np.int64(math.floor((hi[ax, b] - origin[ax]) / cell))
+            j0 = np.int64(math.floor((lo[bx, b] - origin[bx]) / cell))
+            j1 = np.int64(math.floor((hi[bx, b] - origin[bx]) / cell))
+            level_lo = np.int64(math.floor((lo[cx, b] - origin[cx]) / step))
+            level_hi = np.int64(math.floor((hi[cx, b] - origin[cx]) / step))
+            for i in range(i0, i1 + 1):
+                for j in range(j0, j1 + 1):
+                    base = (i * shape[1] + j) * shape[2]
+                    start, stop = first[base + level_lo], first[base + level_hi + 1]
+                    if phase == 0:
+                        total += stop - start
+                        continue
+                    for position in range(start, stop):
+                        inside = True
+                        for axis in range(3):
+                            coordinate = sorted_xt[axis, position]
+                            inside = inside and lo[axis, b] <= coordinate <= hi[axis, b]
+                        if inside:
+                            node[kept], owner[kept] = sorted_nodes[position], b
+                            kept += 1
     return node[:kept], owner[:kept]
-
-
-def _segment_offsets(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For segments of the given lengths: owner segment and rank within it of each item."""
-    owner = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
-    rank = np.arange(len(owner), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
-    return owner, rank
 
 
 class CellIndex:
@@ -241,9 +240,11 @@ class CellIndex:
         empty = np.empty(0, dtype=np.int64)
         if self.grid is None or len(self.sorted_nodes) == 0 or lo.shape[1] == 0:
             return empty, empty.copy()
-        box, key_lo, key_hi = self.grid.box_runs(lo, hi)
-        return _run_pairs(self.first[key_lo], self.first[key_hi + 1], box, self.sorted_nodes,
-                          self.sorted_xt, np.ascontiguousarray(lo), np.ascontiguousarray(hi))
+        grid = self.grid
+        return _box_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), grid.origin,
+                          grid.cell, grid.step, np.array(grid.shape, dtype=np.int64),
+                          np.array(grid.axes, dtype=np.int64), self.first, self.sorted_nodes,
+                          self.sorted_xt)
 
     def blocks(self, lo: np.ndarray, hi: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """:meth:`box_pairs` for consecutive blocks of boxes; box ids are global.

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -10,6 +12,7 @@ __all__ = [
     "triangle_normals",
     "plane_projection",
     "barycentric_gradients",
+    "triangle_frames",
 ]
 
 
@@ -56,19 +59,53 @@ def barycentric_gradients(a: np.ndarray, b: np.ndarray, c: np.ndarray
     :math:`n\cdot(p - a)`, i.e. :func:`plane_projection` with the per-triangle
     work done once, which pays off when each triangle is tested against many
     points.  ``gradients[:, j]`` is :math:`g_j`.  A zero-area triangle has
-    non-finite gradients, so no point ever projects inside it.
+    non-finite gradients, so no point ever projects inside it.  The work is
+    :func:`triangle_frames`'.
     """
-    e1, e2 = b - a, c - a
-    n, _ = triangle_normals(a, b, c)
-    g11 = np.einsum("ij,ij->i", e1, e1)
-    g12 = np.einsum("ij,ij->i", e1, e2)
-    g22 = np.einsum("ij,ij->i", e2, e2)
-    det = g11 * g22 - g12 * g12
-    grad = np.empty(e1.shape[:-1] + (3, 3))
-    grad[:, 1] = (g22[:, None] * e1 - g12[:, None] * e2) / det[:, None]
-    grad[:, 2] = (g11[:, None] * e2 - g12[:, None] * e1) / det[:, None]
-    grad[:, 0] = -grad[:, 1] - grad[:, 2]
-    return n, grad
+    normal, grad, _ = triangle_frames(*(np.ascontiguousarray(np.asarray(v, dtype=float).T)
+                                        for v in (a, b, c)))
+    return normal.T, np.moveaxis(grad, 2, 0)
+
+
+def triangle_frames(a: np.ndarray, b: np.ndarray, c: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit normals ``(3, M)``, barycentric gradients ``(3, 3, M)`` (``[j, axis]``, as in
+    :func:`barycentric_gradients`) and altitudes ``1/|g_j|`` ``(3, M)`` of triangles
+    whose vertices are given by axis, ``(3, M)`` each: a loop compiled by Numba with the
+    floating-point operations of the NumPy formulas (:func:`triangle_normals`,
+    ``np.linalg.norm``, :func:`dot3`), so the bits are theirs."""
+    count = a.shape[1]
+    normal, grad, altitudes = np.empty((3, count)), np.empty((3, 3, count)), np.empty((3, count))
+    _triangle_frames(a, b, c, normal, grad, altitudes)
+    return normal, grad, altitudes
+
+
+@numba.njit(cache=True)
+def _triangle_frames(a, b, c, normal, grad, altitudes):  # pragma: no cover
+    for t in range(a.shape[1]):
+        e10, e11, e12 = b[0, t] - a[0, t], b[1, t] - a[1, t], b[2, t] - a[2, t]
+        e20, e21, e22 = c[0, t] - a[0, t], c[1, t] - a[1, t], c[2, t] - a[2, t]
+        N0 = e11 * e22 - e12 * e21
+        N1 = e12 * e20 - e10 * e22
+        N2 = e10 * e21 - e11 * e20
+        length = max(math.sqrt((N0 * N0 + N1 * N1) + N2 * N2), 1e-300)
+        normal[0, t], normal[1, t], normal[2, t] = N0 / length, N1 / length, N2 / length
+        g11 = dot3(e10, e11, e12, e10, e11, e12)
+        g12 = dot3(e10, e11, e12, e20, e21, e22)
+        g22 = dot3(e20, e21, e22, e20, e21, e22)
+        det = g11 * g22 - g12 * g12
+        for i in range(3):
+            u = e10 if i == 0 else (e11 if i == 1 else e12)
+            v = e20 if i == 0 else (e21 if i == 1 else e22)
+            g1 = (g22 * u - g12 * v) / det
+            g2 = (g11 * v - g12 * u) / det
+            grad[1, i, t] = g1
+            grad[2, i, t] = g2
+            grad[0, i, t] = -g1 - g2
+        for j in range(3):
+            altitudes[j, t] = 1.0 / math.sqrt((grad[j, 0, t] * grad[j, 0, t]
+                                               + grad[j, 1, t] * grad[j, 1, t])
+                                              + grad[j, 2, t] * grad[j, 2, t])
 
 
 def _barycentric(q: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

@@ -1,13 +1,13 @@
 """Compiled loops of the contact search and Jacobian: the narrow phase's cheap pair tests,
-the Jacobian's 3×3 blocks (per row and per group of blended rows) and their sums per node
-pair.
+the gradients the Jacobian's 3×3 blocks are made of, the blocks themselves (per row and per
+group of blended rows) and their sums per node pair.
 
 One contact evaluation of the closed valve at the default mesh tests some 20 000
-(node, triangle) pairs and builds some 60 000 blocks, each a few dozen flops; as NumPy
-expressions over all of them the work would go into temporaries the size of the result.
-These loops, compiled by Numba (cached on disk after the first call), write each result
-once.  Their sums run in the order written, so a result is the same to the last bit
-from run to run.
+(node, triangle) pairs and makes some 60 000 blocks, each a few dozen flops, that sum to
+some 7 000 distinct node pairs; as NumPy expressions over all of them the work would go
+into temporaries the size of the result.  These loops, compiled by Numba (cached on disk
+after the first call), sum each block into its node pair as they compute it.  Their sums
+run in the order written, so a result is the same to the last bit from run to run.
 """
 
 from __future__ import annotations
@@ -15,34 +15,90 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["group_blocks", "near_pairs", "row_blocks", "sum_blocks"]
+__all__ = ["group_blocks", "near_pairs", "pair_slots", "row_block_sums", "row_gradients",
+           "sum_blocks"]
 
 
 @numba.njit(cache=True)
-def row_blocks(ids, B, normal, own, magnitude, geometric, dn, dlam, rows, cols,
-               blocks):  # pragma: no cover
-    r"""Blocks of each row over its own nodes: ``(r, m) = n ⊗ T_rm + B_r φ ∂n/∂x_m``.
+def row_gradients(B, normal, grad_logp, p, dfdd, grad_f, turning, w, G, f, c, blended, depth,
+                  scale, multi):  # pragma: no cover
+    r"""Per row and node ``m`` of ``[node, support]``, the gradients its blocks are made of
+    (:meth:`~valve_dolfinx.contact.results.ContactRows.result`), each ``(A, m, 3)``:
 
-    ``T_rm = B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m`` (``φ`` the row's force magnitude,
-    ``dn`` ``(A, m, 3, 3)``, ``dlam`` ``(A, m-1, m, 3)``); without the geometric
-    terms (``geometric`` False, ``dn`` and ``dlam`` unused) ``(B_r n) ⊗ own_m``.
-    Writes ``rows``, ``cols`` ``(A·m·m,)`` and ``blocks`` ``(A·m·m, 3, 3)``, row by
-    row, then row node, then column node.
+    * ``own``: ``w G ∇f + w f c ∇p``, with blending ``+ G f w(1-w) ∇L``, and on a row
+      of a group of several (``multi``) ``+ (G f w² ∇L - w f c ∇p)`` (the ``i = k``
+      term of the group sum taken out),
+    * ``∇d = B ⊗ n``, ``w ∇L`` and ``c ∇p`` (the group coupling's factors),
+
+    with ``∇p = p ∇log p``, ``∇f = f' ∇d`` (``+ grad_f`` if ``turning``) and
+    ``∇L = ∇log p (1 + p·depth) - (p/scale) ∇d``.
     """
-    count, m = ids.shape
-    k = 0
+    count, m = B.shape
+    own = np.empty((count, m, 3))
+    grad_d = np.empty((count, m, 3))
+    U = np.zeros((count, m, 3))
+    V = np.empty((count, m, 3))
     for i in range(count):
+        wG = w[i] * G[i]
+        wfc = (w[i] * f[i]) * c[i]
+        Gfw = (G[i] * f[i]) * w[i]
+        spread = Gfw * (1.0 - w[i])
+        self_term = Gfw * w[i]
+        lift = 1.0 + p[i] * depth[i]
+        pull = p[i] / scale
+        for r in range(m):
+            for s in range(3):
+                gd = B[i, r] * normal[i, s]
+                gl = grad_logp[i, r, s]
+                gp = p[i] * gl
+                gf = dfdd[i] * gd
+                if turning:
+                    gf = gf + grad_f[i, r, s]
+                value = wG * gf + wfc * gp
+                if blended:
+                    gL = gl * lift - pull * gd
+                    value = value + spread * gL
+                    if multi[i]:
+                        value = value + (self_term * gL - wfc * gp)
+                    U[i, r, s] = w[i] * gL
+                own[i, r, s] = value
+                grad_d[i, r, s] = gd
+                V[i, r, s] = c[i] * gp
+    return own, grad_d, U, V
+
+
+@numba.njit(cache=True)
+def row_block_sums(live, ids, B, normal, own, magnitude, geometric, dn, dlam, extra_rows,
+                   extra_cols, extra_blocks, num_nodes):  # pragma: no cover
+    r"""The blocks of the rows ``live`` over their own nodes and the ``extra`` blocks,
+    summed per (row node, column node) pair: :func:`sum_blocks` of the row blocks
+    followed by the extra ones, without writing the row blocks out one by one.
+
+    Row ``i``'s block ``(r, m)`` is ``n ⊗ T_rm + B_r φ ∂n/∂x_m`` with
+    ``T_rm = B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m`` (``φ`` the row's force magnitude,
+    ``dn`` ``(A, m, 3, 3)``, ``dlam`` ``(A, m-1, m, 3)``); without the geometric terms
+    (``geometric`` False, ``dn`` and ``dlam`` unused) ``(B_r n) ⊗ own_m``.  The blocks
+    enter the sums row by row, then row node, then column node, then the extra blocks
+    in their order.  The valve's rows repeat each node pair six to eight times (a
+    node's blended triangles share their corners): summing as they are computed reads
+    and writes a tenth of the memory of building all blocks and summing them after.
+    """
+    m = ids.shape[1]
+    own_count = len(live) * m * m
+    slot, out_rows, out_cols = _row_pair_slots(live, ids, extra_rows, extra_cols, num_nodes)
+    summed = np.zeros((len(out_rows), 3, 3))
+    k = 0
+    for i in live:
         phi = magnitude[i]
         for r in range(m):
             Br = B[i, r]
             Bphi = Br * phi
             for c in range(m):
-                rows[k] = ids[i, r]
-                cols[k] = ids[i, c]
+                s = slot[k]
                 if not geometric:
                     for a in range(3):
                         for b in range(3):
-                            blocks[k, a, b] = (Br * normal[i, a]) * own[i, c, b]
+                            summed[s, a, b] += (Br * normal[i, a]) * own[i, c, b]
                     k += 1
                     continue
                 for b in range(3):
@@ -50,8 +106,14 @@ def row_blocks(ids, B, normal, own, magnitude, geometric, dn, dlam, rows, cols,
                     if r >= 1:
                         t = t - phi * dlam[i, r - 1, c, b]
                     for a in range(3):
-                        blocks[k, a, b] = normal[i, a] * t + Bphi * dn[i, c, a, b]
+                        summed[s, a, b] += normal[i, a] * t + Bphi * dn[i, c, a, b]
                 k += 1
+    for j in range(len(extra_rows)):
+        s = slot[own_count + j]
+        for a in range(3):
+            for b in range(3):
+                summed[s, a, b] += extra_blocks[j, a, b]
+    return _nonzero_blocks(out_rows, out_cols, summed)
 
 
 @numba.njit(cache=True)
@@ -78,7 +140,30 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
     for i in range(count):
         for r in range(m):
             key[i * m + r] = group[i] * num_nodes + ids[i, r]
-    order = np.argsort(key, kind="mergesort")
+    # entries in increasing key order: a counting sort by group, then each group's few
+    # entries by node (insertion sort)
+    num_groups = 0
+    for i in range(count):
+        num_groups = max(num_groups, group[i] + 1)
+    start = np.zeros(num_groups + 1, dtype=np.int64)
+    for i in range(count):
+        start[group[i] + 1] += m
+    for g in range(num_groups):
+        start[g + 1] += start[g]
+    order = np.empty(flat, dtype=np.int64)
+    fill = start[:-1].copy()
+    for j in range(flat):
+        g = group[j // m]
+        order[fill[g]] = j
+        fill[g] += 1
+    for g in range(num_groups):
+        for a in range(start[g] + 1, start[g + 1]):
+            moved = order[a]
+            b = a - 1
+            while b >= start[g] and key[order[b]] > key[moved]:
+                order[b + 1] = order[b]
+                b -= 1
+            order[b + 1] = moved
     # the distinct (group, node) entries, in increasing key order
     entry = np.empty(flat, dtype=np.int64)
     entry_key = np.empty(flat, dtype=np.int64)
@@ -136,11 +221,12 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
 
 
 @numba.njit(cache=True)
-def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
-    """The blocks summed per (row, column) pair, sorted by row then column, zero sums left out.
+def pair_slots(rows, cols, num_nodes):  # pragma: no cover
+    """The distinct (row, column) pairs of ``rows``, ``cols``, sorted by row then column,
+    and the slot of every input pair among them: ``(slot (K,), pair rows, pair cols)``.
 
-    Each pair's sum runs over its blocks in their order in the input.  Linear in the
-    number of blocks: a counting sort by row, then a slot per column node within a row.
+    Linear in the number of pairs: a counting sort by row, then a slot per column node
+    within a row (first seen first), then the row's few columns put in order.
     """
     count = len(rows)
     start = np.zeros(num_nodes + 1, dtype=np.int64)
@@ -153,52 +239,164 @@ def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
     for k in range(count):
         order[fill[rows[k]]] = k
         fill[rows[k]] += 1
-    slot = np.full(num_nodes, -1, dtype=np.int64)
+    seen = np.full(num_nodes, -1, dtype=np.int64)
+    slot = np.empty(count, dtype=np.int64)
     out_rows = np.empty(count, dtype=np.int64)
     out_cols = np.empty(count, dtype=np.int64)
-    summed = np.empty((count, 3, 3))
+    rank = np.empty(count, dtype=np.int64)  # first-seen position -> sorted position
     total = 0
     for row in range(num_nodes):
         first = total
         for j in range(start[row], start[row + 1]):
             k = order[j]
             col = cols[k]
-            s = slot[col]
+            s = seen[col]
             if s < 0:
                 s = total
-                slot[col] = s
+                seen[col] = s
                 out_cols[s] = col
-                summed[s] = 0.0
                 total += 1
-            for p in range(3):
-                for q in range(3):
-                    summed[s, p, q] += blocks[k, p, q]
+            slot[k] = s
         for s in range(first, total):
-            slot[out_cols[s]] = -1
+            seen[out_cols[s]] = -1
             out_rows[s] = row
+            rank[s] = s
         # columns in increasing order within the row (insertion sort: a row has few)
         for s in range(first + 1, total):
-            col = out_cols[s]
-            block = summed[s].copy()
+            col, moved = out_cols[s], rank[s]
             j = s - 1
             while j >= first and out_cols[j] > col:
-                out_cols[j + 1] = out_cols[j]
-                summed[j + 1] = summed[j]
+                out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
                 j -= 1
-            out_cols[j + 1] = col
-            summed[j + 1] = block
-    # leave out the all-zero sums, in place
+            out_cols[j + 1], rank[j + 1] = col, moved
+        for s in range(first, total):  # rank[s]: the first-seen slot now at s
+            seen[rank[s] - first] = s
+        for j in range(start[row], start[row + 1]):
+            k = order[j]
+            slot[k] = seen[slot[k] - first]
+        for s in range(first, total):
+            seen[s - first] = -1
+    return slot, out_rows[:total], out_cols[:total]
+
+
+@numba.njit(cache=True)
+def _row_pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cover
+    """:func:`pair_slots` of the blocks of :func:`row_block_sums` (row ``i``'s block
+    ``(r, c)`` at ``(ids[i, r], ids[i, c])``, then the extra blocks), sorting the row
+    nodes ``(i, r)`` rather than every block: a quarter of the work and memory."""
+    m = ids.shape[1]
+    own_rows = len(live) * m
+    own_count = own_rows * m
+    instances = own_rows + len(extra_rows)
+    start = np.zeros(num_nodes + 1, dtype=np.int64)
+    for li in range(len(live)):
+        for r in range(m):
+            start[ids[live[li], r] + 1] += 1
+    for j in range(len(extra_rows)):
+        start[extra_rows[j] + 1] += 1
+    for n in range(num_nodes):
+        start[n + 1] += start[n]
+    order = np.empty(instances, dtype=np.int32)  # row instances by row node, in input order
+    fill = start[:-1].copy()
+    for li in range(len(live)):
+        for r in range(m):
+            row = ids[live[li], r]
+            order[fill[row]] = li * m + r
+            fill[row] += 1
+    for j in range(len(extra_rows)):
+        order[fill[extra_rows[j]]] = own_rows + j
+        fill[extra_rows[j]] += 1
+    seen = np.full(num_nodes, -1, dtype=np.int64)
+    slot = np.empty(own_count + len(extra_rows), dtype=np.int32)
+    out_rows = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    out_cols = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    rank = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    total = 0
+    for row in range(num_nodes):
+        first = total
+        for pass_ in range(2):  # 0: first-seen slots, 1: the sorted ones
+            for a in range(start[row], start[row + 1]):
+                instance = order[a]
+                if instance < own_rows:
+                    i = live[instance // m]
+                    for c in range(m):
+                        k = instance * m + c
+                        if pass_ == 1:
+                            slot[k] = seen[slot[k] - first]
+                            continue
+                        col = ids[i, c]
+                        s = seen[col]
+                        if s < 0:
+                            s = total
+                            seen[col] = s
+                            out_cols[s] = col
+                            total += 1
+                        slot[k] = s
+                else:
+                    k = own_count + instance - own_rows
+                    if pass_ == 1:
+                        slot[k] = seen[slot[k] - first]
+                        continue
+                    col = extra_cols[instance - own_rows]
+                    s = seen[col]
+                    if s < 0:
+                        s = total
+                        seen[col] = s
+                        out_cols[s] = col
+                        total += 1
+                    slot[k] = s
+            if pass_ == 1:
+                for s in range(first, total):
+                    seen[s - first] = -1
+                break
+            for s in range(first, total):
+                seen[out_cols[s]] = -1
+                out_rows[s] = row
+                rank[s] = s
+            # columns in increasing order within the row (insertion sort: a row has few)
+            for s in range(first + 1, total):
+                col, moved = out_cols[s], rank[s]
+                j = s - 1
+                while j >= first and out_cols[j] > col:
+                    out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
+                    j -= 1
+                out_cols[j + 1], rank[j + 1] = col, moved
+            for s in range(first, total):  # rank[s]: the first-seen slot now at s
+                seen[rank[s] - first] = s
+    return slot, out_rows[:total], out_cols[:total]
+
+
+@numba.njit(cache=True)
+def _nonzero_blocks(rows, cols, blocks):  # pragma: no cover
+    """The (row, col, block) triples whose block is not all zero, in order (in place)."""
     kept = 0
-    for s in range(total):
+    for s in range(len(rows)):
         nonzero = False
         for p in range(3):
             for q in range(3):
-                nonzero = nonzero or summed[s, p, q] != 0.0
+                nonzero = nonzero or blocks[s, p, q] != 0.0
         if nonzero:
-            out_rows[kept], out_cols[kept] = out_rows[s], out_cols[s]
-            summed[kept] = summed[s]
+            rows[kept], cols[kept] = rows[s], cols[s]
+            blocks[kept] = blocks[s]
             kept += 1
-    return out_rows[:kept], out_cols[:kept], summed[:kept]
+    return rows[:kept], cols[:kept], blocks[:kept]
+
+
+@numba.njit(cache=True)
+def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
+    """The blocks summed per (row, column) pair, sorted by row then column, zero sums left out.
+
+    Each pair's sum runs over its blocks in their order in the input
+    (:func:`pair_slots`, then one pass over the blocks).
+    """
+    slot, out_rows, out_cols = pair_slots(rows, cols, num_nodes)
+    summed = np.zeros((len(out_rows), 3, 3))
+    for k in range(len(rows)):
+        s = slot[k]
+        for p in range(3):
+            for q in range(3):
+                summed[s, p, q] += blocks[k, p, q]
+    return _nonzero_blocks(out_rows, out_cols, summed)
 
 
 @numba.njit(cache=True)

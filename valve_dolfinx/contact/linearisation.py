@@ -49,7 +49,7 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import dot3
 
-__all__ = ["direction_derivatives"]
+__all__ = ["direction_derivatives", "turning_load"]
 
 #: Barycentric coordinates below this count as zero when telling an edge contact
 #: (two vertices carry the contact point) from a vertex contact (one does).
@@ -204,3 +204,24 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
                np.ascontiguousarray(normal, dtype=np.float64), np.asarray(edge, dtype=np.bool_),
                dn, dlam)
     return dn, dlam
+
+
+@numba.njit(cache=True)
+def _turning_load(dn, load, slope, out):  # pragma: no cover
+    for a in range(dn.shape[0]):
+        scale = -slope[a]
+        for m in range(dn.shape[1]):
+            for j in range(3):
+                total = dn[a, m, 0, j] * load[a, 0]
+                total = total + dn[a, m, 1, j] * load[a, 1]
+                out[a, m, j] = scale * (total + dn[a, m, 2, j] * load[a, 2])
+
+
+def turning_load(dn: np.ndarray, load: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    """``-slope_a (∂n/∂x_m)ᵀ load_a`` ``(A, 4, 3)``: how a force ``f(F)`` of slope
+    ``slope = ∂f/∂F`` changes as its driving force ``F = -load·n`` turns with ``n``
+    (``dn`` from :func:`direction_derivatives`, ``load`` ``(A, 3)``)."""
+    out = np.empty(dn.shape[:2] + (3,))
+    _turning_load(np.ascontiguousarray(dn), np.ascontiguousarray(load, dtype=np.float64),
+                  np.ascontiguousarray(slope, dtype=np.float64), out)
+    return out

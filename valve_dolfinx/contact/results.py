@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from valve_dolfinx.contact.kernels import group_blocks, row_blocks
+from valve_dolfinx.contact.kernels import group_blocks, row_block_sums, row_gradients
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 __all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
@@ -188,6 +188,32 @@ class ContactRows:
         """Nodal forces and their Jacobian blocks (``clock``: laps "forces" and "jacobian").
 
         ``jacobian=False``: the forces and diagnostics only (no blocks).
+        """
+        result = self._forces(num_nodes)
+        if clock is not None:
+            clock.add("forces")
+        if not jacobian:
+            return result
+        return self.with_jacobian(result, num_nodes, clock)
+
+    def _forces(self, num_nodes: int) -> ContactResult:
+        """The nodal forces and the diagnostics, without Jacobian blocks."""
+        count = len(self.node)
+        w = np.ones(count) if self.blend is None else self.blend
+        p = np.ones(count) if self.presence is None else self.presence
+        G, _ = self._group_presence()
+        magnitude = w * G * self.f
+        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
+        B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
+        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
+        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
+                                       minlength=num_nodes) for i in range(3)], axis=1)
+        return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
+                                 np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
+
+    def with_jacobian(self, result: ContactResult, num_nodes: int,
+                      clock: StepClock | None = None) -> ContactResult:
+        """``result`` (these rows' forces) with the Jacobian blocks of the forces added.
 
         Row ``i`` pushes with ``s_i = w_i G f_i``: ``f`` the law's force,
         ``w_i = p_i e^{-d_i/ε}/Σ_k p_k e^{-d_k/ε}`` the blending weight of the
@@ -206,7 +232,8 @@ class ContactRows:
         (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).  The
         couplings between the rows of a group are summed per group over the
         distinct nodes it touches (:func:`~valve_dolfinx.contact.kernels.group_blocks`),
-        not pair by pair; the blocks may repeat a (row, col) pair and are to be summed.
+        not pair by pair, and all blocks summed per (row, col) node pair as they are
+        computed (:func:`~valve_dolfinx.contact.kernels.row_block_sums`).
         """
         count = len(self.node)
         w = np.ones(count) if self.blend is None else self.blend
@@ -216,71 +243,49 @@ class ContactRows:
         magnitude = w * G * f
         ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
         B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
-        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
-        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
-                                       minlength=num_nodes) for i in range(3)], axis=1)
-        if clock is not None:
-            clock.add("forces")
-        if not jacobian:
-            return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
-                                     np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
-        grad_d = B[:, :, None] * self.normal[:, None, :]                           # (A, m, 3)
-        grad_logp = np.zeros_like(grad_d) if self.grad_log_presence is None \
-            else self.grad_log_presence
-        grad_p = p[:, None, None] * grad_logp
-        grad_f = self.dfdd[:, None, None] * grad_d
-        if self.grad_f is not None:
-            grad_f = grad_f + self.grad_f
-        own = (w * G)[:, None, None] * grad_f + (w * f * c)[:, None, None] * grad_p
-        if self.blend is not None:
-            # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
-            depth = (self.blend_cutoff - self.d) / self.blend_scale
-            grad_L = (grad_logp * (1.0 + p * depth)[:, None, None]
-                      - (p / self.blend_scale)[:, None, None] * grad_d)
-            own += (G * f * w * (1.0 - w))[:, None, None] * grad_L
-        m = ids.shape[1]
-        Bn = B[:, :, None] * self.normal[:, None, :]                               # (A, m, 3)
-        multi = None
+        zeros = np.zeros((count, ids.shape[1], 3))
+        multi = np.empty(0, dtype=np.int64)
         if self.blend is not None and self.group is not None:
             _, inverse, group_size = np.unique(self.group, return_inverse=True,
                                                return_counts=True)
             multi = np.flatnonzero(group_size[inverse] > 1)
-            # the pair sum below includes i = k: take that term out of the row's own part
-            own[multi] += ((G * f * w * w)[multi, None, None] * grad_L[multi]
-                           - (w * f * c)[multi, None, None] * grad_p[multi])
+        in_multi = np.zeros(count, dtype=bool)
+        in_multi[multi] = True
+        # log w_i = log p_i + p_i (h - d_i)/ε + const (see SurfaceContact._blend_weights)
+        depth = (self.blend_cutoff - self.d) / self.blend_scale if self.blend is not None \
+            else np.zeros(count)
+        own, Bn, wgrad_L, cgrad_p = row_gradients(
+            B, np.ascontiguousarray(self.normal),
+            zeros if self.grad_log_presence is None else self.grad_log_presence, p,
+            np.ascontiguousarray(self.dfdd), zeros if self.grad_f is None else self.grad_f,
+            self.grad_f is not None, w, G, f, c, self.blend is not None, depth,
+            self.blend_scale, in_multi)
+        m = ids.shape[1]
         outer = None
-        if multi is not None and len(multi):
-            outer = group_blocks(
-                inverse[multi], ids[multi], Bn[multi], -(G * f * w)[multi], (w * f)[multi],
-                w[multi, None, None] * grad_L[multi], c[multi, None, None] * grad_p[multi],
-                num_nodes)
+        if len(multi):
+            outer = group_blocks(inverse[multi], ids[multi], Bn[multi], -(G * f * w)[multi],
+                                 (w * f)[multi], wgrad_L[multi], cgrad_p[multi], num_nodes)
         # a row without force, force slope or driving-force turning has no blocks of its own
         # (in range of the search, out of reach of the law); it may still take part in its
         # group's coupling above
         acting = (f != 0.0) | (self.dfdd != 0.0)
         if self.grad_f is not None:
             acting |= np.any(self.grad_f != 0.0, axis=(1, 2))
-        live = slice(None) if acting.all() else np.flatnonzero(acting)
-        size = int(acting.sum()) * m * m
-        total = size + (0 if outer is None else len(outer[0]))
-        rows = np.empty(total, dtype=np.int64)
-        cols = np.empty(total, dtype=np.int64)
-        blocks = np.empty((total, 3, 3))
+        if outer is None:
+            outer = (np.empty(0, dtype=np.int64),) * 2 + (np.empty((0, 3, 3)),)
         # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m, with the
         # turning direction and the sliding point (linearisation module); B_r n ⊗ own_m without
         if self.geometric is None:
             dn, dlam = np.empty((0, m, 3, 3)), np.empty((0, m - 1, m, 3))
         else:
-            dn, dlam = (np.ascontiguousarray(g[live]) for g in self.geometric)
-        row_blocks(np.ascontiguousarray(ids[live]), np.ascontiguousarray(B[live]),
-                   np.ascontiguousarray(self.normal[live]), np.ascontiguousarray(own[live]),
-                   np.ascontiguousarray(magnitude[live]), self.geometric is not None, dn, dlam,
-                   rows[:size], cols[:size], blocks[:size])
-        if outer is not None:
-            rows[size:], cols[size:], blocks[size:] = outer
+            dn, dlam = self.geometric
+        rows, cols, blocks = row_block_sums(
+            np.flatnonzero(acting), ids, B, np.ascontiguousarray(self.normal), own,
+            np.ascontiguousarray(magnitude), self.geometric is not None,
+            np.ascontiguousarray(dn), np.ascontiguousarray(dlam), *outer, num_nodes)
         if clock is not None:
             clock.add("jacobian")
-        return self._diagnostics(forces, magnitude, p, rows, cols, blocks)
+        return replace(result, jac_rows=rows, jac_cols=cols, jac_blocks=blocks)
 
     def _diagnostics(self, forces: np.ndarray, magnitude: np.ndarray, p: np.ndarray,
                      rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray) -> ContactResult:

@@ -39,8 +39,8 @@ import numpy as np
 from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
 from valve_dolfinx.contact.exclusions import merge_exclusions, reference_neighbours, triangle_halo
 from valve_dolfinx.contact.geometry import (
-    barycentric_gradients,
     closest_point_on_triangles,
+    triangle_frames,
     triangle_normals,
 )
 from valve_dolfinx.contact.kernels import near_pairs
@@ -50,7 +50,7 @@ from valve_dolfinx.contact.law import (
     contact_force_slope_in_F,
     law_force_from_load,
 )
-from valve_dolfinx.contact.linearisation import direction_derivatives
+from valve_dolfinx.contact.linearisation import direction_derivatives, turning_load
 from valve_dolfinx.contact.results import (
     ContactResult,
     ContactRows,
@@ -92,7 +92,7 @@ class _TriangleFrames:
 
     ``origin`` is vertex 0, ``normal`` the unit normal and ``grad1``, ``grad2``
     the in-plane gradients of the barycentric coordinates λ1, λ2
-    (:func:`~valve_dolfinx.contact.geometry.barycentric_gradients`), so that a
+    (:func:`~valve_dolfinx.contact.geometry.triangle_frames`), so that a
     point ``p`` projects to ``λ_j = grad_j·(p - origin)`` at distance
     ``normal·(p - origin)``.
     """
@@ -106,11 +106,8 @@ class _TriangleFrames:
     @classmethod
     def at(cls, xt: np.ndarray, triangles: np.ndarray) -> _TriangleFrames:
         a, b, c = (xt[:, triangles[:, j]] for j in range(3))
-        normal, grad = barycentric_gradients(a.T, b.T, c.T)
-        return cls(origin=a, normal=np.ascontiguousarray(normal.T),
-                   grad1=np.ascontiguousarray(grad[:, 1].T),
-                   grad2=np.ascontiguousarray(grad[:, 2].T),
-                   altitudes=np.ascontiguousarray((1.0 / np.linalg.norm(grad, axis=2)).T))
+        normal, grad, altitudes = triangle_frames(a, b, c)
+        return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes)
 
 
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -292,6 +289,8 @@ class SurfaceContact:
         #: ``(x, f_ext, nodes, rows, geometry)`` of the last forces-only evaluation
         #: (see :meth:`evaluate`)
         self._last_rows: tuple | None = None
+        #: ``(x, nodes, candidates)`` of the last search (see :meth:`_candidates`)
+        self._last_candidates: tuple | None = None
         #: Wall-clock seconds of the steps of the last evaluation: "broad" (grid and box
         #: queries), "narrow" (exact geometric tests, sides, windows), "forces" (blending,
         #: the law, nodal forces) and "jacobian" (all derivative blocks).
@@ -347,19 +346,20 @@ class SurfaceContact:
         if jacobian and kept is not None and all(
                 np.array_equal(a, b) for a, b in zip(kept[:3], (x, f_ext, nodes), strict=True)):
             # the Jacobian at the state of the last forces-only call (a solver's residual,
-            # then its Jacobian): its rows and their geometry stand, only the blocks are new
-            _, _, _, contacts, geometry = kept
+            # then its Jacobian): its rows, their geometry and forces stand, only the blocks
+            # are new
+            _, _, _, contacts, geometry, forces = kept
             contacts = self._jacobian_terms(x, f_ext, contacts, geometry)
+            clock.add("jacobian")
+            result = contacts.with_jacobian(forces, self.num_nodes, clock)
         else:
             contacts, geometry = self._find_contacts(x, f_ext, nodes, clock)
             if jacobian:
                 contacts = self._jacobian_terms(x, f_ext, contacts, geometry)
-        if jacobian:
-            clock.add("jacobian")
-            self._last_rows = None
-        else:
-            self._last_rows = (x.copy(), f_ext.copy(), nodes.copy(), contacts, geometry)
-        result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
+                clock.add("jacobian")
+            result = contacts.result(self.num_nodes, clock, jacobian=jacobian)
+        self._last_rows = None if jacobian else (x.copy(), f_ext.copy(), nodes.copy(), contacts,
+                                                 geometry, result)
         self.timings, self.cpu_timings = clock.laps, clock.cpu_laps
         log.debug("surface contact: %d active, max penetration %.3g mm, total force %.4g mN",
                   result.n_active, result.max_penetration, result.total_force)
@@ -480,7 +480,7 @@ class SurfaceContact:
             slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
                                              p.stiffness, p.cutoff, p.taper)
             slope = np.where(F > p.min_driving_force, g.weight * slope, 0.0)
-            grad_f = -slope[:, None, None] * np.einsum("amil,ai->aml", dn, f_ext[node])
+            grad_f = turning_load(dn, f_ext[node], slope)
         return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f,
                        geometric=(dn, dlam))
 
@@ -489,14 +489,22 @@ class SurfaceContact:
         """All (node, triangle) pairs passing the geometric tests.
 
         Returns ``node, tri``, the unsided distance ``d0``, the barycentric
-        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.
+        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.  They depend on the
+        positions only: a second search at the positions of the last one (a solver's
+        static residual after its step's last Newton residual, with new sides and
+        driving forces) returns the arrays of the first, which are not to be modified.
         """
+        last = self._last_candidates
+        if last is not None and np.array_equal(last[0], x) and np.array_equal(last[1], nodes):
+            return last[2]
         xt = np.ascontiguousarray(x.T)
         frames = _TriangleFrames.at(xt, self.triangles)
         near = self._search(xt, frames, nodes, clock)
         node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
         clock.add("narrow")
-        return node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+        found = node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+        self._last_candidates = (x.copy(), nodes.copy(), found)
+        return found
 
     def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
                 clock: StepClock) -> tuple[np.ndarray, ...]:
