@@ -15,8 +15,63 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from valve_dolfinx.contact.geometry import dot3
+
 __all__ = ["group_blocks", "near_pairs", "pair_slots", "row_block_sums", "row_gradients",
-           "sum_blocks"]
+           "plane_distances", "presence_gradients", "sum_blocks"]
+
+
+@numba.njit(cache=True)
+def _log_ramp_slope(x, width):  # pragma: no cover
+    """``d log(ramp(x))/dx`` of the C¹ smoothstep ``ramp`` of ``width`` where it is positive
+    (0 where it is 1)."""
+    xi = min(max(x / width, 1e-300), 1.0)
+    return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
+
+
+@numba.njit(cache=True)
+def presence_gradients(B, normal, d, tapered, cutoff, eps, edge, plane_lam, side, plane_normal,
+                       side_distance, in_plane, offset, plane_distance, banded, band, lam,
+                       dlam):  # pragma: no cover
+    r"""``∂log p/∂x`` ``(A, m, 3)`` over ``[node, support]`` of each row's presence ``p``
+    (:meth:`~valve_dolfinx.contact.surface.SurfaceContact._find_contacts`): the taper
+    towards the cut-off (``tapered``), with ``∇d = B ⊗ n``; on edge/vertex rows the fade
+    in from the plane (``∇(s d₀) = B^{plane} ⊗ s n_t``) and with the in-plane distance
+    ``ρ = √(gap² − d₀²)`` (``∇ρ = (B ⊗ (x_p − q) − d₀ B^{plane} ⊗ n_t)/ρ``); on face rows
+    fading out beyond their triangle (``banded``) the band ramps of the barycentric
+    coordinates, through ``dlam`` ``(A, m-1, m, 3)``."""
+    count, m = B.shape
+    out = np.zeros((count, m, 3))
+    for i in range(count):
+        if tapered:
+            taper = _log_ramp_slope(cutoff - d[i], eps)
+            for r in range(m):
+                for s in range(3):
+                    out[i, r, s] = out[i, r, s] - taper * (B[i, r] * normal[i, s])
+        if edge[i]:
+            fade = _log_ramp_slope(side_distance[i], eps)
+            rho = in_plane[i]
+            spread = _log_ramp_slope(rho, eps) / max(rho, 1e-300)
+            for r in range(m):
+                plane_B = 1.0 if r == 0 else -plane_lam[i, r - 1]
+                for s in range(3):
+                    sided = side[i] * plane_normal[i, s]
+                    out[i, r, s] = out[i, r, s] + (fade * plane_B) * sided
+            for r in range(m):
+                plane_B = 1.0 if r == 0 else -plane_lam[i, r - 1]
+                for s in range(3):
+                    grad_rho = (B[i, r] * offset[i, s]
+                                - (plane_distance[i] * plane_B) * plane_normal[i, s])
+                    out[i, r, s] = out[i, r, s] + spread * grad_rho
+        elif banded[i]:
+            s0 = _log_ramp_slope(lam[i, 0] + band[i, 0], band[i, 0])
+            s1 = _log_ramp_slope(lam[i, 1] + band[i, 1], band[i, 1])
+            s2 = _log_ramp_slope(lam[i, 2] + band[i, 2], band[i, 2])
+            for r in range(m):
+                for s in range(3):
+                    total = s0 * dlam[i, 0, r, s] + s1 * dlam[i, 1, r, s]
+                    out[i, r, s] = out[i, r, s] + (total + s2 * dlam[i, 2, r, s])
+    return out
 
 
 @numba.njit(cache=True)
@@ -397,6 +452,20 @@ def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
             for q in range(3):
                 summed[s, p, q] += blocks[k, p, q]
     return _nonzero_blocks(out_rows, out_cols, summed)
+
+
+@numba.njit(cache=True)
+def plane_distances(node, tri, triangles, x, normals):  # pragma: no cover
+    """``(x[node] - x[triangles[tri, 0]])·normals[tri]`` per pair ``(K,)``, ``x`` and the
+    unit ``normals`` ``(·, 3)``: the signed distance of each node from its triangle's
+    plane, summed in the order of ``np.einsum("ij,ij->i")``."""
+    out = np.empty(len(node))
+    for k in range(len(node)):
+        p, t = node[k], tri[k]
+        a = triangles[t, 0]
+        out[k] = dot3(x[p, 0] - x[a, 0], x[p, 1] - x[a, 1], x[p, 2] - x[a, 2],
+                      normals[t, 0], normals[t, 1], normals[t, 2])
+    return out
 
 
 @numba.njit(cache=True)

@@ -162,8 +162,10 @@ class ContactRows:
     #: between the mid-surfaces
     surface_offset: float = 0.0
 
-    def _group_presence(self) -> tuple[np.ndarray, np.ndarray]:
-        """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``).
+    def _group_presence(self, inverse: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``);
+        ``inverse``: the rows' group indices, if known (``np.unique(group)``'s).
 
         ``G = 1 - Π_j (1 - p_j)`` over the rows of a group: 1 as soon as one row
         is fully present (a node over the shared edge of two coplanar faces gets
@@ -173,7 +175,8 @@ class ContactRows:
         p = np.ones(len(self.node)) if self.presence is None else self.presence
         if self.group is None:
             return p, np.ones(len(p))
-        _, inverse = np.unique(self.group, return_inverse=True)
+        if inverse is None:
+            _, inverse = np.unique(self.group, return_inverse=True)
         exact_one = p >= 1.0
         log_slack = np.where(exact_one, 0.0, np.log(np.maximum(1.0 - p, 1e-300)))
         total = np.bincount(inverse, log_slack)[inverse]       # Σ log(1-p) over p < 1
@@ -238,16 +241,18 @@ class ContactRows:
         count = len(self.node)
         w = np.ones(count) if self.blend is None else self.blend
         p = np.ones(count) if self.presence is None else self.presence
-        G, c = self._group_presence()
+        inverse = None
+        if self.group is not None:
+            _, inverse, group_size = np.unique(self.group, return_inverse=True,
+                                               return_counts=True)
+        G, c = self._group_presence(inverse)
         f = self.f
         magnitude = w * G * f
         ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
         B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
         zeros = np.zeros((count, ids.shape[1], 3))
         multi = np.empty(0, dtype=np.int64)
-        if self.blend is not None and self.group is not None:
-            _, inverse, group_size = np.unique(self.group, return_inverse=True,
-                                               return_counts=True)
+        if self.blend is not None and inverse is not None:
             multi = np.flatnonzero(group_size[inverse] > 1)
         in_multi = np.zeros(count, dtype=bool)
         in_multi[multi] = True
@@ -298,7 +303,8 @@ class ContactRows:
         over = active & (p >= 0.5)
         return ContactResult(
             forces=forces, jac_rows=rows, jac_cols=cols, jac_blocks=blocks,
-            n_active=int(active.sum()) if groups is None else len(np.unique(groups)),
+            n_active=int(active.sum()) if groups is None
+            else int(np.count_nonzero(np.bincount(groups))),
             max_penetration=float(np.max(-self.d[over], initial=0.0)),
             total_force=float(magnitude.sum()),
             pairs=np.stack([self.node[active], self.partner[active]], axis=1),

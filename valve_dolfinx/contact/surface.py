@@ -43,7 +43,7 @@ from valve_dolfinx.contact.geometry import (
     triangle_frames,
     triangle_normals,
 )
-from valve_dolfinx.contact.kernels import near_pairs
+from valve_dolfinx.contact.kernels import near_pairs, plane_distances, presence_gradients
 from valve_dolfinx.contact.law import (
     DEFAULT_PARAMETERS,
     ContactParameters,
@@ -118,12 +118,6 @@ def _ramp(x: np.ndarray, width: float) -> np.ndarray:
     """C¹ smoothstep: 0 for ``x <= 0``, 1 for ``x >= width``."""
     xi = np.clip(np.asarray(x, dtype=float) / width, 0.0, 1.0)
     return xi * xi * (3.0 - 2.0 * xi)
-
-
-def _log_ramp_slope(x: np.ndarray, width: float) -> np.ndarray:
-    """``d log(ramp(x))/dx`` where the ramp is positive (0 where it is 1)."""
-    xi = np.clip(np.asarray(x, dtype=float) / width, 1e-300, 1.0)
-    return 6.0 * (1.0 - xi) / (xi * (3.0 - 2.0 * xi)) / width
 
 
 @dataclass(frozen=True)
@@ -409,31 +403,30 @@ class SurfaceContact:
         keep = (d > -p.penetration_depth) & (presence > 0.0)
         weight = self._pair_weight(node, tri)
         keep &= weight > 0.0
-        node, tri, d, lam, weight, presence, normal, edge, side_distance = (
-            v[keep] for v in (node, tri, d, lam, weight, presence, normal, edge, side_distance))
-        in_plane, offset, d0 = in_plane[keep], offset[keep], d0[keep]
-        plane_lam, s, n_tri, face_lam_min = plane_lam[keep], s[keep], n_tri[keep], \
-            face_lam_min[keep]
-        band = band[keep]
+        kept = np.flatnonzero(keep)
+        node, tri, d, weight, presence, normal = (
+            v[kept] for v in (node, tri, d, weight, presence, normal))
         clock.add("narrow")
         blend = self._blend_weights(node, tri, d, presence)
         f, dfdd = law_force_from_load(d, f_ext[node], normal, p)
         f, dfdd = weight * f, weight * dfdd
         # rows with no force stay: their distance still moves the blending weights
-        a = (f > 0.0) | (dfdd != 0.0) | (blend < 1.0)
-        node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight = (
-            v[a] for v in (node, tri, d, lam, presence, normal, edge, blend, f, dfdd, weight))
+        a = np.flatnonzero((f > 0.0) | (dfdd != 0.0) | (blend < 1.0))
+        node, tri, d, presence, normal, blend, f, dfdd, weight = (
+            v[a] for v in (node, tri, d, presence, normal, blend, f, dfdd, weight))
+        rows = kept[a]  # of the candidates
         clock.add("forces")
         group = node * len(self.body_labels) + self.triangle_body[tri]
         support = self.triangles[tri]
-        contacts = ContactRows(node=node, support=support, weights=lam, normal=normal, d=d, f=f,
-                             dfdd=dfdd, partner=tri, group=group, blend=blend, blend_scale=eps,
-                             blend_cutoff=p.cutoff, presence=presence,
-                             surface_offset=p.thickness)
+        contacts = ContactRows(node=node, support=support, weights=lam[rows], normal=normal, d=d,
+                               f=f, dfdd=dfdd, partner=tri, group=group, blend=blend,
+                               blend_scale=eps, blend_cutoff=p.cutoff, presence=presence,
+                               surface_offset=p.thickness)
         geometry = _RowGeometry(
-            edge=edge, weight=weight, plane_lam=plane_lam[a], side=s[a], plane_normal=n_tri[a],
-            side_distance=side_distance[a], in_plane=in_plane[a], offset=offset[a],
-            plane_distance=d0[a], face_lam_min=face_lam_min[a], band=band[a])
+            edge=edge[rows], weight=weight, plane_lam=plane_lam[rows], side=s[rows],
+            plane_normal=n_tri[rows], side_distance=side_distance[rows],
+            in_plane=in_plane[rows], offset=offset[rows], plane_distance=d0[rows],
+            face_lam_min=face_lam_min[rows], band=band[rows])
         return contacts, geometry
 
     def _jacobian_terms(self, x: np.ndarray, f_ext: np.ndarray, contacts: ContactRows,
@@ -446,33 +439,14 @@ class SurfaceContact:
                                          contacts.normal, contacts.d)
         g = geometry
         edge = g.edge
-        # ∂log p/∂x over [node, vertices]: ∇d = B⊗n; the plane distance s·d0 moves with
-        # the vertices through the barycentric coordinates of the plane projection
-        B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
-        grad_d = B[:, :, None] * normal[:, None, :]
-        grad_logp = np.zeros_like(grad_d)
-        if p.taper > 0.0:
-            grad_logp -= (_log_ramp_slope(p.cutoff - d, eps))[:, None, None] * grad_d
-        on_edge = np.flatnonzero(edge)
-        if len(on_edge):
-            plane_B = np.concatenate([np.ones((len(on_edge), 1)), -g.plane_lam[on_edge]], axis=1)
-            sided = g.side[on_edge, None] * g.plane_normal[on_edge]
-            grad_logp[on_edge] += (_log_ramp_slope(g.side_distance[on_edge], eps)[:, None, None]
-                                   * plane_B[:, :, None] * sided[:, None, :])
-            # ∂√(gap² − d0²)/∂x_m = (B_m (x_p − q) − d0 B^plane_m n_t)/√(...): the closest
-            # point moves with the vertices at fixed barycentrics, the plane distance as −λ n
-            rho = g.in_plane[on_edge]
-            grad_rho = (B[on_edge][:, :, None] * g.offset[on_edge][:, None, :]
-                        - (g.plane_distance[on_edge, None, None] * plane_B[:, :, None]
-                           * g.plane_normal[on_edge][:, None, :]))
-            grad_logp[on_edge] += ((_log_ramp_slope(rho, eps) / np.maximum(rho, 1e-300))
-                                   [:, None, None] * grad_rho)
         dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
-        banded = np.flatnonzero(~edge & (g.face_lam_min < 0.0))
-        if len(banded):  # face rows fading out beyond their triangle's boundary
-            width = g.band[banded]
-            slopes = _log_ramp_slope(lam[banded] + width, width)                      # (K, 3)
-            grad_logp[banded] += np.einsum("kj,kjml->kml", slopes, dlam[banded])
+        B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
+        grad_logp = presence_gradients(
+            B, np.ascontiguousarray(normal), d, p.taper > 0.0, p.cutoff, eps, edge,
+            np.ascontiguousarray(g.plane_lam), g.side, np.ascontiguousarray(g.plane_normal),
+            g.side_distance, g.in_plane, np.ascontiguousarray(g.offset), g.plane_distance,
+            ~edge & (g.face_lam_min < 0.0), np.ascontiguousarray(g.band),
+            np.ascontiguousarray(lam), dlam)
         grad_f = None
         if p.driving_force == "normal":
             # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
@@ -614,14 +588,13 @@ class SurfaceContact:
             from_pressure = -np.sign(_rowdot(f_ext[node], n_tri))
             return np.where(from_pressure != 0.0, from_pressure, from_position)
         x_prev, n_prev = self._history
-        t = self.triangles[tri]
-        recorded = _rowdot(x_prev[node] - x_prev[t[:, 0]], n_prev[tri])
+        recorded = plane_distances(node, tri, self.triangles, x_prev, n_prev)
         side = from_position.copy()
         # only a pair whose recorded side differs from its present one needs the (costly)
         # closest-point test: for all others both answers agree
         differ = np.flatnonzero((np.abs(recorded) >= SIDE_TOLERANCE)
                                 & (np.sign(recorded) != from_position))
-        p, t = node[differ], t[differ]
+        p, t = node[differ], self.triangles[tri[differ]]
         q, _ = closest_point_on_triangles(x_prev[p], x_prev[t[:, 0]], x_prev[t[:, 1]],
                                           x_prev[t[:, 2]])
         was_close = np.linalg.norm(x_prev[p] - q, axis=1) < 2.0 * self.params.search_distance
