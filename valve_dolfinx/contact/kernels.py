@@ -18,7 +18,8 @@ import numpy as np
 from valve_dolfinx.contact.geometry import dot3
 
 __all__ = ["group_blocks", "near_pairs", "pair_slots", "row_block_sums", "row_gradients",
-           "plane_distances", "presence_gradients", "sum_blocks"]
+           "nodal_forces", "plane_distances", "presence_gradients",
+           "sum_blocks"]
 
 
 @numba.njit(cache=True)
@@ -71,6 +72,24 @@ def presence_gradients(B, normal, d, tapered, cutoff, eps, edge, plane_lam, side
                 for s in range(3):
                     total = s0 * dlam[i, 0, r, s] + s1 * dlam[i, 1, r, s]
                     out[i, r, s] = out[i, r, s] + (total + s2 * dlam[i, 2, r, s])
+    return out
+
+
+@numba.njit(cache=True)
+def nodal_forces(node, support, weights, normal, magnitude, num_nodes):  # pragma: no cover
+    """``(N, 3)`` nodal forces of the rows: ``φ n`` on the node and ``-λ_j φ n`` on the
+    triangle's vertex ``j`` (``φ`` = ``magnitude``), summed per node in the rows' order
+    (as ``np.bincount`` sums)."""
+    out = np.zeros((num_nodes, 3))
+    m = support.shape[1] + 1
+    for s in range(3):
+        for i in range(len(node)):
+            push = magnitude[i] * normal[i, s]
+            for r in range(m):
+                if r == 0:
+                    out[node[i], s] += 1.0 * push
+                else:
+                    out[support[i, r - 1], s] += -weights[i, r - 1] * push
     return out
 
 
@@ -485,10 +504,12 @@ def near_pairs(node, tri, xt, origin, normal, grad1, grad2, altitudes, node_body
     Keeps a pair when the node lies within ``search_distance`` of the triangle's plane,
     its projection falls in the triangle or its fade band (``side_band`` beyond the
     sides of another body's triangle, ``face_band`` otherwise) or possibly within
-    ``reach`` of it, and it is not in the triangle's neighbourhood (``excluded``, ``-1``
-    padded rows).  Returns ``node, tri``, the plane distance ``d0``, the barycentric
-    coordinates ``lam (K, 3)`` of the projection, ``beyond`` (a lower bound on its
-    in-plane distance from the triangle) and ``in_band``, in the order of the input.
+    ``reach`` of it, and it is not in the triangle's neighbourhood (``excluded``: per
+    triangle the node ids in ascending order, then ``-1`` padding, as
+    :mod:`~valve_dolfinx.contact.exclusions` makes them).  Returns ``node, tri``, the
+    plane distance ``d0``, the barycentric coordinates ``lam (K, 3)`` of the projection,
+    ``beyond`` (a lower bound on its in-plane distance from the triangle) and ``in_band``,
+    in the order of the input.
     """
     count = len(node)
     out_node = np.empty(count, dtype=np.int64)
@@ -519,8 +540,12 @@ def near_pairs(node, tri, xt, origin, normal, grad1, grad2, altitudes, node_body
         if not (in_band or (beyond < reach and abs(d0) < reach)):
             continue
         neighbour = False
-        for e in excluded[t]:
-            neighbour = neighbour or e == p
+        for e in excluded[t]:  # ascending, then -1
+            if e < 0 or e > p:
+                break
+            if e == p:
+                neighbour = True
+                break
         if neighbour:
             continue
         out_node[kept], out_tri[kept], out_d0[kept] = p, t, d0

@@ -15,7 +15,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from valve_dolfinx.contact.kernels import group_blocks, row_block_sums, row_gradients
+from valve_dolfinx.contact.kernels import (
+    group_blocks,
+    nodal_forces,
+    row_block_sums,
+    row_gradients,
+)
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 __all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
@@ -206,11 +211,10 @@ class ContactRows:
         p = np.ones(count) if self.presence is None else self.presence
         G, _ = self._group_presence()
         magnitude = w * G * self.f
-        ids = np.concatenate([self.node[:, None], self.support], axis=1)         # (A, m)
-        B = np.concatenate([np.ones((count, 1)), -self.weights], axis=1)
-        contributions = B[:, :, None] * (magnitude[:, None] * self.normal)[:, None, :]
-        forces = np.stack([np.bincount(ids.ravel(), contributions[:, :, i].ravel(),
-                                       minlength=num_nodes) for i in range(3)], axis=1)
+        forces = nodal_forces(self.node, np.ascontiguousarray(self.support),
+                              np.ascontiguousarray(self.weights, dtype=np.float64),
+                              np.ascontiguousarray(self.normal, dtype=np.float64), magnitude,
+                              num_nodes)
         return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
                                  np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
 
