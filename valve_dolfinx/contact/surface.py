@@ -303,6 +303,12 @@ class SurfaceContact:
         self._history = (x, normals)
         self._last_rows = None
 
+    def forget_search(self) -> None:
+        """Forget the last search and rows, so that the next evaluation at the same
+        positions searches afresh (what a benchmark of one evaluation times)."""
+        self._last_candidates = None
+        self._last_rows = None
+
     def clear_history(self) -> None:
         """Forget the recorded state (sides then follow the pressure direction)."""
         self._history = None
