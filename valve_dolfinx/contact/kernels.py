@@ -159,7 +159,7 @@ def row_block_sums(live, ids, B, normal, own, magnitude, geometric, dn, dlam, ex
     """
     m = ids.shape[1]
     own_count = len(live) * m * m
-    slot, out_rows, out_cols = _row_pair_slots(live, ids, extra_rows, extra_cols, num_nodes)
+    slot, out_rows, out_cols = pair_slots(live, ids, extra_rows, extra_cols, num_nodes)
     summed = np.zeros((len(out_rows), 3, 3))
     k = 0
     for i in live:
@@ -295,42 +295,67 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
 
 
 @numba.njit(cache=True)
-def pair_slots(rows, cols, num_nodes):  # pragma: no cover
-    """The distinct (row, column) pairs of ``rows``, ``cols``, sorted by row then column,
-    and the slot of every input pair among them: ``(slot (K,), pair rows, pair cols)``.
+def _slot(col, seen, out_cols, total):  # pragma: no cover
+    """The slot of column ``col`` in the current row (a new one, ``total``, if unseen)."""
+    s = seen[col]
+    if s < 0:
+        s = total
+        seen[col] = s
+        out_cols[s] = col
+        total += 1
+    return s, total
 
-    Linear in the number of pairs: a counting sort by row, then a slot per column node
-    within a row (first seen first), then the row's few columns put in order.
+
+@numba.njit(cache=True)
+def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cover
+    """The distinct (row, column) node pairs of the blocks of :func:`row_block_sums` (row
+    ``i``'s block ``(r, c)`` at ``(ids[i, r], ids[i, c])`` for ``i`` in ``live``, then the
+    extra blocks at ``(extra_rows, extra_cols)``), sorted by row then column, and the slot
+    of every block among them: ``(slot (K,), pair rows, pair cols)``.
+
+    Linear in the number of blocks: a counting sort of the row nodes ``(i, r)`` (not of
+    every block), a slot per column node within a row (first seen first), then the row's
+    few columns put in order and the slots renumbered.
     """
-    count = len(rows)
+    m = ids.shape[1]
+    own_rows = len(live) * m
+    own_count = own_rows * m
+    total_count = own_count + len(extra_rows)
     start = np.zeros(num_nodes + 1, dtype=np.int64)
-    for k in range(count):
-        start[rows[k] + 1] += 1
+    for li in range(len(live)):
+        for r in range(m):
+            start[ids[live[li], r] + 1] += 1
+    for j in range(len(extra_rows)):
+        start[extra_rows[j] + 1] += 1
     for n in range(num_nodes):
         start[n + 1] += start[n]
-    order = np.empty(count, dtype=np.int64)
+    order = np.empty(own_rows + len(extra_rows), dtype=np.int32)  # row instances by row
     fill = start[:-1].copy()
-    for k in range(count):
-        order[fill[rows[k]]] = k
-        fill[rows[k]] += 1
+    for li in range(len(live)):
+        for r in range(m):
+            row = ids[live[li], r]
+            order[fill[row]] = li * m + r
+            fill[row] += 1
+    for j in range(len(extra_rows)):
+        order[fill[extra_rows[j]]] = own_rows + j
+        fill[extra_rows[j]] += 1
     seen = np.full(num_nodes, -1, dtype=np.int64)
-    slot = np.empty(count, dtype=np.int64)
-    out_rows = np.empty(count, dtype=np.int64)
-    out_cols = np.empty(count, dtype=np.int64)
-    rank = np.empty(count, dtype=np.int64)  # first-seen position -> sorted position
+    slot = np.empty(total_count, dtype=np.int32)
+    out_rows = np.empty(total_count, dtype=np.int64)
+    out_cols = np.empty(total_count, dtype=np.int64)
+    rank = np.empty(total_count, dtype=np.int64)
     total = 0
     for row in range(num_nodes):
         first = total
-        for j in range(start[row], start[row + 1]):
-            k = order[j]
-            col = cols[k]
-            s = seen[col]
-            if s < 0:
-                s = total
-                seen[col] = s
-                out_cols[s] = col
-                total += 1
-            slot[k] = s
+        for a in range(start[row], start[row + 1]):  # first-seen slots
+            instance = order[a]
+            if instance < own_rows:
+                i = live[instance // m]
+                for c in range(m):
+                    slot[instance * m + c], total = _slot(ids[i, c], seen, out_cols, total)
+            else:
+                j = instance - own_rows
+                slot[own_count + j], total = _slot(extra_cols[j], seen, out_cols, total)
         for s in range(first, total):
             seen[out_cols[s]] = -1
             out_rows[s] = row
@@ -345,98 +370,17 @@ def pair_slots(rows, cols, num_nodes):  # pragma: no cover
             out_cols[j + 1], rank[j + 1] = col, moved
         for s in range(first, total):  # rank[s]: the first-seen slot now at s
             seen[rank[s] - first] = s
-        for j in range(start[row], start[row + 1]):
-            k = order[j]
-            slot[k] = seen[slot[k] - first]
+        for a in range(start[row], start[row + 1]):  # the slots renumbered
+            instance = order[a]
+            if instance < own_rows:
+                for c in range(m):
+                    k = instance * m + c
+                    slot[k] = seen[slot[k] - first]
+            else:
+                k = own_count + instance - own_rows
+                slot[k] = seen[slot[k] - first]
         for s in range(first, total):
             seen[s - first] = -1
-    return slot, out_rows[:total], out_cols[:total]
-
-
-@numba.njit(cache=True)
-def _row_pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cover
-    """:func:`pair_slots` of the blocks of :func:`row_block_sums` (row ``i``'s block
-    ``(r, c)`` at ``(ids[i, r], ids[i, c])``, then the extra blocks), sorting the row
-    nodes ``(i, r)`` rather than every block: a quarter of the work and memory."""
-    m = ids.shape[1]
-    own_rows = len(live) * m
-    own_count = own_rows * m
-    instances = own_rows + len(extra_rows)
-    start = np.zeros(num_nodes + 1, dtype=np.int64)
-    for li in range(len(live)):
-        for r in range(m):
-            start[ids[live[li], r] + 1] += 1
-    for j in range(len(extra_rows)):
-        start[extra_rows[j] + 1] += 1
-    for n in range(num_nodes):
-        start[n + 1] += start[n]
-    order = np.empty(instances, dtype=np.int32)  # row instances by row node, in input order
-    fill = start[:-1].copy()
-    for li in range(len(live)):
-        for r in range(m):
-            row = ids[live[li], r]
-            order[fill[row]] = li * m + r
-            fill[row] += 1
-    for j in range(len(extra_rows)):
-        order[fill[extra_rows[j]]] = own_rows + j
-        fill[extra_rows[j]] += 1
-    seen = np.full(num_nodes, -1, dtype=np.int64)
-    slot = np.empty(own_count + len(extra_rows), dtype=np.int32)
-    out_rows = np.empty(own_count + len(extra_rows), dtype=np.int64)
-    out_cols = np.empty(own_count + len(extra_rows), dtype=np.int64)
-    rank = np.empty(own_count + len(extra_rows), dtype=np.int64)
-    total = 0
-    for row in range(num_nodes):
-        first = total
-        for pass_ in range(2):  # 0: first-seen slots, 1: the sorted ones
-            for a in range(start[row], start[row + 1]):
-                instance = order[a]
-                if instance < own_rows:
-                    i = live[instance // m]
-                    for c in range(m):
-                        k = instance * m + c
-                        if pass_ == 1:
-                            slot[k] = seen[slot[k] - first]
-                            continue
-                        col = ids[i, c]
-                        s = seen[col]
-                        if s < 0:
-                            s = total
-                            seen[col] = s
-                            out_cols[s] = col
-                            total += 1
-                        slot[k] = s
-                else:
-                    k = own_count + instance - own_rows
-                    if pass_ == 1:
-                        slot[k] = seen[slot[k] - first]
-                        continue
-                    col = extra_cols[instance - own_rows]
-                    s = seen[col]
-                    if s < 0:
-                        s = total
-                        seen[col] = s
-                        out_cols[s] = col
-                        total += 1
-                    slot[k] = s
-            if pass_ == 1:
-                for s in range(first, total):
-                    seen[s - first] = -1
-                break
-            for s in range(first, total):
-                seen[out_cols[s]] = -1
-                out_rows[s] = row
-                rank[s] = s
-            # columns in increasing order within the row (insertion sort: a row has few)
-            for s in range(first + 1, total):
-                col, moved = out_cols[s], rank[s]
-                j = s - 1
-                while j >= first and out_cols[j] > col:
-                    out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
-                    j -= 1
-                out_cols[j + 1], rank[j + 1] = col, moved
-            for s in range(first, total):  # rank[s]: the first-seen slot now at s
-                seen[rank[s] - first] = s
     return slot, out_rows[:total], out_cols[:total]
 
 
@@ -463,7 +407,9 @@ def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
     Each pair's sum runs over its blocks in their order in the input
     (:func:`pair_slots`, then one pass over the blocks).
     """
-    slot, out_rows, out_cols = pair_slots(rows, cols, num_nodes)
+    slot, out_rows, out_cols = pair_slots(np.empty(0, dtype=np.int64),
+                                          np.empty((0, 1), dtype=np.int64), rows, cols,
+                                          num_nodes)
     summed = np.zeros((len(out_rows), 3, 3))
     for k in range(len(rows)):
         s = slot[k]
