@@ -295,18 +295,6 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
 
 
 @numba.njit(cache=True)
-def _slot(col, seen, out_cols, total):  # pragma: no cover
-    """The slot of column ``col`` in the current row (a new one, ``total``, if unseen)."""
-    s = seen[col]
-    if s < 0:
-        s = total
-        seen[col] = s
-        out_cols[s] = col
-        total += 1
-    return s, total
-
-
-@numba.njit(cache=True)
 def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cover
     """The distinct (row, column) node pairs of the blocks of :func:`row_block_sums` (row
     ``i``'s block ``(r, c)`` at ``(ids[i, r], ids[i, c])`` for ``i`` in ``live``, then the
@@ -320,7 +308,7 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
     m = ids.shape[1]
     own_rows = len(live) * m
     own_count = own_rows * m
-    total_count = own_count + len(extra_rows)
+    instances = own_rows + len(extra_rows)
     start = np.zeros(num_nodes + 1, dtype=np.int64)
     for li in range(len(live)):
         for r in range(m):
@@ -329,7 +317,7 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
         start[extra_rows[j] + 1] += 1
     for n in range(num_nodes):
         start[n + 1] += start[n]
-    order = np.empty(own_rows + len(extra_rows), dtype=np.int32)  # row instances by row
+    order = np.empty(instances, dtype=np.int32)  # row instances by row node, in input order
     fill = start[:-1].copy()
     for li in range(len(live)):
         for r in range(m):
@@ -340,47 +328,51 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
         order[fill[extra_rows[j]]] = own_rows + j
         fill[extra_rows[j]] += 1
     seen = np.full(num_nodes, -1, dtype=np.int64)
-    slot = np.empty(total_count, dtype=np.int32)
-    out_rows = np.empty(total_count, dtype=np.int64)
-    out_cols = np.empty(total_count, dtype=np.int64)
-    rank = np.empty(total_count, dtype=np.int64)
+    slot = np.empty(own_count + len(extra_rows), dtype=np.int32)
+    out_rows = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    out_cols = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    rank = np.empty(own_count + len(extra_rows), dtype=np.int64)
     total = 0
     for row in range(num_nodes):
         first = total
-        for a in range(start[row], start[row + 1]):  # first-seen slots
-            instance = order[a]
-            if instance < own_rows:
-                i = live[instance // m]
-                for c in range(m):
-                    slot[instance * m + c], total = _slot(ids[i, c], seen, out_cols, total)
-            else:
-                j = instance - own_rows
-                slot[own_count + j], total = _slot(extra_cols[j], seen, out_cols, total)
-        for s in range(first, total):
-            seen[out_cols[s]] = -1
-            out_rows[s] = row
-            rank[s] = s
-        # columns in increasing order within the row (insertion sort: a row has few)
-        for s in range(first + 1, total):
-            col, moved = out_cols[s], rank[s]
-            j = s - 1
-            while j >= first and out_cols[j] > col:
-                out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
-                j -= 1
-            out_cols[j + 1], rank[j + 1] = col, moved
-        for s in range(first, total):  # rank[s]: the first-seen slot now at s
-            seen[rank[s] - first] = s
-        for a in range(start[row], start[row + 1]):  # the slots renumbered
-            instance = order[a]
-            if instance < own_rows:
-                for c in range(m):
-                    k = instance * m + c
-                    slot[k] = seen[slot[k] - first]
-            else:
-                k = own_count + instance - own_rows
-                slot[k] = seen[slot[k] - first]
-        for s in range(first, total):
-            seen[s - first] = -1
+        for pass_ in range(2):  # 0: first-seen slots, 1: the sorted ones
+            for a in range(start[row], start[row + 1]):
+                instance = order[a]
+                if instance < own_rows:  # row i's blocks (r, 0..m-1)
+                    i, k0, width = live[instance // m], instance * m, m
+                else:  # one extra block
+                    i, k0, width = -1, own_count + instance - own_rows, 1
+                for c in range(width):
+                    k = k0 + c
+                    if pass_ == 1:
+                        slot[k] = seen[slot[k] - first]
+                        continue
+                    col = ids[i, c] if i >= 0 else extra_cols[instance - own_rows]
+                    s = seen[col]
+                    if s < 0:
+                        s = total
+                        seen[col] = s
+                        out_cols[s] = col
+                        total += 1
+                    slot[k] = s
+            if pass_ == 1:
+                for s in range(first, total):
+                    seen[s - first] = -1
+                break
+            for s in range(first, total):
+                seen[out_cols[s]] = -1
+                out_rows[s] = row
+                rank[s] = s
+            # columns in increasing order within the row (insertion sort: a row has few)
+            for s in range(first + 1, total):
+                col, moved = out_cols[s], rank[s]
+                j = s - 1
+                while j >= first and out_cols[j] > col:
+                    out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
+                    j -= 1
+                out_cols[j + 1], rank[j + 1] = col, moved
+            for s in range(first, total):  # rank[s]: the first-seen slot now at s
+                seen[rank[s] - first] = s
     return slot, out_rows[:total], out_cols[:total]
 
 
