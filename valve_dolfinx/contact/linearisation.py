@@ -57,10 +57,11 @@ _ON_FEATURE = 1e-12
 
 
 @numba.njit(cache=True)
-def _face_terms(x, p, tri, lam, normal, dn, dlam, work):  # pragma: no cover
+def _face_terms(x, p, tri, lam, normal, grad, dn, dlam, work):  # pragma: no cover
     """``∂n/∂x_m`` ``(4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(3, 4, 3)`` of a face contact of node
-    ``p`` with triangle ``tri``, written into ``dn``, ``dlam`` (zero on entry); ``work``
-    a scratch buffer of 64 values."""
+    ``p`` with triangle ``tri`` (``grad`` ``(3, 3)``: its barycentric gradients
+    ``g_j``), written into ``dn``, ``dlam`` (zero on entry); ``work`` a scratch buffer of
+    64 values."""
     a, b, c = tri[0], tri[1], tri[2]
     e1, e2, nhat, r = work[0:3], work[3:6], work[6:9], work[9:12]
     for i in range(3):
@@ -91,16 +92,6 @@ def _face_terms(x, p, tri, lam, normal, dn, dlam, work):  # pragma: no cover
             for s in range(3):
                 dnhat[k, i, s] = (P0 * K[0, s] + P1 * K[1, s] + P2 * K[2, s]) / length
                 dn[1 + k, i, s] = side * dnhat[k, i, s]
-    # in-plane gradients g_j of the barycentric coordinates (geometry.barycentric_gradients)
-    g11 = dot3(e1[0], e1[1], e1[2], e1[0], e1[1], e1[2])
-    g12 = dot3(e1[0], e1[1], e1[2], e2[0], e2[1], e2[2])
-    g22 = dot3(e2[0], e2[1], e2[2], e2[0], e2[1], e2[2])
-    det = g11 * g22 - g12 * g12
-    grad = work[48:57].reshape((3, 3))
-    for i in range(3):
-        grad[1, i] = (g22 * e1[i] - g12 * e2[i]) / det
-        grad[2, i] = (g11 * e2[i] - g12 * e1[i]) / det
-        grad[0, i] = -grad[1, i] - grad[2, i]
     d0 = dot3(nhat[0], nhat[1], nhat[2], r[0], r[1], r[2])
     # dλ_j = g_j·(dx_p - Σ_k λ_k dx_k - d₀ dn̂)
     for j in range(3):
@@ -170,18 +161,19 @@ def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
 
 
 @numba.njit(cache=True)
-def _all_terms(x, node, support, lam, normal, edge, dn, dlam):  # pragma: no cover
+def _all_terms(x, node, support, lam, normal, edge, grad, dn, dlam):  # pragma: no cover
     work = np.empty(64)
     for i in range(len(node)):
         if edge[i]:
             _feature_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
         else:
-            _face_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i], work)
+            _face_terms(x, node[i], support[i], lam[i], normal[i], grad[i], dn[i], dlam[i],
+                        work)
 
 
 def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
-                          lam: np.ndarray, normal: np.ndarray, edge: np.ndarray
-                          ) -> tuple[np.ndarray, np.ndarray]:
+                          lam: np.ndarray, normal: np.ndarray, edge: np.ndarray,
+                          gradients: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``∂n/∂x_m`` ``(A, 4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(A, 3, 4, 3)``, ``m`` over ``[p, a, b, c]``.
 
     Parameters
@@ -194,6 +186,9 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
         direction of the force on the node ``(A, 3)``.
     edge
         ``(A,)`` True for edge or vertex contacts (closest point on the boundary).
+    gradients
+        ``(A, 3, 3)`` the barycentric gradients ``g_j`` of each row's triangle at ``x``
+        (:func:`~valve_dolfinx.contact.geometry.triangle_frames`; used by face rows).
     """
     count = len(node)
     dn = np.zeros((count, 4, 3, 3))
@@ -202,7 +197,7 @@ def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
                np.ascontiguousarray(support, dtype=np.int64),
                np.ascontiguousarray(lam, dtype=np.float64),
                np.ascontiguousarray(normal, dtype=np.float64), np.asarray(edge, dtype=np.bool_),
-               dn, dlam)
+               np.ascontiguousarray(gradients, dtype=np.float64), dn, dlam)
     return dn, dlam
 
 

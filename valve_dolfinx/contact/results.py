@@ -270,7 +270,7 @@ class ContactRows:
             self.grad_f is not None, w, G, f, c, self.blend is not None, depth,
             self.blend_scale, in_multi)
         m = ids.shape[1]
-        outer = None
+        outer = (np.empty(0, dtype=np.int64),) * 2 + (np.empty((0, 3, 3)),)
         if len(multi):
             outer = group_blocks(inverse[multi], ids[multi], Bn[multi], -(G * f * w)[multi],
                                  (w * f)[multi], wgrad_L[multi], cgrad_p[multi], num_nodes)
@@ -280,8 +280,6 @@ class ContactRows:
         acting = (f != 0.0) | (self.dfdd != 0.0)
         if self.grad_f is not None:
             acting |= np.any(self.grad_f != 0.0, axis=(1, 2))
-        if outer is None:
-            outer = (np.empty(0, dtype=np.int64),) * 2 + (np.empty((0, 3, 3)),)
         # block (r, m) = n ⊗ (B_r own_m - [r ≥ 1] φ ∂λ_{r-1}/∂x_m) + B_r φ ∂n/∂x_m, with the
         # turning direction and the sliding point (linearisation module); B_r n ⊗ own_m without
         if self.geometric is None:

@@ -109,6 +109,11 @@ class _TriangleFrames:
         normal, grad, altitudes = triangle_frames(a, b, c)
         return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes)
 
+    def gradients(self, tri: np.ndarray) -> np.ndarray:
+        """``(K, 3, 3)`` barycentric gradients ``g_j`` (``[j, axis]``) of triangles ``tri``."""
+        g1, g2 = self.grad1[:, tri].T, self.grad2[:, tri].T
+        return np.stack([-g1 - g2, g1, g2], axis=1)
+
 
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
@@ -126,7 +131,8 @@ class _RowGeometry:
     vertex contact, the law's pair weight, and the row's triangle plane: the barycentric
     coordinates of the node's projection on it, the side, the plane's normal, the sided and
     the unsided plane distance, the in-plane distance and the offset from the closest point
-    (edge rows), the smallest barycentric coordinate and the fade band (face rows)."""
+    (edge rows), the smallest barycentric coordinate and the fade band (face rows), and
+    the triangle's barycentric gradients."""
 
     edge: np.ndarray
     weight: np.ndarray
@@ -139,6 +145,7 @@ class _RowGeometry:
     plane_distance: np.ndarray
     face_lam_min: np.ndarray
     band: np.ndarray
+    plane_gradients: np.ndarray  # (A, 3, 3): g_j of the row's triangle, [j, axis]
 
 
 class SurfaceContact:
@@ -280,7 +287,7 @@ class SurfaceContact:
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
         self._history: tuple[np.ndarray, np.ndarray] | None = None
-        #: ``(x, f_ext, nodes, rows, geometry)`` of the last forces-only evaluation
+        #: ``(x, f_ext, nodes, rows, geometry, result)`` of the last forces-only evaluation
         #: (see :meth:`evaluate`)
         self._last_rows: tuple | None = None
         #: ``(x, nodes, candidates)`` of the last search (see :meth:`_candidates`)
@@ -375,7 +382,8 @@ class SurfaceContact:
         :meth:`_jacobian_terms` needs."""
         p = self.params
         clock = StepClock() if clock is None else clock
-        node, tri, d0, gap, lam, offset, plane_lam, n_tri = self._candidates(x, nodes, clock)
+        node, tri, d0, gap, lam, offset, plane_lam, n_tri, frames = self._candidates(
+            x, nodes, clock)
         s = self._side(node, tri, d0, f_ext, n_tri)
         edge = ~np.isnan(gap)
         # face contacts: signed plane distance; edge/vertex contacts: distance to the
@@ -432,7 +440,8 @@ class SurfaceContact:
             edge=edge[rows], weight=weight, plane_lam=plane_lam[rows], side=s[rows],
             plane_normal=n_tri[rows], side_distance=side_distance[rows],
             in_plane=in_plane[rows], offset=offset[rows], plane_distance=d0[rows],
-            face_lam_min=face_lam_min[rows], band=band[rows])
+            face_lam_min=face_lam_min[rows], band=band[rows],
+            plane_gradients=frames.gradients(tri))
         return contacts, geometry
 
     def _jacobian_terms(self, x: np.ndarray, f_ext: np.ndarray, contacts: ContactRows,
@@ -445,7 +454,8 @@ class SurfaceContact:
                                          contacts.normal, contacts.d)
         g = geometry
         edge = g.edge
-        dn, dlam = direction_derivatives(x, node, support, lam, normal, edge)
+        dn, dlam = direction_derivatives(x, node, support, lam, normal, edge,
+                                         g.plane_gradients)
         B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
         grad_logp = presence_gradients(
             B, np.ascontiguousarray(normal), d, p.taper > 0.0, p.cutoff, eps, edge,
@@ -468,8 +478,10 @@ class SurfaceContact:
                     ) -> tuple[np.ndarray, ...]:
         """All (node, triangle) pairs passing the geometric tests.
 
-        Returns ``node, tri``, the unsided distance ``d0``, the barycentric
-        coordinates ``(K, 3)`` and the triangle normals ``(K, 3)``.  They depend on the
+        Returns ``node, tri``, the unsided distance ``d0``, the distance ``gap`` to the
+        closest point, its barycentric coordinates ``(K, 3)``, the offset from it, those
+        of the plane projection (:meth:`_narrow`), the triangle normals ``(K, 3)`` and the
+        triangles' frames (:class:`_TriangleFrames`).  They depend on the
         positions only: a second search at the positions of the last one (a solver's
         static residual after its step's last Newton residual, with new sides and
         driving forces) returns the arrays of the first, which are not to be modified.
@@ -482,7 +494,7 @@ class SurfaceContact:
         near = self._search(xt, frames, nodes, clock)
         node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
         clock.add("narrow")
-        found = node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T
+        found = node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T, frames
         self._last_candidates = (x.copy(), nodes.copy(), found)
         return found
 
