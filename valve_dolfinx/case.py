@@ -180,6 +180,17 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     return CaseState(domain, model, root, positions, forces, report, display=display)
 
 
+def _crossed_length(state: CaseState) -> float:
+    """Length of the lines along which two leaflets' loaded surfaces cross, more than 1 mm
+    from the root wall (largest over the pairs of leaflets)."""
+    from valve_dolfinx.analysis.intersection import leaflet_intersections
+
+    valve, positions = state.display or (state.domain.valve, state.positions)
+    pairs = leaflet_intersections(positions, valve.cells, valve.cell_tags,
+                                  0.5 * state.root.diameter)
+    return max((p.inner_mm for p in pairs), default=0.0)
+
+
 def analyse_case(state: CaseState, config: CaseConfig):
     """Coaptation analysis of a solved case (on every rank; it is serial and cheap)."""
     from valve_dolfinx.analysis import analyse_coaptation
@@ -234,6 +245,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         root_diameter_mm=state.root.diameter,
         max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
         max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
+        leaflet_intersection_mm=_crossed_length(state),
         n_dofs=state.model.V.dofmap.index_map.size_global * 3,
         n_ranks=comm.size,
         mesh_size_mm=g.mesh_size,

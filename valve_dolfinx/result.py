@@ -43,6 +43,9 @@ class CaseResult:
     root_diameter_mm: float = float("nan")
     max_penetration_mm: float = float("nan")
     max_contact_layer_overlap_mm: float = float("nan")
+    #: length of the lines along which two leaflets' loaded surfaces cross, away from the
+    #: root wall (:func:`valve_dolfinx.analysis.intersection.leaflet_intersections`)
+    leaflet_intersection_mm: float = float("nan")
     n_dofs: int = 0
     n_ranks: int = 1
     wall_time_s: float = 0.0
