@@ -6,8 +6,8 @@ the part inside the valve (more than ``--wall-band`` from the root wall: the att
 lines meet at the commissures by construction) and where that part lies; ``result.json``
 keeps the largest inner length as ``leaflet_intersection_mm``.
 
-Reads the ``loaded_state.npz`` of case folders written by ``valve-dolfinx run`` or a
-study (``results/graft_sweep/cases/*``)::
+Reads the ``loaded_state.npz`` and ``result.json`` (the root diameter) of case folders
+written by ``valve-dolfinx run`` or a study (``results/graft_sweep/cases/*``)::
 
     .venv/bin/python benchmarks/intersections.py results/graft_sweep/cases/*
 """
@@ -15,6 +15,7 @@ study (``results/graft_sweep/cases/*``)::
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -35,14 +36,14 @@ def main() -> None:
     missing = []
     for folder in args.cases:
         state = folder / "loaded_state.npz"
-        if not state.is_file():
+        if not (state.is_file() and (folder / "result.json").is_file()):
             missing.append(str(folder))
             continue
         data = np.load(state)
-        x = data["positions"]
-        root_radius = float(np.max(np.hypot(x[:, 0], x[:, 1])))
-        for pair in leaflet_intersections(x, data["cells"], data["cell_tags"], root_radius,
-                                          args.wall_band):
+        result = json.loads((folder / "result.json").read_text())
+        root_radius = 0.5 * result["root_diameter_mm"]
+        for pair in leaflet_intersections(data["positions"], data["cells"], data["cell_tags"],
+                                          root_radius, args.wall_band):
             r = "" if pair.inner_radius_mm is None else "{:.1f}–{:.1f}".format(
                 *pair.inner_radius_mm)
             z = "" if pair.inner_height_mm is None else "{:.1f}–{:.1f}".format(
@@ -51,8 +52,8 @@ def main() -> None:
             print(f"| {folder.name} | {a}–{b} | {pair.total_mm:.2f} | {pair.inner_mm:.2f} "
                   f"| {r} | {z} |", flush=True)
     if missing:
-        sys.exit(f"no loaded_state.npz in {', '.join(missing)}: pass case folders written "
-                 "by `valve-dolfinx run` or a study")
+        sys.exit(f"no loaded_state.npz and result.json in {', '.join(missing)}: pass case "
+                 "folders written by `valve-dolfinx run` or a study")
 
 
 if __name__ == "__main__":
