@@ -113,6 +113,10 @@ class CaseState:
     #: reference with its two mirror images
     display: tuple | None = None
 
+    def shown(self) -> tuple:
+        """(valve, positions) that the analysis, the figures and the outputs read."""
+        return self.display or (self.domain.valve, self.positions)
+
 
 def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                progress: Callable[[dict], None] | None = None,
@@ -185,7 +189,7 @@ def _crossed_length(state: CaseState) -> float:
     from the root wall (largest over the pairs of leaflets)."""
     from valve_dolfinx.analysis.intersection import leaflet_intersections
 
-    valve, positions = state.display or (state.domain.valve, state.positions)
+    valve, positions = state.shown()
     pairs = leaflet_intersections(positions, valve.cells, valve.cell_tags,
                                   0.5 * state.root.diameter)
     return max((p.inner_mm for p in pairs), default=0.0)
@@ -195,7 +199,7 @@ def analyse_case(state: CaseState, config: CaseConfig):
     """Coaptation analysis of a solved case (on every rank; it is serial and cheap)."""
     from valve_dolfinx.analysis import analyse_coaptation
 
-    valve, positions = state.display or (state.domain.valve, state.positions)
+    valve, positions = state.shown()
     result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
                                 pixel_mm=config.orifice_pixel_mm,
                                 nodulus_length_mm=config.nodulus_length_mm)

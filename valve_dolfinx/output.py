@@ -112,7 +112,7 @@ def _write_fields(path: Path, state) -> None:
 def _write_figures(out: Path, state, result) -> None:
     from valve_dolfinx.plotting import write_case_figures
 
-    valve, positions = state.display or (state.domain.valve, state.positions)
+    valve, positions = state.shown()
     try:
         write_case_figures(out, positions, valve, state.coaptation, result,
                            mirrored=state.display is not None)

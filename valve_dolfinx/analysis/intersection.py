@@ -33,13 +33,6 @@ class LeafletIntersection:
     inner_height_mm: tuple[float, float] | None
 
 
-def _surface(points: np.ndarray, cells: np.ndarray):
-    import pyvista as pv
-
-    faces = np.hstack([np.full((len(cells), 1), 3), cells]).ravel()
-    return pv.PolyData(np.asarray(points, dtype=float), faces).clean()
-
-
 def leaflet_intersections(points: np.ndarray, cells: np.ndarray, cell_tags: np.ndarray,
                           root_radius_mm: float, wall_band_mm: float = 1.0
                           ) -> list[LeafletIntersection]:
@@ -49,7 +42,11 @@ def leaflet_intersections(points: np.ndarray, cells: np.ndarray, cell_tags: np.n
     import pyvista as pv
 
     tags = np.asarray(cell_tags)
-    surfaces = {int(t): _surface(points, cells[tags == t]) for t in np.unique(tags)}
+    points = np.asarray(points, dtype=float)
+    surfaces = {}
+    for t in np.unique(tags):
+        faces = np.hstack([np.full((np.sum(tags == t), 1), 3), cells[tags == t]]).ravel()
+        surfaces[int(t)] = pv.PolyData(points, faces).clean()
     inner_limit = root_radius_mm - wall_band_mm
     out = []
     for a, b in itertools.combinations(sorted(surfaces), 2):
@@ -62,10 +59,11 @@ def leaflet_intersections(points: np.ndarray, cells: np.ndarray, cell_tags: np.n
             ends = lines.get_cell(i).points
             length = float(np.linalg.norm(ends[-1] - ends[0]))
             mid = ends.mean(axis=0)
+            radius = float(np.hypot(mid[0], mid[1]))
             total += length
-            if np.hypot(mid[0], mid[1]) < inner_limit:
+            if radius < inner_limit:
                 inner += length
-                where.append((float(np.hypot(mid[0], mid[1])), float(mid[2])))
+                where.append((radius, float(mid[2])))
         w = np.array(where).reshape(-1, 2)
         out.append(LeafletIntersection(
             (a, b), total, inner,
