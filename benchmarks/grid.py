@@ -6,8 +6,9 @@ each case in its own single-process subprocess (``--jobs N`` at a time, default 
 through :func:`valve_dolfinx.case.run_case` with an output folder (a temporary one,
 or ``--keep DIR``), as ``valve-dolfinx run`` does.  Prints a line per case as it ends,
 then a Markdown table in grid order: converged, static residual (mN), penetration (mm),
-figure of merit (``min_coaptation_height_mm``), raw minimum, central height, regurgitant
-orifice area, root diameter, Newton iterations, wall time (s, the case's own, output
+the length along which two leaflets' surfaces cross (``leaflet_intersection_mm``), figure
+of merit (``min_coaptation_height_mm``), raw minimum, central height, coaptation area,
+regurgitant orifice area, root diameter, Newton iterations, wall time (s, the case's own, output
 included).  ``--out FILE.md`` and ``--json FILE`` keep the table and the figures.
 
 Run: ``.venv/bin/python benchmarks/grid.py --jobs 2`` (the whole grid on 2 cores;
@@ -33,9 +34,11 @@ from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_n
 #: columns of the table: (header, result key, format)
 COLUMNS = [("converged", "converged", "s"), ("residual mN", "equilibrium_residual_mN", ".3g"),
            ("penetration mm", "max_penetration_mm", ".3f"),
+           ("crossing mm", "leaflet_intersection_mm", ".2f"),
            ("min h mm", "min_coaptation_height_mm", ".2f"),
            ("raw min mm", "min_coaptation_height_raw_mm", ".2f"),
            ("central mm", "central_coaptation_height_mm", ".2f"),
+           ("area mm²", "coaptation_area_mm2", ".0f"),
            ("orifice mm²", "regurgitant_orifice_area_mm2", ".2f"),
            ("root mm", "root_diameter_mm", ".2f"), ("Newton", "newton_iterations", "d"),
            ("wall s", "wall_time_s", ".0f")]

@@ -224,10 +224,12 @@ def test_jacobian_after_a_forces_only_call_equals_a_fresh_one():
     contact.evaluate(x, f_ext, jacobian=False)
     np.testing.assert_array_equal(contact.evaluate(moved, f_ext).jac_blocks,
                                   fresh.evaluate(moved, f_ext).jac_blocks)
-    # a new history flips sides (the forces change): the kept rows of the old one are dropped
+    # sides forgotten and recorded afresh flip (the forces change): the kept rows of the old
+    # ones are dropped
     contact.evaluate(x, f_ext, jacobian=False)
-    contact.update_history(x)
-    fresh.update_history(x)
+    for model in (contact, fresh):
+        model.clear_history()
+        model.update_history(x)
     flipped = fresh.evaluate(x, f_ext)
     assert np.abs(flipped.forces - reference.forces).max() > 1.0
     np.testing.assert_array_equal(contact.evaluate(x, f_ext).forces, flipped.forces)
@@ -412,6 +414,8 @@ def smoothstep(x: float, width: float) -> float:
 def brute_force_forces(x, f_ext, triangles, body, x_prev, params):
     """All pairs, plain loops over the survivors: the contact rules written out directly.
 
+    The side of every pair is the side of the triangle's plane the node was on in
+    ``x_prev`` (the one recorded state: every pair here is close in it).
     Face rows where the node projects inside the triangle or within FACE_BAND
     (barycentric) outside it, with presence ``Π_j smoothstep(λ_j + band)``;
     edge/vertex rows (closest point on the boundary, found segment by segment)

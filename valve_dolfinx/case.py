@@ -40,7 +40,8 @@ from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 from valve_dolfinx.solvers.report import SolveReport
 
-__all__ = ["CaseState", "closure_model", "solve_case", "analyse_case", "run_case"]
+__all__ = ["CaseState", "closure_model", "solve_case", "analyse_case", "leaflet_crossing_mm",
+           "run_case"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
@@ -154,7 +155,7 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      self_exclusion_radius=SELF_EXCLUSION_FACTOR
                                      * config.contact.reach,
                                      attached_reference=valve.points,
-                                     attached_exclusion_radius=config.commissure_exclusion_mm,
+                                     seam_taper_length=config.commissure_taper_mm,
                                      boundary_band=config.free_edge_band))
         # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
         # takes it from the current positions
@@ -184,7 +185,7 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     return CaseState(domain, model, root, positions, forces, report, display=display)
 
 
-def _crossed_length(state: CaseState) -> float:
+def leaflet_crossing_mm(state: CaseState) -> float:
     """Length of the lines along which two leaflets' loaded surfaces cross, more than 1 mm
     from the root wall (largest over the pairs of leaflets)."""
     from valve_dolfinx.analysis.intersection import leaflet_intersections
@@ -237,6 +238,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
     report = state.report
     last = report.history[-1] if report.history else {}
     fields_ = coaptation.result_fields()
+    crossing = leaflet_crossing_mm(state)
     result = CaseResult(
         graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
         converged=bool(report.converged),
@@ -245,11 +247,14 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         central_coaptation_height_mm=fields_["central_coaptation_height_mm"],
         coaptation_area_mm2=fields_["coaptation_area_mm2"],
         regurgitant_orifice_area_mm2=fields_["regurgitant_orifice_area_mm2"],
-        competent=bool(fields_["competent"]) and bool(report.converged),
+        # a seal is claimed only for an equilibrium whose leaflets do not pass through each
+        # other (crossing lines shorter than one element)
+        competent=(bool(fields_["competent"]) and bool(report.converged)
+                   and crossing < g.mesh_size),
         root_diameter_mm=state.root.diameter,
         max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
         max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
-        leaflet_intersection_mm=_crossed_length(state),
+        leaflet_intersection_mm=crossing,
         n_dofs=state.model.V.dofmap.index_map.size_global * 3,
         n_ranks=comm.size,
         mesh_size_mm=g.mesh_size,

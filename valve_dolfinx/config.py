@@ -62,10 +62,12 @@ MMHG_TO_KPA = 0.133322
 #: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
 #: The side of every node-triangle pair, between leaflets as within one, is the side the node
 #: approaches from (recorded at the last accepted state), whichever face of the triangle that is.
-VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05)
-#: leaflets never contact each other within this distance (mm) of where they are sewn
-#: together, measured on the unloaded valve (see SurfaceContact: attached_reference)
-COMMISSURE_EXCLUSION_MM = 2.5
+VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05,
+                                  crossing_stiffness=1000.0)
+#: the leaflets' contact thickness against each other grows from 0 at the commissure where
+#: they are sewn together to its full value at this distance (mm), measured on the unloaded
+#: valve (see SurfaceContact: seam_taper_length)
+COMMISSURE_TAPER_MM = 2.5
 #: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
 #: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
 FREE_EDGE_BAND = 1.0
@@ -127,7 +129,7 @@ class CaseConfig:
     coaptation_threshold_mm: float = 0.5
     orifice_pixel_mm: float = 0.05
     nodulus_length_mm: float = DEFAULT_NODULUS_LENGTH_MM
-    commissure_exclusion_mm: float = COMMISSURE_EXCLUSION_MM
+    commissure_taper_mm: float = COMMISSURE_TAPER_MM
     free_edge_band: float = FREE_EDGE_BAND
     quadrature_degree: int = 1
     symmetric_reference: bool = False
@@ -140,6 +142,8 @@ class CaseConfig:
                     low_open=True, unit="mm")
         check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
                     hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
+        check_range("commissure_taper_mm", self.commissure_taper_mm, 0.0, 10.0, unit="mm",
+                    hint="0 gives the full contact thickness up to the commissures")
         if self.solver not in SOLVERS:
             raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
                                  "'ptc' (pseudo-transient continuation, the default) or "
@@ -192,8 +196,9 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "orifice_pixel_mm": ("mm", "pixel size of the regurgitant orifice map"),
         "nodulus_length_mm": ("mm", "free-edge length at the triple point treated as the "
                               "nodulus of Arantius by the coaptation heights (0: none)"),
-        "commissure_exclusion_mm": ("mm", "leaflets do not contact each other this close "
-                                    "to where they are sewn together"),
+        "commissure_taper_mm": ("mm", "the leaflets' contact thickness against each other "
+                                "grows from 0 where they are sewn together (the commissures) "
+                                "to its full value at this distance"),
         "free_edge_band": ("triangle heights", "face contact with a neighbour fades out "
                            "over this band beyond its free edge"),
         "quadrature_degree": ("", "quadrature degree of the membrane forms (1 is exact "

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["merge_exclusions", "reference_neighbours", "triangle_halo", "vertex_adjacency"]
+__all__ = ["merge_exclusions", "reference_neighbours", "seam_distances", "triangle_halo",
+           "vertex_adjacency"]
 
 
 def vertex_adjacency(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
@@ -88,3 +89,47 @@ def merge_exclusions(halo: np.ndarray, extra: list[np.ndarray]) -> np.ndarray:
         table[i, :len(r)] = r
     return table
 
+
+
+def seam_distances(triangles: np.ndarray, body: np.ndarray, placed: np.ndarray,
+                   num_bodies: int) -> np.ndarray:
+    """``(N, B)`` distance of every node from the seam its body shares with each body.
+
+    Two bodies are sewn together where they share nodes (the commissures of the valve):
+    the seam is the set of edges (and lone nodes) common to both.  Entry ``[p, b]`` is
+    the distance, in the ``placed`` state ``(N, 3)``, from node ``p`` to the seam between
+    its own body (the lowest body among its triangles) and body ``b``: ``inf`` where the two
+    share no node, and for ``b`` its own body.
+    """
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    num_nodes = len(placed)
+    member = np.zeros((num_nodes, num_bodies), dtype=bool)
+    for k in range(3):
+        member[triangles[:, k], body] = True
+    own = np.argmax(member, axis=1)
+    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.unique(edges, axis=0)
+    out = np.full((num_nodes, num_bodies), np.inf)
+    for a in range(num_bodies):
+        for b in range(a + 1, num_bodies):
+            shared = member[:, a] & member[:, b]
+            if not shared.any():
+                continue
+            seam = edges[shared[edges[:, 0]] & shared[edges[:, 1]]]
+            lone = np.setdiff1d(np.flatnonzero(shared), seam.ravel())
+            seam = np.concatenate([seam, np.stack([lone, lone], axis=1)])
+            start, end = placed[seam[:, 0]], placed[seam[:, 1]]
+            for one, other in ((a, b), (b, a)):
+                nodes = np.flatnonzero(own == one)
+                out[nodes, other] = _segment_distances(placed[nodes], start, end).min(axis=1)
+    return out
+
+
+def _segment_distances(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``(P, S)`` distances of points from segments (a segment may be a single point)."""
+    along = end - start
+    length2 = np.einsum("ij,ij->i", along, along)
+    rel = points[:, None, :] - start[None, :, :]
+    t = np.einsum("psi,si->ps", rel, along) / np.where(length2 > 0.0, length2, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    return np.linalg.norm(rel - t[:, :, None] * along[None, :, :], axis=2)

@@ -241,12 +241,14 @@ def contact_force_slope_in_F(d: np.ndarray, F: np.ndarray, k: float, h: float,
     return out
 
 
-def crossing_barrier(d: np.ndarray, params: ContactParameters
+def crossing_barrier(d: np.ndarray, params: ContactParameters,
+                     thickness: np.ndarray | float | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Barrier force against crossing mid-surfaces and its derivative ``df/dd``.
 
-    With the crossing depth ``e = -(d + t_c)`` (``t_c`` the contact thickness,
-    ``d`` the law's distance) and ``w`` the onset width:
+    With the crossing depth ``e = -(d + t_c)`` (``t_c`` the contact thickness, the
+    parameters' unless ``thickness`` gives it, per distance; ``d`` the law's distance) and
+    ``w`` the onset width:
 
     .. math::
 
@@ -257,18 +259,19 @@ def crossing_barrier(d: np.ndarray, params: ContactParameters
     """
     d = np.asarray(d, dtype=float)
     k, w = params.crossing_stiffness, params.crossing_width
-    e = -(d + params.thickness)
+    e = -(d + (params.thickness if thickness is None else thickness))
     f = k * np.where(e < w, 0.5 * np.clip(e, 0.0, None) ** 2 / w, e - 0.5 * w)
     dfdd = -k * np.clip(e / w, 0.0, 1.0)
     return f, dfdd
 
 
-def law_force(d: np.ndarray, F: np.ndarray, params: ContactParameters
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`contact_force` with the parameters' ``k``, ``h``, taper, plus the crossing barrier."""
+def law_force(d: np.ndarray, F: np.ndarray, params: ContactParameters,
+              thickness: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`contact_force` with the parameters' ``k``, ``h``, taper, plus the crossing barrier
+    (:func:`crossing_barrier`, with the contact ``thickness`` of each distance if given)."""
     f, dfdd = contact_force(d, F, params.stiffness, params.cutoff, params.taper)
     if params.crossing_stiffness > 0.0:
-        fb, dfb = crossing_barrier(d, params)
+        fb, dfb = crossing_barrier(d, params, thickness)
         f, dfdd = f + fb, dfdd + dfb
     return f, dfdd
 
@@ -294,8 +297,10 @@ def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParamete
 
 
 def law_force_from_load(d: np.ndarray, f_ext: np.ndarray, normal: np.ndarray,
-                        params: ContactParameters) -> tuple[np.ndarray, np.ndarray]:
+                        params: ContactParameters,
+                        thickness: np.ndarray | float | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`law_force` and its slope in ``d`` with ``F`` the :func:`driving_force` of the
     external nodal forces ``f_ext`` ``(K, 3)`` against the sided normals ``normal``."""
     F = driving_force(f_ext, normal, params)
-    return law_force(d, F, params)
+    return law_force(d, F, params, thickness)

@@ -163,9 +163,9 @@ class ContactRows:
     #: (:func:`~valve_dolfinx.contact.linearisation.direction_derivatives`): the turning
     #: direction and the sliding contact point, for the geometric Jacobian blocks
     geometric: tuple[np.ndarray, np.ndarray] | None = None
-    #: distance of the contact surface from the mid-surface (mm): d + offset is the gap
-    #: between the mid-surfaces
-    surface_offset: float = 0.0
+    #: distance of the contact surface from the mid-surface (mm), for all rows or per row:
+    #: d + offset is the gap between the mid-surfaces
+    surface_offset: float | np.ndarray = 0.0
 
     def _group_presence(self, inverse: np.ndarray | None = None
                         ) -> tuple[np.ndarray, np.ndarray]:
@@ -310,5 +310,5 @@ class ContactRows:
             max_penetration=float(np.max(-self.d[over], initial=0.0)),
             total_force=float(magnitude.sum()),
             pairs=np.stack([self.node[active], self.partner[active]], axis=1),
-            max_crossing=float(np.max(-(self.d[over] + self.surface_offset), initial=0.0)),
+            max_crossing=float(np.max(-(self.d + self.surface_offset)[over], initial=0.0)),
         )

@@ -37,13 +37,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
-from valve_dolfinx.contact.exclusions import merge_exclusions, reference_neighbours, triangle_halo
+from valve_dolfinx.contact.exclusions import (
+    merge_exclusions,
+    reference_neighbours,
+    seam_distances,
+    triangle_halo,
+)
 from valve_dolfinx.contact.geometry import (
     closest_point_on_triangles,
     triangle_frames,
-    triangle_normals,
 )
-from valve_dolfinx.contact.kernels import near_pairs, plane_distances, presence_gradients
+from valve_dolfinx.contact.kernels import near_pairs, presence_gradients
 from valve_dolfinx.contact.law import (
     DEFAULT_PARAMETERS,
     ContactParameters,
@@ -58,6 +62,7 @@ from valve_dolfinx.contact.results import (
     check_nodes,
     check_positions,
 )
+from valve_dolfinx.contact.sides import SideMemory, adjacent_triangles
 from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["FACE_BAND", "SurfaceContact"]
@@ -81,9 +86,10 @@ PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
 #: Safety margin (mm) of the lower bound on a node's distance to a triangle used to skip
 #: the exact closest-point computation; far above the bound's rounding error.
 _BOUND_MARGIN = 1e-6
-#: Below this |(x_prev - x_prev,0)·n_prev| (mm) the recorded state does not
-#: tell the side of a node; the pressure direction decides instead.
-SIDE_TOLERANCE = 1e-12
+#: A (node, triangle) pair keeps its side while the node stays within this many search
+#: distances of the triangle at the accepted states (see :mod:`~valve_dolfinx.contact.sides`):
+#: farther than a pseudo-time step moves a node
+TRACKING_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -157,12 +163,18 @@ class SurfaceContact:
     of the nodes it shares an edge with).
 
     **Sidedness.**  Contact only makes sense on one side of a triangle: the
-    side the node comes from.  With a recorded state (:meth:`update_history`),
-    :math:`s = \\operatorname{sign}((x^{prev}_p - x^{prev}_{t_0})\\cdot n^{prev}_t)`;
-    without one, or when that is below 1e-12 mm, the node comes from the side
-    opposite to where its pressure force pushes it,
-    :math:`s = -\\operatorname{sign}(f_{ext,p}\\cdot n_t)`; when that too is
-    zero, the node's current side.  The sided normal is :math:`n = s\\,n_t` and
+    side the node comes from, remembered while the pair stays close
+    (:mod:`~valve_dolfinx.contact.sides`).  Each accepted state
+    (:meth:`update_history`) records the side of every pair within
+    ``TRACKING_FACTOR`` search distances of each other: a pair that was
+    remembered keeps its side, however far the node has been pushed or pulled
+    through the triangle since; a new pair takes the side its node has on an
+    adjacent triangle of the same body, else the side it is on.  Between two
+    records a pair that is not remembered takes the same rule at the current
+    positions.  Before the first record the node comes from the side opposite
+    to where its pressure force pushes it,
+    :math:`s = -\\operatorname{sign}(f_{ext,p}\\cdot n_t)` (its current side
+    where that is zero).  The sided normal is :math:`n = s\\,n_t` and
     :math:`d = (x_p - x_{t_0})\\cdot n`.
     The rule is the same within a leaflet and between leaflets, on either face
     of a triangle (a graft sliding below its neighbours meets their aortic
@@ -208,13 +220,16 @@ class SurfaceContact:
         genuine self-contact; near a crease (a leaflet's V-shaped tip at the
         valve centre) they are within reach across the crease, and treating
         them as contacts makes the two sides of the crease fight.
-    attached_reference, attached_exclusion_radius
+    attached_reference, seam_taper_length
         ``(N, 3)`` node positions of the assembled, unloaded structure (the
-        leaflets wrapped on the root) and a radius (mm): a node never contacts
-        another body's triangles within that radius of it there.  Leaflets
-        sewn together at a commissure share its nodes; next to it they close
-        like the pages of a book, closer than the contact thickness however
-        they deform, so the layers would fight the suture line.
+        leaflets wrapped on the root) and a length (mm).  Bodies sewn together
+        (leaflets sharing the nodes of a commissure) close next to their seam like
+        the pages of a book, closer than the contact thickness: a node's contact
+        thickness against another body grows linearly with its distance from
+        their seam in that state, from 0 at the seam to the full thickness at
+        ``seam_taper_length`` (:func:`~valve_dolfinx.contact.exclusions.seam_distances`),
+        so that the layers neither fight the suture line nor let the pages pass
+        through each other beside it.
     boundary_band
         Width (barycentric, i.e. in triangle heights) of the band beyond the
         surface's boundary edges over which face contacts with *other* bodies
@@ -233,7 +248,7 @@ class SurfaceContact:
                  reference: np.ndarray | None = None,
                  self_exclusion_radius: float = 0.0,
                  attached_reference: np.ndarray | None = None,
-                 attached_exclusion_radius: float = 0.0,
+                 seam_taper_length: float = 0.0,
                  boundary_band: float = FACE_BAND) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
@@ -267,14 +282,13 @@ class SurfaceContact:
             extra = reference_neighbours(triangles, reference, self.triangle_body,
                                          self_exclusion_radius)
             self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
-        if attached_reference is not None and attached_exclusion_radius > 0.0:
+        #: ``(N, B)`` factor on the contact thickness of each node against each body: its
+        #: distance from their seam over ``seam_taper_length``, at most 1 (1 against its own)
+        self.thickness_scale = np.ones((self.num_nodes, len(self.body_labels)))
+        if attached_reference is not None and seam_taper_length > 0.0:
             placed = check_positions(attached_reference, self.num_nodes, "attached_reference")
-            extra = reference_neighbours(triangles, placed[triangles],
-                                         np.zeros(len(triangles), dtype=np.int64),
-                                         attached_exclusion_radius)
-            # other bodies only: self-contact keeps its own (flat reference) rule
-            extra = [e[self.node_body[e] != self.triangle_body[t]] for t, e in enumerate(extra)]
-            self.excluded_nodes = merge_exclusions(self.excluded_nodes, extra)
+            seam = seam_distances(triangles, self.triangle_body, placed, len(self.body_labels))
+            self.thickness_scale = np.minimum(seam / seam_taper_length, 1.0)
         #: ``(M, 3)`` band (barycentric) beyond the side opposite each vertex over which face
         #: rows of *other* bodies fade out: ``boundary_band`` on the surface's boundary
         #: (free edges), ``FACE_BAND`` on interior sides (the neighbour takes over there)
@@ -286,7 +300,10 @@ class SurfaceContact:
                                            return_counts=True)
             boundary = (counts[inverse.ravel()] == 1).reshape(-1, 3)
             self.side_band[boundary] = float(boundary_band)
-        self._history: tuple[np.ndarray, np.ndarray] | None = None
+        #: same-body triangles around each triangle, which pass a node's side on
+        self.adjacent = adjacent_triangles(triangles, self.triangle_body)
+        #: sides of the pairs close at the last accepted state (None: no state recorded)
+        self.memory: SideMemory | None = None
         #: ``(x, f_ext, nodes, rows, geometry, result)`` of the last forces-only evaluation
         #: (see :meth:`evaluate`)
         self._last_rows: tuple | None = None
@@ -303,11 +320,34 @@ class SurfaceContact:
                   self.excluded_nodes.shape[1])
 
     def update_history(self, x: np.ndarray) -> None:
-        """Record the positions of the last accepted state; they fix each node's side."""
-        x = check_positions(x, self.num_nodes, "x").copy()
-        t = self.triangles
-        normals, _ = triangle_normals(x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
-        self._history = (x, normals)
+        """Record an accepted state: remember the side of every pair close in it.
+
+        A node keeps its remembered sides with a body only while it lies over that body's
+        surface: where the nearest of its pairs with the body is not a face whose plane
+        it projects into (beyond a free edge, or off a convex ridge), it has nothing it
+        could have passed through, and its pairs with that body take the sides it is on
+        now -- it may go round the free edge and meet the other face.  (They are still
+        recorded, so that within the next step no side flips as the node moves.)"""
+        x = check_positions(x, self.num_nodes, "x")
+        reach = TRACKING_FACTOR * self.search_distance
+        xt = np.ascontiguousarray(x.T)
+        frames = _TriangleFrames.at(xt, self.triangles)
+        near = self._search(xt, frames, np.arange(self.num_nodes), StepClock(),
+                            distance=reach, reach=reach)
+        node, tri, d0, gap, _, _, plane_lam = self._narrow(xt, frames, *near, reach=reach)
+        face = np.isnan(gap)
+        inside = face & (plane_lam.min(axis=1, initial=np.inf) >= -INSIDE_TOLERANCE)
+        # the distance to the triangle: the plane's where the node projects into it, the
+        # closest boundary point's otherwise (a face row in its band does not measure it)
+        distance = np.where(inside, np.abs(d0), np.where(face, np.inf, gap))
+        group = node * len(self.body_labels) + self.triangle_body[tri]
+        order = np.lexsort((~inside, distance, group))  # per group, the nearest pair first
+        first = order[np.r_[True, group[order][1:] != group[order][:-1]]] if len(order) \
+            else order
+        over = np.isin(group, group[first[inside[first]]])
+        side = self._remembered_side(node, tri, d0)
+        side = np.where(over, side, np.where(d0 < 0.0, -1.0, 1.0))
+        self.memory = SideMemory.of(node, tri, side, len(self.triangles))
         self._last_rows = None
 
     def forget_search(self) -> None:
@@ -317,8 +357,8 @@ class SurfaceContact:
         self._last_rows = None
 
     def clear_history(self) -> None:
-        """Forget the recorded state (sides then follow the pressure direction)."""
-        self._history = None
+        """Forget the recorded sides (they then follow the pressure direction)."""
+        self.memory = None
         self._last_rows = None
 
     #: Record CPU (process) time laps in :attr:`cpu_timings` too (for benchmarks: each
@@ -388,7 +428,8 @@ class SurfaceContact:
         edge = ~np.isnan(gap)
         # face contacts: signed plane distance; edge/vertex contacts: distance to the
         # closest point, only for nodes on their own side of the triangle's plane
-        d = np.where(edge, gap, s * d0) - p.thickness
+        thickness = p.thickness * self.thickness_scale[node, self.triangle_body[tri]]
+        d = np.where(edge, gap, s * d0) - thickness
         normal = s[:, None] * n_tri
         edge_normal = offset[edge] / np.maximum(gap[edge], 1e-300)[:, None]
         normal[edge] = edge_normal
@@ -422,7 +463,7 @@ class SurfaceContact:
             v[kept] for v in (node, tri, d, weight, presence, normal))
         clock.add("narrow")
         blend = self._blend_weights(node, tri, d, presence)
-        f, dfdd = law_force_from_load(d, f_ext[node], normal, p)
+        f, dfdd = law_force_from_load(d, f_ext[node], normal, p, thickness[kept])
         f, dfdd = weight * f, weight * dfdd
         # rows with no force stay: their distance still moves the blending weights
         a = np.flatnonzero((f > 0.0) | (dfdd != 0.0) | (blend < 1.0))
@@ -435,7 +476,7 @@ class SurfaceContact:
         contacts = ContactRows(node=node, support=support, weights=lam[rows], normal=normal, d=d,
                                f=f, dfdd=dfdd, partner=tri, group=group, blend=blend,
                                blend_scale=eps, blend_cutoff=p.cutoff, presence=presence,
-                               surface_offset=p.thickness)
+                               surface_offset=thickness[rows])
         geometry = _RowGeometry(
             edge=edge[rows], weight=weight, plane_lam=plane_lam[rows], side=s[rows],
             plane_normal=n_tri[rows], side_distance=side_distance[rows],
@@ -499,9 +540,15 @@ class SurfaceContact:
         return found
 
     def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
-                clock: StepClock) -> tuple[np.ndarray, ...]:
-        """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays)."""
-        lo, hi = padded_bounds(xt, self.triangles, self.search_distance, frames.normal,
+                clock: StepClock, distance: float | None = None, reach: float | None = None
+                ) -> tuple[np.ndarray, ...]:
+        """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays).
+
+        ``distance`` and ``reach`` (default: the search distance and the law's reach) bound
+        the pairs' plane distance and their distance from the triangle's boundary."""
+        distance = self.search_distance if distance is None else distance
+        reach = self.params.reach if reach is None else reach
+        lo, hi = padded_bounds(xt, self.triangles, distance, frames.normal,
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
@@ -509,7 +556,7 @@ class SurfaceContact:
         # wide beyond a free edge): widen by that too, or a large triangle's band is cut
         # off by the box and its row appears with a jump
         extent = self.side_band * np.asarray(frames.altitudes).T
-        width = np.maximum(self.params.reach, extent.max(axis=1))
+        width = np.maximum(reach, extent.max(axis=1))
         lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
@@ -521,12 +568,12 @@ class SurfaceContact:
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
-            found.append(self._near(xt, frames, node, tri + first))
+            found.append(self._near(xt, frames, node, tri + first, distance, reach))
             clock.add("narrow")
         return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
 
     def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-              tri: np.ndarray) -> tuple[np.ndarray, ...]:
+              tri: np.ndarray, distance: float, reach: float) -> tuple[np.ndarray, ...]:
         """The cheap tests of :meth:`_narrow`: near the plane, within reach of the triangle
         or in its fade band, and not in its neighbourhood
         (:func:`~valve_dolfinx.contact.kernels.near_pairs`).  Returns ``node, tri``, the
@@ -536,11 +583,11 @@ class SurfaceContact:
         return near_pairs(node, tri, xt, frames.origin, frames.normal, frames.grad1,
                           frames.grad2, frames.altitudes, self.node_body, self.triangle_body,
                           self.side_band, FACE_BAND, self.excluded_nodes,
-                          self.search_distance, self.params.reach)
+                          distance, reach)
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
                 tri: np.ndarray, d0: np.ndarray, lam: np.ndarray, beyond: np.ndarray,
-                in_band: np.ndarray) -> tuple[np.ndarray, ...]:
+                in_band: np.ndarray, reach: float | None = None) -> tuple[np.ndarray, ...]:
         """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
 
         A node whose projection falls inside the triangle meets its face: the
@@ -560,7 +607,7 @@ class SurfaceContact:
         """
         lam_min = lam.min(axis=1)
         n = frames.normal
-        h = self.params.reach
+        h = self.params.reach if reach is None else reach
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
@@ -573,7 +620,7 @@ class SurfaceContact:
                                              xo[t[:, 2]])
         v = xo[node[out]] - q
         gap = np.linalg.norm(v, axis=1)
-        near_edge = gap < self.params.reach
+        near_edge = gap < h
         out, bary, v, gap = out[near_edge], bary[near_edge], v[near_edge], gap[near_edge]
         rows = np.concatenate([face, out])
         return (node[rows], tri[rows], d0[rows],
@@ -589,35 +636,23 @@ class SurfaceContact:
 
     def _side(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray, f_ext: np.ndarray,
               n_tri: np.ndarray) -> np.ndarray:
-        """Side ``s = ±1`` of each node w.r.t. each triangle (see the class docstring).
-
-        The recorded state decides only for pairs that were already close then
-        (within twice the search distance of the triangle): their side is the
-        one the node was on, so a node that has crossed a little is pushed back.
-        A pair that was not close is a new contact; as no node moves through a
-        surface unseen in one step (the solver bounds the step's motion), the
-        node is on its own side now.  The sign of the recorded *plane* distance
-        of a far pair is meaningless -- a node beside a curved sheet can lie
-        behind a triangle's extended plane while approaching its front -- and
-        using it pushed such nodes through the sheet.
-        """
-        from_position = np.where(d0 < 0.0, -1.0, 1.0)
-        if self._history is None:
+        """Side ``s = ±1`` of each node w.r.t. each triangle (see the class docstring):
+        remembered, passed on from an adjacent triangle, or the node's present side; before
+        any recorded state, opposite to the node's pressure force."""
+        if self.memory is None:
             from_pressure = -np.sign(_rowdot(f_ext[node], n_tri))
-            return np.where(from_pressure != 0.0, from_pressure, from_position)
-        x_prev, n_prev = self._history
-        recorded = plane_distances(node, tri, self.triangles, x_prev, n_prev)
-        side = from_position.copy()
-        # only a pair whose recorded side differs from its present one needs the (costly)
-        # closest-point test: for all others both answers agree
-        differ = np.flatnonzero((np.abs(recorded) >= SIDE_TOLERANCE)
-                                & (np.sign(recorded) != from_position))
-        p, t = node[differ], self.triangles[tri[differ]]
-        q, _ = closest_point_on_triangles(x_prev[p], x_prev[t[:, 0]], x_prev[t[:, 1]],
-                                          x_prev[t[:, 2]])
-        was_close = np.linalg.norm(x_prev[p] - q, axis=1) < 2.0 * self.params.search_distance
-        side[differ[was_close]] = np.sign(recorded[differ[was_close]])
-        return side
+            return np.where(from_pressure != 0.0, from_pressure, np.where(d0 < 0.0, -1.0, 1.0))
+        return self._remembered_side(node, tri, d0)
+
+    def _remembered_side(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray
+                         ) -> np.ndarray:
+        """The memory's side of each pair (:meth:`SideMemory.lookup`), else the side of the
+        triangle's plane the node is on (``d0``, its unsided plane distance)."""
+        present = np.where(d0 < 0.0, -1.0, 1.0)
+        if self.memory is None:
+            return present
+        side = self.memory.lookup(node, tri, self.adjacent)
+        return np.where(side != 0, side.astype(float), present)
 
     def _pair_weight(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """Weight of each (node, triangle) pair under the pairing rule (see ContactParameters).
