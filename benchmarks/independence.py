@@ -6,7 +6,8 @@ Prints, at the default mesh, the figure of merit (minimum native coaptation heig
   (``mass_length_mm`` ÷ 4): target |Δ| < 0.02 mm;
 * W21/H27 placed slack bulged 0.75 mm towards the valve axis and 0.75 mm away from it
   (1.5 mm apart at the graft's free-edge midpoint, SPEC §1): target |Δ| < 0.05 mm in the
-  figure of merit and < 0.1 mm in every loaded node position::
+  figure of merit and < 0.1 mm in every loaded node position, compared directly or with
+  one state mirrored (:func:`~valve_dolfinx.geometry.symmetry.distance_up_to_mirror`)::
 
     .venv/bin/python benchmarks/independence.py [--mesh-size 0.8]
 """
@@ -21,6 +22,7 @@ import numpy as np
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.case import analyse_case, solve_case
 from valve_dolfinx.config import CaseConfig
+from valve_dolfinx.geometry.symmetry import distance_up_to_mirror
 from valve_dolfinx.geometry.valve import ValveParameters
 
 
@@ -67,10 +69,11 @@ def main() -> None:
     graft = next(p for p in valve_in.leaflets if p.is_graft)
     mid = graft.nodes[graft.midline_free_edge_node]
     apart = np.linalg.norm(valve_in.points[mid] - valve_out.points[mid])
-    motion = np.max(np.linalg.norm(s_in.positions - s_out.positions, axis=1))
+    direct, mirror = distance_up_to_mirror(valve_in, s_in.positions, s_out.positions)
     print(f"placements {apart:.2f} mm apart at the graft's free-edge midpoint: "
           f"|Δ figure of merit| = {abs(f_in - f_out):.4f} mm (target < 0.05 mm), "
-          f"largest nodal distance {motion:.4f} mm (target < 0.1 mm)")
+          f"largest nodal distance {direct:.4f} mm, {mirror:.4f} mm to the other's mirror "
+          f"image (target: the smaller < 0.1 mm)")
 
 
 if __name__ == "__main__":

@@ -349,3 +349,19 @@ def test_save_load_roundtrip(valve, tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a mesh")
     with pytest.raises(MeshError, match="regenerate"):
         load_valve_mesh(tmp_path / "junk.npz")
+
+
+def test_graft_valve_states_compare_up_to_its_mirror_symmetry(graft_valve):
+    """The graft valve is its own mirror image in the plane through the axis and the graft's
+    midline (θ = 240°).  A state a = x + 1 mm across that plane and its mirror image
+    b = x − 1 mm across it (node by node) are 2 mm apart directly and 0 up to the mirror."""
+    from valve_dolfinx.geometry.symmetry import distance_up_to_mirror
+
+    x = graft_valve.points
+    theta = np.radians(240.0)
+    across = np.array([-np.sin(theta), np.cos(theta), 0.0])
+    a, b = x + across, x - across
+    direct, mirror = distance_up_to_mirror(graft_valve, a, b)
+    assert direct == pytest.approx(2.0, abs=1e-12)
+    assert mirror < 1e-9
+    assert distance_up_to_mirror(graft_valve, a, a) == (0.0, pytest.approx(2.0, abs=1e-9))

@@ -5,7 +5,9 @@ two planes through the valve axis at ±60° that its neighbours mirror it across
 :func:`single_leaflet` cuts that leaflet out of a valve mesh,
 :func:`symmetry_planes` gives the planes, and :func:`mirror_leaflet` rebuilds a
 three-leaflet valve from the solved leaflet so that the coaptation analysis and
-the figures treat it as the full valve.
+the figures treat it as the full valve.  :func:`distance_up_to_mirror` compares two
+loaded states of a valve that is mirror-symmetric about the plane through the axis and
+its graft's midline, whose loaded state need not be.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from valve_dolfinx.geometry.valve import LEAFLET_TAGS, ValveMesh
 
-__all__ = ["single_leaflet", "symmetry_planes", "mirror_leaflet"]
+__all__ = ["single_leaflet", "symmetry_planes", "mirror_leaflet", "distance_up_to_mirror"]
 
 
 def single_leaflet(valve: ValveMesh) -> ValveMesh:
@@ -82,3 +84,31 @@ def mirror_leaflet(valve: ValveMesh, positions: np.ndarray) -> tuple[ValveMesh, 
                          edge_tags=np.tile(valve.edge_tags, 3), leaflets=tuple(patches),
                          parameters=valve.parameters)
     return mirrored, np.concatenate(all_pos)
+
+
+def distance_up_to_mirror(valve: ValveMesh, a: np.ndarray, b: np.ndarray,
+                          tolerance: float = 1e-9) -> tuple[float, float]:
+    """Largest nodal distance between two loaded states ``a`` and ``b`` ``(N, 3)`` of a graft
+    valve: directly, and with ``b`` mirrored in the plane through the axis and the graft's
+    free-edge midpoint.
+
+    A graft valve is mirror-symmetric about that plane (the two coronary leaflets are
+    mirror images of each other), but its loaded state may lean to one side, and two runs
+    can reach two mirror images of one state.  The mesh must be its own mirror image
+    (every node's image a node, within ``tolerance`` mm); raises ``ValueError`` otherwise.
+    """
+    from scipy.spatial import cKDTree
+
+    graft = next(p for p in valve.leaflets if p.is_graft)
+    mid = valve.points[graft.nodes[graft.midline_free_edge_node]]
+    across = np.array([-mid[1], mid[0], 0.0]) / math.hypot(mid[0], mid[1])
+
+    def mirrored(x: np.ndarray) -> np.ndarray:
+        return x - 2.0 * np.outer(x @ across, across)
+
+    gap, image = cKDTree(valve.points).query(mirrored(valve.points))
+    if gap.max() > tolerance:
+        raise ValueError(f"the mesh is not its own mirror image ({gap.max():.3g} mm)")
+    direct = float(np.linalg.norm(a - b, axis=1).max())
+    mirror = float(np.linalg.norm(a - mirrored(b[image]), axis=1).max())
+    return direct, mirror
