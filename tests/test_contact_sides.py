@@ -155,7 +155,7 @@ def test_a_node_that_separated_meets_the_sheet_afresh_on_its_other_face():
 
 def test_a_node_that_goes_round_the_free_edge_meets_the_other_face():
     """A node over the strip, then beyond its edge y = 1 (0.3 mm out, 0.05 mm below the
-    plane: within the tracking distance, but over nothing it could have passed through),
+    plane: over nothing it could have passed through),
     then back under the strip: it takes the side it is on beyond the edge, and pressed up
     onto the back face it is held off it, f = F·e^{−k·d/F} downwards (d = 0.05 mm), not
     pulled up through the strip to the face it first came from."""

@@ -86,9 +86,9 @@ PRISM_SLACK = 10.0 * INSIDE_TOLERANCE
 #: Safety margin (mm) of the lower bound on a node's distance to a triangle used to skip
 #: the exact closest-point computation; far above the bound's rounding error.
 _BOUND_MARGIN = 1e-6
-#: A (node, triangle) pair keeps its side while the node stays within this many search
-#: distances of the triangle at the accepted states (see :mod:`~valve_dolfinx.contact.sides`):
-#: farther than a pseudo-time step moves a node
+#: A (node, triangle) pair keeps its side while the node stays over the triangle within this
+#: many search distances of its plane at the accepted states (see
+#: :mod:`~valve_dolfinx.contact.sides`): farther than a pseudo-time step moves a node
 TRACKING_FACTOR = 2.0
 
 
@@ -165,8 +165,9 @@ class SurfaceContact:
     **Sidedness.**  Contact only makes sense on one side of a triangle: the
     side the node comes from, remembered while the pair stays close
     (:mod:`~valve_dolfinx.contact.sides`).  Each accepted state
-    (:meth:`update_history`) records the side of every pair within
-    ``TRACKING_FACTOR`` search distances of each other: a pair that was
+    (:meth:`update_history`) records the side of every pair close in it
+    (the node over the triangle within ``TRACKING_FACTOR`` search distances of
+    its plane, or within the law's reach of its boundary): a pair that was
     remembered keeps its side, however far the node has been pushed or pulled
     through the triangle since; a new pair takes the side its node has on an
     adjacent triangle of the same body, else the side it is on.  Between two
@@ -329,12 +330,14 @@ class SurfaceContact:
         now -- it may go round the free edge and meet the other face.  (They are still
         recorded, so that within the next step no side flips as the node moves.)"""
         x = check_positions(x, self.num_nodes, "x")
-        reach = TRACKING_FACTOR * self.search_distance
         xt = np.ascontiguousarray(x.T)
         frames = _TriangleFrames.at(xt, self.triangles)
+        # faces within the tracking distance; edges and vertices within the law's reach (a
+        # node beyond it of a triangle's boundary feels no force from it, and takes its side
+        # from the adjacent faces when it slides over them)
         near = self._search(xt, frames, np.arange(self.num_nodes), StepClock(),
-                            distance=reach, reach=reach)
-        node, tri, d0, gap, _, _, plane_lam = self._narrow(xt, frames, *near, reach=reach)
+                            distance=TRACKING_FACTOR * self.search_distance)
+        node, tri, d0, gap, _, _, plane_lam = self._narrow(xt, frames, *near)
         face = np.isnan(gap)
         inside = face & (plane_lam.min(axis=1, initial=np.inf) >= -INSIDE_TOLERANCE)
         # the distance to the triangle: the plane's where the node projects into it, the
