@@ -543,14 +543,11 @@ class SurfaceContact:
         return found
 
     def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
-                clock: StepClock, distance: float | None = None, reach: float | None = None
-                ) -> tuple[np.ndarray, ...]:
+                clock: StepClock, distance: float | None = None) -> tuple[np.ndarray, ...]:
         """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays).
 
-        ``distance`` and ``reach`` (default: the search distance and the law's reach) bound
-        the pairs' plane distance and their distance from the triangle's boundary."""
+        ``distance`` (default: the search distance) bounds the pairs' plane distance."""
         distance = self.search_distance if distance is None else distance
-        reach = self.params.reach if reach is None else reach
         lo, hi = padded_bounds(xt, self.triangles, distance, frames.normal,
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
@@ -559,7 +556,7 @@ class SurfaceContact:
         # wide beyond a free edge): widen by that too, or a large triangle's band is cut
         # off by the box and its row appears with a jump
         extent = self.side_band * np.asarray(frames.altitudes).T
-        width = np.maximum(reach, extent.max(axis=1))
+        width = np.maximum(self.params.reach, extent.max(axis=1))
         lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
@@ -571,14 +568,14 @@ class SurfaceContact:
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
-            found.append(self._near(xt, frames, node, tri + first, distance, reach))
+            found.append(self._near(xt, frames, node, tri + first, distance))
             clock.add("narrow")
         return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
 
     def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-              tri: np.ndarray, distance: float, reach: float) -> tuple[np.ndarray, ...]:
-        """The cheap tests of :meth:`_narrow`: near the plane, within reach of the triangle
-        or in its fade band, and not in its neighbourhood
+              tri: np.ndarray, distance: float) -> tuple[np.ndarray, ...]:
+        """The cheap tests of :meth:`_narrow`: within ``distance`` of the plane, within reach
+        of the triangle or in its fade band, and not in its neighbourhood
         (:func:`~valve_dolfinx.contact.kernels.near_pairs`).  Returns ``node, tri``, the
         plane distance ``d0``, the barycentric coordinates ``lam (K, 3)`` of the projection,
         ``beyond``, a lower bound on its in-plane distance from the triangle, and
@@ -586,11 +583,11 @@ class SurfaceContact:
         return near_pairs(node, tri, xt, frames.origin, frames.normal, frames.grad1,
                           frames.grad2, frames.altitudes, self.node_body, self.triangle_body,
                           self.side_band, FACE_BAND, self.excluded_nodes,
-                          distance, reach)
+                          distance, self.params.reach)
 
     def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
                 tri: np.ndarray, d0: np.ndarray, lam: np.ndarray, beyond: np.ndarray,
-                in_band: np.ndarray, reach: float | None = None) -> tuple[np.ndarray, ...]:
+                in_band: np.ndarray) -> tuple[np.ndarray, ...]:
         """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
 
         A node whose projection falls inside the triangle meets its face: the
@@ -610,7 +607,7 @@ class SurfaceContact:
         """
         lam_min = lam.min(axis=1)
         n = frames.normal
-        h = self.params.reach if reach is None else reach
+        h = self.params.reach
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
