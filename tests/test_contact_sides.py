@@ -17,7 +17,7 @@ from scipy.optimize import brentq
 
 from valve_dolfinx.config import VALVE_CONTACT as VALVE
 from valve_dolfinx.contact import SurfaceContact
-from valve_dolfinx.contact.sides import adjacent_triangles
+from valve_dolfinx.contact.exclusions import adjacent_triangles
 
 #: a 4 mm square of body 0 (normals +z), and a node of body 1
 SQUARE = 4.0 * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])

@@ -1,12 +1,29 @@
-"""The nodes that never contact each triangle of a surface: its mesh neighbourhood and,
-optionally, the nodes near it in a reference state."""
+"""Mesh neighbourhoods of a contact surface: the nodes that never contact each triangle (its
+mesh neighbourhood and, optionally, the nodes near it in a reference state), the triangles
+around each triangle, and each node's distance from the seams where bodies are sewn
+together."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["merge_exclusions", "reference_neighbours", "seam_distances", "triangle_halo",
-           "vertex_adjacency"]
+__all__ = ["adjacent_triangles", "merge_exclusions", "reference_neighbours", "seam_distances",
+           "triangle_halo", "vertex_adjacency"]
+
+
+def _padded_rows(keys: np.ndarray, num_rows: int, first: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """Padded table of the sorted, distinct ``keys = row·num_rows + col``: row ``r`` holds
+    its columns ascending (after ``first[r]``, if given), then ``-1``."""
+    row, col = np.divmod(keys, num_rows)
+    degree = np.bincount(row, minlength=num_rows)
+    lead = 0 if first is None else 1
+    table = np.full((num_rows, int(degree.max(initial=0)) + lead), -1, dtype=np.int64)
+    if first is not None:
+        table[:, 0] = first
+    rank = np.arange(len(row)) - (np.cumsum(degree) - degree)[row]
+    table[row, lead + rank] = col
+    return table
 
 
 def vertex_adjacency(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
@@ -20,13 +37,23 @@ def vertex_adjacency(triangles: np.ndarray, num_nodes: int) -> np.ndarray:
     edges = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     edges = np.concatenate([edges, edges[:, ::-1]])
     keys = np.unique(edges[:, 0] * num_nodes + edges[:, 1])
-    row, col = np.divmod(keys, num_nodes)
-    degree = np.bincount(row, minlength=num_nodes)
-    table = np.full((num_nodes, int(degree.max(initial=0)) + 1), -1, dtype=np.int64)
-    table[:, 0] = np.arange(num_nodes)
-    rank = np.arange(len(row)) - (np.cumsum(degree) - degree)[row]
-    table[row, 1 + rank] = col
-    return table
+    return _padded_rows(keys, num_nodes, first=np.arange(num_nodes))
+
+
+def adjacent_triangles(triangles: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """``(M, K)`` table of the triangles of the same body that share a vertex with each
+    triangle (itself excluded), ascending, padded with ``-1``."""
+    from scipy.sparse import csr_matrix
+
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    m = len(triangles)
+    if m == 0:
+        return np.empty((0, 0), dtype=np.int64)
+    incidence = csr_matrix((np.ones(3 * m), (np.repeat(np.arange(m), 3), triangles.ravel())))
+    shared = (incidence @ incidence.T).tocoo()
+    t, u = shared.row.astype(np.int64), shared.col.astype(np.int64)
+    keep = (t != u) & (body[t] == body[u])
+    return _padded_rows(np.unique(t[keep] * m + u[keep]), m)
 
 
 

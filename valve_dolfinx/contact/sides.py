@@ -24,39 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SideMemory", "adjacent_triangles"]
+__all__ = ["SideMemory", "present_side"]
 
 
-def adjacent_triangles(triangles: np.ndarray, body: np.ndarray) -> np.ndarray:
-    """``(M, K)`` table of the triangles of the same body that share a vertex with each
-    triangle (itself excluded), ascending, padded with ``-1``."""
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    m = len(triangles)
-    if m == 0:
-        return np.empty((0, 0), dtype=np.int64)
-    owner = np.repeat(np.arange(m), 3)
-    vertex = triangles.ravel()
-    order = np.argsort(vertex, kind="stable")
-    vertex, owner = vertex[order], owner[order]
-    # all (t, u) with a common vertex: pair every incidence with every other one of its vertex
-    starts = np.flatnonzero(np.r_[True, vertex[1:] != vertex[:-1]])
-    counts = np.diff(np.r_[starts, len(vertex)])
-    pairs = [np.empty((0, 2), dtype=np.int64)]
-    for c in np.unique(counts):
-        group = starts[counts == c][:, None] + np.arange(c)
-        members = owner[group]
-        t = np.repeat(members, c, axis=1).ravel()
-        u = np.tile(members, (1, c)).ravel()
-        pairs.append(np.stack([t, u], axis=1))
-    pairs = np.concatenate(pairs)
-    pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (body[pairs[:, 0]] == body[pairs[:, 1]])]
-    keys = np.unique(pairs[:, 0] * m + pairs[:, 1])
-    row, col = np.divmod(keys, m)
-    degree = np.bincount(row, minlength=m)
-    table = np.full((m, int(degree.max(initial=0))), -1, dtype=np.int64)
-    rank = np.arange(len(row)) - (np.cumsum(degree) - degree)[row]
-    table[row, rank] = col
-    return table
+def present_side(d0: np.ndarray) -> np.ndarray:
+    """The side a node is on now, from its unsided plane distance ``d0``: ±1 (+1 on the plane)."""
+    return np.where(d0 < 0.0, -1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -78,19 +51,12 @@ class SideMemory:
     num_triangles: int
 
     @classmethod
-    def empty(cls, num_triangles: int) -> SideMemory:
-        return cls(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int8), int(num_triangles))
-
-    @classmethod
     def of(cls, node: np.ndarray, tri: np.ndarray, sides: np.ndarray,
            num_triangles: int) -> SideMemory:
         """The memory of the pairs ``(node, tri)`` (distinct) with ``sides``."""
         keys = np.asarray(node, dtype=np.int64) * num_triangles + np.asarray(tri, dtype=np.int64)
         order = np.argsort(keys, kind="stable")
         return cls(keys[order], np.asarray(sides)[order].astype(np.int8), int(num_triangles))
-
-    def __len__(self) -> int:
-        return len(self.keys)
 
     def _find(self, keys: np.ndarray) -> np.ndarray:
         """Side of each key, 0 where it is not remembered."""
@@ -105,7 +71,8 @@ class SideMemory:
     def lookup(self, node: np.ndarray, tri: np.ndarray, adjacent: np.ndarray) -> np.ndarray:
         """Sides of the pairs ``(node, tri)``: remembered, else the side the node has on the
         first remembered triangle of ``adjacent[tri]`` (the same body's triangles around
-        it), else 0 (a new pair)."""
+        it, :func:`~valve_dolfinx.contact.exclusions.adjacent_triangles`), else 0 (a new
+        pair)."""
         node = np.asarray(node, dtype=np.int64)
         tri = np.asarray(tri, dtype=np.int64)
         m = self.num_triangles

@@ -38,6 +38,7 @@ import numpy as np
 
 from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
 from valve_dolfinx.contact.exclusions import (
+    adjacent_triangles,
     merge_exclusions,
     reference_neighbours,
     seam_distances,
@@ -62,7 +63,7 @@ from valve_dolfinx.contact.results import (
     check_nodes,
     check_positions,
 )
-from valve_dolfinx.contact.sides import SideMemory, adjacent_triangles
+from valve_dolfinx.contact.sides import SideMemory, present_side
 from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["FACE_BAND", "SurfaceContact"]
@@ -345,11 +346,9 @@ class SurfaceContact:
         distance = np.where(inside, np.abs(d0), np.where(face, np.inf, gap))
         group = node * len(self.body_labels) + self.triangle_body[tri]
         order = np.lexsort((~inside, distance, group))  # per group, the nearest pair first
-        first = order[np.r_[True, group[order][1:] != group[order][:-1]]] if len(order) \
-            else order
+        first = order[np.unique(group[order], return_index=True)[1]]
         over = np.isin(group, group[first[inside[first]]])
-        side = self._remembered_side(node, tri, d0)
-        side = np.where(over, side, np.where(d0 < 0.0, -1.0, 1.0))
+        side = np.where(over, self._remembered_side(node, tri, d0), present_side(d0))
         self.memory = SideMemory.of(node, tri, side, len(self.triangles))
         self._last_rows = None
 
@@ -641,18 +640,17 @@ class SurfaceContact:
         any recorded state, opposite to the node's pressure force."""
         if self.memory is None:
             from_pressure = -np.sign(_rowdot(f_ext[node], n_tri))
-            return np.where(from_pressure != 0.0, from_pressure, np.where(d0 < 0.0, -1.0, 1.0))
+            return np.where(from_pressure != 0.0, from_pressure, present_side(d0))
         return self._remembered_side(node, tri, d0)
 
     def _remembered_side(self, node: np.ndarray, tri: np.ndarray, d0: np.ndarray
                          ) -> np.ndarray:
         """The memory's side of each pair (:meth:`SideMemory.lookup`), else the side of the
         triangle's plane the node is on (``d0``, its unsided plane distance)."""
-        present = np.where(d0 < 0.0, -1.0, 1.0)
         if self.memory is None:
-            return present
+            return present_side(d0)
         side = self.memory.lookup(node, tri, self.adjacent)
-        return np.where(side != 0, side.astype(float), present)
+        return np.where(side != 0, side.astype(float), present_side(d0))
 
     def _pair_weight(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """Weight of each (node, triangle) pair under the pairing rule (see ContactParameters).
