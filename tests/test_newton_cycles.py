@@ -25,6 +25,21 @@ CYCLE = brentq(lambda x: 2.0 * x - (1.0 + x * x) * math.atan(x), 1.0, 2.0, xtol=
 def newton_on_arctan(x0: float, monitor=None, max_it: int = 30, damping=None):
     """(converged reason, iterations, residual norms) of PETSc's Newton method on arctan;
     ``damping`` (a :class:`NewtonReversalDamping`) as the line search's pre-check."""
+    return newton_1d(math.atan, lambda x: 1.0 / (1.0 + x * x), x0, monitor, max_it, damping)
+
+
+#: a three-cycle 1 → −2 → 3 → 1 of Newton's method on f(x) = x with a kinked tangent:
+#: the slope s at x sends x to x − x/s
+THREE_CYCLE_SLOPES = {1.0: 1.0 / 3.0, -2.0: 0.4, 3.0: 1.5}
+
+
+def three_cycle_slope(x: float) -> float:
+    return THREE_CYCLE_SLOPES[min(THREE_CYCLE_SLOPES, key=lambda p: abs(p - x))]
+
+
+def newton_1d(f, df, x0: float, monitor=None, max_it: int = 30, damping=None):
+    """PETSc's Newton method (basic line search) on the scalar equation f(x) = 0 with the
+    tangent df."""
     snes = PETSc.SNES().create(PETSc.COMM_SELF)
     x = PETSc.Vec().createSeq(1, comm=PETSc.COMM_SELF)
     r = x.duplicate()
@@ -32,11 +47,11 @@ def newton_on_arctan(x0: float, monitor=None, max_it: int = 30, damping=None):
     J.setUp()
 
     def residual(snes, X, R):
-        R[0] = math.atan(X[0])
+        R[0] = f(X[0])
         R.assemble()
 
     def jacobian(snes, X, A, P):
-        P[0, 0] = 1.0 / (1.0 + X[0] ** 2)
+        P[0, 0] = df(X[0])
         P.assemble()
 
     snes.setFunction(residual, r)
@@ -72,6 +87,21 @@ def test_a_cycling_solve_ends_at_the_fourth_iteration():
     stop = NewtonCycleStop(1e-3)
     reason, its, _ = newton_on_arctan(CYCLE, monitor=stop, max_it=30)
     assert reason < 0 and its == 4
+    assert stop.stopped == 1
+
+
+def test_a_three_cycle_ends_at_the_sixth_iteration():
+    """Norms 1, 2, 3, 1, 2, 3, ...: a period-2 test never sees it; after the first update
+    two whole periods (iterations 1-6) show it."""
+    def plain_run():
+        return newton_1d(lambda x: x, three_cycle_slope, 1.0, max_it=12)
+
+    reason, its, norms = plain_run()
+    assert reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and its == 12
+    assert norms[:7] == pytest.approx([1.0, 2.0, 3.0, 1.0, 2.0, 3.0, 1.0])
+    stop = NewtonCycleStop(1e-3)
+    reason, its, _ = newton_1d(lambda x: x, three_cycle_slope, 1.0, monitor=stop, max_it=12)
+    assert reason < 0 and its == 6
     assert stop.stopped == 1
 
 

@@ -276,7 +276,7 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "newton_max_it": ("", "Newton iterations per step"),
         "newton_rtol": ("", "relative residual reduction that ends a step's Newton solve"),
         "newton_cycle_tolerance": ("", "relative repetition of the residual norms that ends "
-                                   "a Newton solve caught in a two-cycle (0: never)"),
+                                   "a Newton solve caught in a cycle of period 2 or 3 (0: never)"),
         "newton_reversal_damping": ("", "factor on a Newton update that points back along "
                                     "the previous one (1: never)"),
         "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),

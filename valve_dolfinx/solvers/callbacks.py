@@ -7,12 +7,13 @@ failed solve: :class:`InterruptGuard` records it in the callback and the solver 
 it again once ``TS.solve`` has returned, so an interrupted study stops (exit status 130)
 instead of recording the interrupted case as unconverged.
 
-A Newton solve whose iterates have settled into a two-cycle (the residual norms repeat
-every second iteration) cannot converge any more, but it runs on to ``snes_max_it``
-before the time stepper retries the step with a shorter one.  :class:`NewtonCycleStop`,
-an SNES monitor, ends it as diverged as soon as the cycle shows;
-:class:`NewtonReversalDamping`, part of the line-search pre-check, damps the update that
-would start one.
+A Newton solve whose iterates have settled into a cycle (the residual norms repeat
+every second or third iteration) cannot converge any more, but it runs on to
+``snes_max_it`` before the time stepper retries the step with a shorter one.
+:class:`NewtonCycleStop`, an SNES monitor, ends it as diverged as soon as the cycle
+shows; :class:`NewtonReversalDamping`, part of the line-search pre-check, damps the
+update that would start a two-cycle (which turns some of them into three-cycles: an
+update, the reversing one halved, the rest of the way back).
 """
 
 from __future__ import annotations
@@ -51,16 +52,18 @@ class InterruptGuard:
 
 
 class NewtonCycleStop:
-    """SNES monitor that ends a Newton solve caught in a two-cycle as diverged.
+    """SNES monitor that ends a Newton solve caught in a cycle of period 2 or 3 as diverged.
 
-    At iteration ``k ≥ 4`` the solve has cycled when both
-    ``|r_k − r_{k−2}| ≤ tolerance·r_k`` and ``|r_{k−1} − r_{k−3}| ≤ tolerance·r_{k−1}``
-    (``r`` the residual norms) and the convergence test has not stopped it.  The
-    reason is then ``DIVERGED_DTOL`` (PETSc has none for a cycle); the time stepper
-    treats it as any failed solve.  PETSc calls the monitors after the convergence
-    test of an iteration and stops on the reason they leave.  A solve that converges
-    is never cut, so the path and the result are those without the monitor.  The
-    residual norm is global, so every rank decides alike.
+    At iteration ``k ≥ 2p`` the solve has cycled with period ``p`` when the last ``p``
+    residual norms each repeat the one ``p`` iterations earlier (the norms after the
+    first update, ``r_1 … r_k``, are compared),
+    ``|r_{k−j} − r_{k−j−p}| ≤ tolerance·r_{k−j}`` for ``j = 0 … p−1``, and the
+    convergence test has not stopped it.  The reason is then ``DIVERGED_DTOL`` (PETSc has
+    none for a cycle); the time stepper treats it as any failed solve and retries the step
+    from its start, so where a failed solve stops does not change the path.  PETSc calls
+    the monitors after the convergence test of an iteration and stops on the reason they
+    leave.  A solve that converges is never cut, so the path and the result are those
+    without the monitor.  The residual norm is global, so every rank decides alike.
 
     Parameters
     ----------
@@ -68,20 +71,31 @@ class NewtonCycleStop:
         Relative repetition of the norms that counts as a cycle; 0 disables it.
     """
 
+    #: cycle lengths looked for
+    PERIODS = (2, 3)
+
     def __init__(self, tolerance: float) -> None:
         self.tolerance = float(tolerance)
-        self.norms: deque[float] = deque(maxlen=4)  # the last four of this solve
+        # the last norms of this solve after its first update: two of the longest periods
+        self.norms: deque[float] = deque(maxlen=2 * max(self.PERIODS))
         #: solves ended by a cycle (reported by the solver's log)
         self.stopped = 0
+
+    def _cycled(self, period: int) -> bool:
+        r, tol = list(self.norms), self.tolerance
+        if len(r) < 2 * period:
+            return False
+        return all(abs(r[-1 - j] - r[-1 - j - period]) <= tol * r[-1 - j]
+                   for j in range(period))
 
     def __call__(self, snes: PETSc.SNES, its: int, fnorm: float) -> None:
         if its == 0:
             self.norms.clear()
-        self.norms.append(float(fnorm))
-        r, tol = self.norms, self.tolerance
-        if tol <= 0.0 or its < 4 or snes.getConvergedReason() != 0:
             return
-        if abs(r[3] - r[1]) <= tol * r[3] and abs(r[2] - r[0]) <= tol * r[2]:
+        self.norms.append(float(fnorm))
+        if self.tolerance <= 0.0 or snes.getConvergedReason() != 0:
+            return
+        if any(self._cycled(p) for p in self.PERIODS):
             snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
             self.stopped += 1
 

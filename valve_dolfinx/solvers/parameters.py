@@ -49,11 +49,12 @@ class PseudoTransientParameters:
         a step's Newton solve; a step whose Newton solve fails is retried with
         half the Δτ.
     newton_cycle_tolerance
-        A Newton solve whose residual norms repeat every second iteration to this
-        relative tolerance has settled into a two-cycle and ends as failed at once
-        instead of at ``newton_max_it`` (0: never); in the runs measured no solve
-        that went on to converge was ever cut at 1e-3, so the result does not
-        depend on it.
+        A Newton solve whose residual norms repeat every second or third iteration
+        to this relative tolerance has settled into a cycle and ends as failed at
+        once instead of at ``newton_max_it`` (0: never).  A failed solve's step is
+        retried from its start, so where it ends does not change the path; in the
+        runs measured no solve that went on to converge was ever cut at 1e-3, so
+        the result does not depend on it.
     newton_reversal_damping
         A Newton update that points back along the previous one of the same solve
         (cosine below -0.9: the iterates jump to and fro across a kink of the

@@ -401,7 +401,7 @@ class PseudoTransientSolver:
         ts.destroy()
         X.destroy()
         log.info("pseudo-transient continuation: %s (%s; %.1f s; %d reversing Newton "
-                 "updates damped, %d Newton solves ended in a two-cycle)",
+                 "updates damped, %d Newton solves ended in a cycle)",
                  "converged" if self.report.converged else "NOT converged",
                  self.report.reason, self.report.wall_time_s, self._reversals.damped,
                  self._cycles.stopped)
