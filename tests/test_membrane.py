@@ -321,6 +321,41 @@ def last_states(model):
     return states, lambda entry: states.append((entry["residual_mN"], model.u.x.array.copy()))
 
 
+class CountingSolver(PseudoTransientSolver):
+    """Counts the iterations of every Newton solve it runs with an SNES monitor of its own."""
+
+    def _make_ts(self):
+        ts = super()._make_ts()
+        self.iterations_per_solve: list[int] = []
+
+        def monitor(snes, its, fnorm):
+            if its == 0:
+                self.iterations_per_solve.append(0)
+            else:
+                self.iterations_per_solve[-1] = its
+
+        ts.getSNES().setMonitor(monitor)
+        return ts
+
+
+def test_newton_iterations_of_rejected_steps_are_counted_apart():
+    """A first step far too long for two capped Newton iterations fails and is retried
+    shorter, again and again: the report counts the iterations of the failed solves apart
+    from those of the accepted steps, the two add up to every iteration the solver ran,
+    and each failed solve ran at least one and at most ``newton_max_it``."""
+    model, bc = slack_sheet(6)
+    solver = CountingSolver(model, [bc], 2.0, PseudoTransientParameters(
+        residual_tolerance=TIGHT, dt_initial=100.0, newton_max_it=2, max_steps=40))
+    report = solver.solve()
+    assert report.rejected_steps > 0
+    accepted = sum(entry["newton_iterations"] for entry in report.history)
+    assert report.newton_iterations == accepted
+    assert report.newton_iterations + report.rejected_newton_iterations == sum(
+        solver.iterations_per_solve)
+    assert len(solver.iterations_per_solve) == report.steps + report.rejected_steps
+    assert report.rejected_steps <= report.rejected_newton_iterations <= 2 * report.rejected_steps
+
+
 @pytest.mark.parametrize("limit, words", [
     ({"max_steps": 3}, ("max_steps = 3", "after 3 steps")),
     ({"wall_time_limit_s": 1e-6}, ("wall-clock limit 1e-06 s", "at step 1"))])

@@ -55,6 +55,7 @@ class CaseResult:
     solver: str = ""
     time_steps: int = 0
     newton_iterations: int = 0
+    rejected_newton_iterations: int = 0
     residual_tolerance_mN: float = float("nan")
     equilibrium_residual_mN: float = float("nan")
     leaflets: dict = field(default_factory=dict)

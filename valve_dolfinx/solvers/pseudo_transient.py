@@ -394,15 +394,20 @@ class PseudoTransientSolver:
                 f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
                 f"{self.params.pressure_ramp_steps})")
         self.report.rejected_steps = ts.getStepRejections()
+        # TS counts the iterations of every Newton solve, failed ones included
+        self.report.rejected_newton_iterations = (ts.getSNESIterations()
+                                                  - self.report.newton_iterations)
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
         self.report.wall_time_s = time.perf_counter() - self._t0
         self.report.timings = dict(self._clock)
         ts.destroy()
         X.destroy()
-        log.info("pseudo-transient continuation: %s (%s; %.1f s; %d reversing Newton "
-                 "updates damped, %d Newton solves ended in a cycle)",
+        log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton iterations in "
+                 "%d failed solves, %d of which ended in a cycle; %d reversing Newton "
+                 "updates damped)",
                  "converged" if self.report.converged else "NOT converged",
-                 self.report.reason, self.report.wall_time_s, self._reversals.damped,
-                 self._cycles.stopped)
+                 self.report.reason, self.report.wall_time_s,
+                 self.report.rejected_newton_iterations, self.report.rejected_steps,
+                 self._cycles.stopped, self._reversals.damped)
         return self.report

@@ -16,7 +16,11 @@ class SolveReport:
     converged, reason
         Whether the static equilibrium was reached, and why the run stopped.
     steps, rejected_steps, newton_iterations
-        Accepted time steps, rejected ones, and Newton iterations over all steps.
+        Accepted time steps, rejected ones, and Newton iterations over the accepted steps.
+    rejected_newton_iterations
+        Newton iterations spent in steps that were rejected and retried with a shorter
+        one: failed Newton solves (under BDF2 also steps rejected for their motion); not
+        counted in ``newton_iterations``.
     time
         Time reached: pseudo-time (dimensionless) for the pseudo-transient
         continuation, simulated time (s) for the damped dynamics.
@@ -36,6 +40,7 @@ class SolveReport:
     steps: int = 0
     rejected_steps: int = 0
     newton_iterations: int = 0
+    rejected_newton_iterations: int = 0
     time: float = 0.0
     last_dt: float = float("nan")
     residual_mN: float = float("nan")
