@@ -82,11 +82,9 @@ class NewtonCycleStop:
         self.stopped = 0
 
     def _cycled(self, period: int) -> bool:
-        r, tol = list(self.norms), self.tolerance
-        if len(r) < 2 * period:
-            return False
-        return all(abs(r[-1 - j] - r[-1 - j - period]) <= tol * r[-1 - j]
-                   for j in range(period))
+        r, tol = self.norms, self.tolerance
+        return len(r) >= 2 * period and all(
+            abs(r[-1 - j] - r[-1 - j - period]) <= tol * r[-1 - j] for j in range(period))
 
     def __call__(self, snes: PETSc.SNES, its: int, fnorm: float) -> None:
         if its == 0:

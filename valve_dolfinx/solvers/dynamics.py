@@ -391,10 +391,7 @@ class DampedDynamicsSolver:
         if not self.report.converged and not self.report.reason:
             self.report.reason = (f"TS stopped with reason {reason} at t = {ts.getTime():.4g} s, "
                                   f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")
-        self.report.rejected_steps = ts.getStepRejections()
-        # TS counts the iterations of every Newton solve, rejected steps' included
-        self.report.rejected_newton_iterations = (ts.getSNESIterations()
-                                                  - self.report.newton_iterations)
+        self.report.count_rejections(ts)
         self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.U.x.scatter_forward()
         self._copy_displacement()

@@ -393,10 +393,7 @@ class PseudoTransientSolver:
                 f", during the pressure ramp ({self.model.pressure.value:.3g} of "
                 f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
                 f"{self.params.pressure_ramp_steps})")
-        self.report.rejected_steps = ts.getStepRejections()
-        # TS counts the iterations of every Newton solve, failed ones included
-        self.report.rejected_newton_iterations = (ts.getSNESIterations()
-                                                  - self.report.newton_iterations)
+        self.report.count_rejections(ts)
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
         self.report.wall_time_s = time.perf_counter() - self._t0

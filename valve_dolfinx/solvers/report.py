@@ -49,6 +49,13 @@ class SolveReport:
     timings: dict = field(default_factory=dict)
     history: list[dict] = field(default_factory=list)
 
+    def count_rejections(self, ts) -> None:
+        """Rejected steps and their Newton iterations from a finished PETSc TS (which counts
+        the iterations of every Newton solve, rejected steps' included); call it after
+        ``newton_iterations`` has summed the accepted steps'."""
+        self.rejected_steps = ts.getStepRejections()
+        self.rejected_newton_iterations = ts.getSNESIterations() - self.newton_iterations
+
 
 @dataclass
 class DynamicsReport(SolveReport):
