@@ -39,3 +39,51 @@ def test_blocks_are_added_at_their_nodes(block_size):
         expected[R:R + 3, C:C + 3] -= 2.0 * b
     got = A.getValues(range(size), range(size))
     assert np.max(np.abs(got - expected)) < 1e-12 * np.abs(expected).max()
+
+
+def _coupling_with_block_order(block_of_node: np.ndarray) -> NodalCoupling:
+    """A plain (block size 3) coupling whose node -> block map is ``block_of_node``."""
+    coupling = NodalCoupling.__new__(NodalCoupling)
+    coupling.layout = NodalLayout()
+    coupling.block_of_node = np.asarray(block_of_node, dtype=np.int64)
+    coupling.num_nodes = len(coupling.block_of_node)
+    return coupling
+
+
+def test_summed_blocks_go_in_as_given_and_rows_ascend():
+    """Blocks already summed per pair (the contact Jacobian's) skip the summation: the matrix
+    is the same as for the same blocks split into random parts, the caller's blocks are not
+    scaled in place, and every matrix row is handed to PETSc with ascending columns although
+    the node -> block map scrambles the order."""
+    n = 12
+    rng = np.random.default_rng(7)
+    coupling = _coupling_with_block_order(rng.permutation(n))
+    pairs = np.array(sorted({(int(r), int(c)) for r, c in rng.integers(0, n, (60, 2))}))
+    rows, cols = pairs[:, 0], pairs[:, 1]
+    blocks = rng.normal(size=(len(rows), 3, 3))
+    kept = blocks.copy()
+
+    def assembled(r, c, b):
+        A = PETSc.Mat().createAIJ(((3 * n, 3 * n), (3 * n, 3 * n)), bsize=3, comm=MPI.COMM_SELF)
+        A.setPreallocationNNZ(3 * n)
+        coupling.add_blocks(A, r, c, b, scale=-0.5)
+        A.assemble()
+        return A.getValues(range(3 * n), range(3 * n))
+
+    got = assembled(rows, cols, blocks)
+    assert np.array_equal(blocks, kept)
+    expected = np.zeros((3 * n, 3 * n))
+    for r, c, b in zip(rows, cols, blocks, strict=True):
+        R, C = 3 * coupling.block_of_node[r], 3 * coupling.block_of_node[c]
+        expected[R:R + 3, C:C + 3] = -0.5 * b
+    assert np.array_equal(got, expected)  # one addition per entry: exact
+    # the same blocks as two shuffled halves that must be summed first
+    part = rng.uniform(size=(len(rows), 1, 1)) * blocks
+    order = rng.permutation(2 * len(rows))
+    split = (np.concatenate([rows, rows])[order], np.concatenate([cols, cols])[order],
+             np.concatenate([part, blocks - part])[order])
+    assert np.allclose(assembled(*split), expected, rtol=0.0, atol=1e-14)
+    indptr, columns, values, matrix_rows = coupling.block_csr(rows, cols, blocks)
+    assert len(np.unique(matrix_rows)) == len(matrix_rows) == 3 * len(np.unique(rows))
+    for a, b in zip(indptr[:-1], indptr[1:], strict=True):
+        assert np.all(np.diff(columns[a:b]) > 0)

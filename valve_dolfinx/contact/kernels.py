@@ -19,7 +19,7 @@ from valve_dolfinx.contact.geometry import dot3
 
 __all__ = ["group_blocks", "near_pairs", "pair_slots", "row_block_sums", "row_gradients",
            "nodal_forces", "plane_distances", "presence_gradients",
-           "sum_blocks"]
+           "sum_blocks", "summed_already", "scalar_rows"]
 
 
 @numba.njit(cache=True)
@@ -409,6 +409,71 @@ def sum_blocks(rows, cols, blocks, num_nodes):  # pragma: no cover
             for q in range(3):
                 summed[s, p, q] += blocks[k, p, q]
     return _nonzero_blocks(out_rows, out_cols, summed)
+
+
+@numba.njit(cache=True)
+def summed_already(rows, cols, blocks):  # pragma: no cover
+    """Whether the blocks are what :func:`sum_blocks` would return for them: sorted by
+    row then column, each (row, column) pair once, no all-zero block."""
+    for k in range(len(rows)):
+        if k > 0 and (rows[k] < rows[k - 1] or (rows[k] == rows[k - 1]
+                                                 and cols[k] <= cols[k - 1])):
+            return False
+        nonzero = False
+        for p in range(3):
+            for q in range(3):
+                nonzero = nonzero or blocks[k, p, q] != 0.0
+        if not nonzero:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def scalar_rows(rows, cols, blocks, scale, row_base, col_base):  # pragma: no cover
+    """``scale``·3×3 blocks as matrix rows: ``(indptr, columns, values, rows)`` of a CSR
+    with three rows per block row.
+
+    ``rows``/``cols`` are block row/column ids, the blocks of a row consecutive;
+    ``row_base[r] + p`` is the matrix row of component ``p`` of block row ``r`` and
+    ``col_base[c] + q`` the column of component ``q`` of block column ``c``.  Within a
+    matrix row the columns ascend (the blocks of a row put in order of ``col_base``, an
+    insertion sort of the row's few blocks), which is the order a compressed-row matrix
+    finds them fastest in.  Every entry of every block is written, zeros included.
+    """
+    n = len(rows)
+    runs = 0
+    for k in range(n):
+        if k == 0 or rows[k] != rows[k - 1]:
+            runs += 1
+    indptr = np.empty(3 * runs + 1, dtype=np.int64)
+    out_rows = np.empty(3 * runs, dtype=np.int64)
+    columns = np.empty(9 * n, dtype=np.int64)
+    values = np.empty(9 * n)
+    order = np.empty(n, dtype=np.int64)
+    position, r, start = 0, 0, 0
+    while start < n:
+        stop = start
+        while stop < n and rows[stop] == rows[start]:
+            key = col_base[cols[stop]]
+            a = stop
+            while a > start and col_base[cols[order[a - 1]]] > key:
+                order[a] = order[a - 1]
+                a -= 1
+            order[a] = stop
+            stop += 1
+        for p in range(3):
+            out_rows[r] = row_base[rows[start]] + p
+            indptr[r] = position
+            for a in range(start, stop):
+                m = order[a]
+                for q in range(3):
+                    columns[position] = col_base[cols[m]] + q
+                    values[position] = scale * blocks[m, p, q]
+                    position += 1
+            r += 1
+        start = stop
+    indptr[r] = position
+    return indptr, columns, values, out_rows
 
 
 @numba.njit(cache=True)

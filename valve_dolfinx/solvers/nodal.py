@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.contact.kernels import sum_blocks
+from valve_dolfinx.contact.kernels import scalar_rows, sum_blocks, summed_already
 from valve_dolfinx.geometry.distributed import node_to_dof
 
 __all__ = ["NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
@@ -113,57 +113,50 @@ class NodalCoupling:
                    blocks: np.ndarray, scale: float = 1.0) -> None:
         """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block (duplicates add).
 
-        The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), the
-        sums scaled, then inserted with one PETSc call per block row: a plain displacement
-        space (block size 3) takes the blocks whole (``MatSetValuesBlocked``, the blocks of
-        a row one after the other), a state with other components interleaved (the
-        dynamics' (u, v)) row by row (:meth:`block_csr`).
+        The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), then
+        inserted matrix row by matrix row (:meth:`add_csr`), so that every matrix entry
+        receives one addition: the sums do not depend on the order of insertion.
         """
-        if len(row_nodes) == 0:
-            return
         rows, cols, blocks = self._merge_blocks(row_nodes, col_nodes, blocks)
-        if len(rows) == 0:
-            return
-        blocks *= scale
-        if self.layout != NodalLayout() or A.getBlockSize() != 3:
-            self.add_csr(A, self.block_csr(rows, cols, blocks))
-            return
-        starts = np.flatnonzero(np.concatenate([[True], rows[1:] != rows[:-1]]))
-        A.setValuesBlockedIJV(np.append(starts, len(rows)).astype(PETSc.IntType),
-                              self.block_of_node[cols].astype(PETSc.IntType), blocks.ravel(),
-                              addv=PETSc.InsertMode.ADD,
-                              rowmap=self.block_of_node[rows[starts]].astype(PETSc.IntType))
+        if len(rows):
+            self.add_csr(A, self._scalar_rows(rows, cols, blocks, scale))
 
     def _merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The blocks summed per (row node, column node) pair, sorted by row then column,
-        all-zero blocks left out.  The valve's contact Jacobian repeats each pair six to
-        eight times (a node's blended triangles share their corners), and a PETSc
-        insertion costs per block, so summing first makes the insertion that much cheaper
-        (:func:`~valve_dolfinx.contact.kernels.sum_blocks`: each sum in the blocks' order)."""
-        if len(row_nodes) == 0:
-            return row_nodes, col_nodes, blocks
-        return sum_blocks(np.asarray(row_nodes, dtype=np.int64),
-                          np.asarray(col_nodes, dtype=np.int64),
-                          np.ascontiguousarray(blocks, dtype=np.float64), self.num_nodes)
+        all-zero blocks left out (:func:`~valve_dolfinx.contact.kernels.sum_blocks`: each
+        sum in the blocks' order); blocks that are so already (the contact Jacobian's,
+        summed as they are computed) are returned as they are."""
+        rows = np.asarray(row_nodes, dtype=np.int64)
+        cols = np.asarray(col_nodes, dtype=np.int64)
+        blocks = np.ascontiguousarray(blocks, dtype=np.float64).reshape(-1, 3, 3)
+        if summed_already(rows, cols, blocks):
+            return rows, cols, blocks
+        return sum_blocks(rows, cols, blocks, self.num_nodes)
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
         """3×3 blocks (as for :meth:`add_blocks`) by global matrix row, for :meth:`add_csr`:
         (row pointer, global columns, values, global rows).  Distinct (row, column) pairs."""
-        rows = np.repeat(self.row_indices(row_nodes), 3, axis=1).ravel()  # row i: cols 0..2
-        cols = np.tile(self.col_indices(col_nodes), (1, 3)).ravel()
-        values = np.asarray(blocks, dtype=PETSc.ScalarType).ravel()
-        order = np.lexsort((cols, rows))
-        rows, cols, values = rows[order], cols[order], values[order]
-        unique_rows, counts = np.unique(rows, return_counts=True)
-        indptr = np.concatenate([[0], np.cumsum(counts)])
-        return (indptr.astype(PETSc.IntType), cols.astype(PETSc.IntType), values,
-                unique_rows.astype(PETSc.IntType))
+        order = np.argsort(row_nodes, kind="stable")
+        return self._scalar_rows(np.asarray(row_nodes, dtype=np.int64)[order],
+                                 np.asarray(col_nodes, dtype=np.int64)[order],
+                                 np.asarray(blocks, dtype=np.float64)[order], 1.0)
+
+    def _scalar_rows(self, rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray,
+                     scale: float) -> tuple[np.ndarray, ...]:
+        """:func:`~valve_dolfinx.contact.kernels.scalar_rows` at this layout's global
+        indices, in PETSc's integer type; the blocks of a row node consecutive."""
+        base = self.block_of_node * self.layout.block_size
+        indptr, columns, values, matrix_rows = scalar_rows(
+            rows, cols, np.ascontiguousarray(blocks), float(scale),
+            base + self.layout.row_offset, base + self.layout.col_offset)
+        return (indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType), values,
+                matrix_rows.astype(PETSc.IntType))
 
     @staticmethod
     def add_csr(A: PETSc.Mat, csr: tuple[np.ndarray, ...]) -> None:
-        """A += the blocks of :meth:`block_csr`, one insertion per matrix row (inserting
+        """A += the rows of :meth:`block_csr`, one insertion per matrix row (inserting
         block by block costs a call per block: ~50 ms for the valve's bending matrix)."""
         indptr, cols, values, rows = csr
         A.setValuesIJV(indptr, cols, values, addv=PETSc.InsertMode.ADD, rowmap=rows)
