@@ -377,15 +377,21 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
 
 
 @numba.njit(cache=True)
+def _zero_block(blocks, k):  # pragma: no cover
+    """Whether the 3×3 block ``blocks[k]`` is all zero."""
+    for p in range(3):
+        for q in range(3):
+            if blocks[k, p, q] != 0.0:
+                return False
+    return True
+
+
+@numba.njit(cache=True)
 def _nonzero_blocks(rows, cols, blocks):  # pragma: no cover
     """The (row, col, block) triples whose block is not all zero, in order (in place)."""
     kept = 0
     for s in range(len(rows)):
-        nonzero = False
-        for p in range(3):
-            for q in range(3):
-                nonzero = nonzero or blocks[s, p, q] != 0.0
-        if nonzero:
+        if not _zero_block(blocks, s):
             rows[kept], cols[kept] = rows[s], cols[s]
             blocks[kept] = blocks[s]
             kept += 1
@@ -419,11 +425,7 @@ def summed_already(rows, cols, blocks):  # pragma: no cover
         if k > 0 and (rows[k] < rows[k - 1] or (rows[k] == rows[k - 1]
                                                  and cols[k] <= cols[k - 1])):
             return False
-        nonzero = False
-        for p in range(3):
-            for q in range(3):
-                nonzero = nonzero or blocks[k, p, q] != 0.0
-        if not nonzero:
+        if _zero_block(blocks, k):
             return False
     return True
 

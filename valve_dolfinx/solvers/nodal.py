@@ -17,6 +17,7 @@ i.e. like the serial arrays the mesh was built from.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -147,12 +148,17 @@ class NodalCoupling:
                      scale: float) -> tuple[np.ndarray, ...]:
         """:func:`~valve_dolfinx.contact.kernels.scalar_rows` at this layout's global
         indices, in PETSc's integer type; the blocks of a row node consecutive."""
-        base = self.block_of_node * self.layout.block_size
+        row_base, col_base = self._matrix_bases
         indptr, columns, values, matrix_rows = scalar_rows(
-            rows, cols, np.ascontiguousarray(blocks), float(scale),
-            base + self.layout.row_offset, base + self.layout.col_offset)
+            rows, cols, np.ascontiguousarray(blocks), float(scale), row_base, col_base)
         return (indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType), values,
                 matrix_rows.astype(PETSc.IntType))
+
+    @cached_property
+    def _matrix_bases(self) -> tuple[np.ndarray, np.ndarray]:
+        """Global matrix row and column of component 0 of each node (``(N,)`` each)."""
+        base = self.block_of_node * self.layout.block_size
+        return base + self.layout.row_offset, base + self.layout.col_offset
 
     @staticmethod
     def add_csr(A: PETSc.Mat, csr: tuple[np.ndarray, ...]) -> None:
@@ -162,12 +168,12 @@ class NodalCoupling:
         A.setValuesIJV(indptr, cols, values, addv=PETSc.InsertMode.ADD, rowmap=rows)
 
     def row_indices(self, nodes: np.ndarray) -> np.ndarray:
-        base = self.block_of_node[nodes] * self.layout.block_size + self.layout.row_offset
-        return (base[:, None] + np.arange(3)).astype(PETSc.IntType)
+        """``(K, 3)`` global matrix rows of the nodes' three force components."""
+        return (self._matrix_bases[0][nodes][:, None] + np.arange(3)).astype(PETSc.IntType)
 
     def col_indices(self, nodes: np.ndarray) -> np.ndarray:
-        base = self.block_of_node[nodes] * self.layout.block_size + self.layout.col_offset
-        return (base[:, None] + np.arange(3)).astype(PETSc.IntType)
+        """``(K, 3)`` global matrix columns of the nodes' three position components."""
+        return (self._matrix_bases[1][nodes][:, None] + np.arange(3)).astype(PETSc.IntType)
 
 
 def pressure_nodal_forces(x: np.ndarray, triangles: np.ndarray, pressure: float,
