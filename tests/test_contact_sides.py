@@ -18,6 +18,7 @@ from scipy.optimize import brentq
 from valve_dolfinx.config import VALVE_CONTACT as VALVE
 from valve_dolfinx.contact import SurfaceContact
 from valve_dolfinx.contact.exclusions import adjacent_triangles
+from valve_dolfinx.contact.sides import SideMemory
 
 #: a 4 mm square of body 0 (normals +z), and a node of body 1
 SQUARE = 4.0 * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
@@ -179,6 +180,26 @@ def test_adjacent_triangles_are_the_same_body_triangles_sharing_a_vertex():
         expected = [u for u in range(len(triangles)) if u != t and body[u] == body[t]
                     and set(triangles[u]) & set(triangles[t])]
         assert list(table[t][table[t] >= 0]) == expected
+
+
+def test_side_lookup_is_the_pair_s_side_else_the_first_remembered_adjacent_s_else_zero():
+    rng = np.random.default_rng(5)
+    num_triangles = 40
+    adjacent = np.where(rng.random((num_triangles, 5)) < 0.8,
+                        rng.integers(0, num_triangles, (num_triangles, 5)), -1)
+    remembered = {(int(p), int(t)): int(s) for p, t, s in zip(
+        rng.integers(0, 30, 300), rng.integers(0, num_triangles, 300),
+        rng.choice([-1, 1], 300), strict=True)}
+    node, tri = np.array(list(remembered)).T
+    memory = SideMemory.of(node, tri, np.array(list(remembered.values())), num_triangles)
+    queries = rng.integers(0, 30, 500), rng.integers(0, num_triangles, 500)
+    expected = []
+    for p, t in zip(*queries, strict=True):
+        around = [(p, u) for u in adjacent[t] if u >= 0 and (p, u) in remembered]
+        key = (p, t) if (p, t) in remembered else (around[0] if around else None)
+        expected.append(remembered[key] if key else 0)
+    assert 0 < expected.count(0) < len(expected)
+    assert memory.lookup(*queries, adjacent).tolist() == expected
 
 
 # --- next to a seam (a commissure) the contact thickness tapers to zero ----------------------

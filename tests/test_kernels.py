@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from valve_dolfinx.contact.geometry import triangle_frames
-from valve_dolfinx.contact.kernels import group_blocks, near_pairs, row_block_sums, sum_blocks
+from valve_dolfinx.contact.kernels import (
+    group_blocks,
+    group_index,
+    near_pairs,
+    row_block_sums,
+    sum_blocks,
+)
 from valve_dolfinx.contact.linearisation import turning_load
 
 
@@ -32,6 +38,15 @@ def test_block_sums_per_pair_in_input_order_sorted_and_without_zero_sums():
     assert list(zip(out_rows, out_cols, strict=True)) == sorted(expected)
     for r, c, s in zip(out_rows, out_cols, summed, strict=True):
         assert np.array_equal(s, expected[(r, c)])  # bit for bit
+
+
+@pytest.mark.parametrize("count, largest", [(0, 0), (1, 0), (500, 40), (300, 10_000)])
+def test_group_index_is_the_rank_among_the_distinct_labels_and_their_counts(count, largest):
+    labels = np.random.default_rng(count).integers(0, largest + 1, count)
+    inverse, counts = group_index(labels)
+    distinct = sorted(set(labels.tolist()))
+    assert inverse.tolist() == [distinct.index(g) for g in labels]
+    assert counts.tolist() == [int(np.sum(labels == g)) for g in distinct]
 
 
 def _summed_in_order(rows, cols, blocks):

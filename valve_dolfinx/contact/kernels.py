@@ -17,9 +17,75 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import dot3
 
-__all__ = ["group_blocks", "near_pairs", "pair_slots", "row_block_sums", "row_gradients",
-           "nodal_forces", "plane_distances", "presence_gradients",
+__all__ = ["group_blocks", "group_index", "near_pairs", "pair_slots", "row_block_sums",
+           "row_gradients", "row_presence", "nodal_forces", "plane_distances",
+           "presence_gradients",
            "sum_blocks", "summed_already", "scalar_rows"]
+
+
+@numba.njit(cache=True)
+def _ramp(x, width):  # pragma: no cover
+    """C¹ smoothstep: 0 for ``x <= 0``, 1 for ``x >= width``."""
+    xi = x / width
+    xi = 0.0 if xi < 0.0 else (1.0 if xi > 1.0 else xi)
+    return xi * xi * (3.0 - 2.0 * xi)
+
+
+@numba.njit(cache=True)
+def row_presence(side, d0, gap, offset, plane_lam, plane_normal, thickness, band, eps,
+                 tapered, cutoff):  # pragma: no cover
+    r"""Distance, direction and presence of each candidate row
+    (:meth:`~valve_dolfinx.contact.surface.SurfaceContact._find_contacts`).
+
+    A face row (``gap`` NaN) is at its sided plane distance ``s d₀`` along ``s n_t``; an
+    edge/vertex row at its distance ``gap`` from the closest point, along the offset from
+    it; both less the contact ``thickness``.  The presence fades each row smoothly to 0
+    where it appears or vanishes, so that no row enters or leaves the blend with a finite
+    weight (a jump in the residual): a face row as the node's projection leaves the
+    triangle, :math:`Π_j \operatorname{ramp}(λ_j + b_j, b_j)` over the ``band`` ``b``
+    (smooth also near the vertices, where a min would kink); an edge/vertex row as the node
+    reaches the triangle's plane (behind it the neighbouring face takes over) and as the
+    in-plane distance of its projection from the triangle, :math:`ρ = \sqrt{gap² − d₀²}`,
+    falls to 0 (where the projection re-enters the triangle its face row takes over, and a
+    row vanishing with a finite weight there would make the blend jump and Newton cycle, a
+    graft node at a free edge); every row as ``d`` reaches the cut-off, over ``eps`` if
+    ``tapered``, else at once (the literal law jumps there anyway).  Ramps have width
+    ``eps`` except the bands'.
+
+    Returns ``edge``, ``d``, the unit directions ``(K, 3)``, ``s d₀``, the smallest
+    barycentric coordinate of the projection, ``ρ`` (0 on face rows) and the presence.
+    """
+    count = len(side)
+    edge = np.empty(count, dtype=np.bool_)
+    d = np.empty(count)
+    normal = np.empty((count, 3))
+    side_distance = np.empty(count)
+    lam_min = np.empty(count)
+    in_plane = np.empty(count)
+    presence = np.empty(count)
+    for i in range(count):
+        edge[i] = not np.isnan(gap[i])
+        side_distance[i] = side[i] * d0[i]
+        d[i] = (gap[i] if edge[i] else side_distance[i]) - thickness[i]
+        scale = max(gap[i], 1e-300)
+        for a in range(3):
+            normal[i, a] = offset[i, a] / scale if edge[i] else side[i] * plane_normal[i, a]
+        low = plane_lam[i, 0] if plane_lam[i, 0] < plane_lam[i, 1] else plane_lam[i, 1]
+        lam_min[i] = low if low < plane_lam[i, 2] else plane_lam[i, 2]
+        fade = _ramp(plane_lam[i, 0] + band[i, 0], band[i, 0])
+        fade = fade * _ramp(plane_lam[i, 1] + band[i, 1], band[i, 1])
+        fade = fade * _ramp(plane_lam[i, 2] + band[i, 2], band[i, 2])
+        g = gap[i] if edge[i] else 0.0
+        spread = g * g - d0[i] * d0[i]
+        in_plane[i] = np.sqrt(spread if spread >= 0.0 else 0.0)
+        if edge[i]:
+            fade = _ramp(side_distance[i], eps) * _ramp(in_plane[i], eps)
+        if tapered:
+            fade = fade * _ramp(cutoff - d[i], eps)
+        else:
+            fade = fade * (1.0 if d[i] < cutoff else 0.0)
+        presence[i] = fade
+    return edge, d, normal, side_distance, lam_min, in_plane, presence
 
 
 @numba.njit(cache=True)
@@ -191,6 +257,31 @@ def row_block_sums(live, ids, B, normal, own, magnitude, geometric, dn, dlam, ex
 
 
 @numba.njit(cache=True)
+def group_index(group):  # pragma: no cover
+    """``(inverse, counts)`` of non-negative labels, as ``np.unique(group, return_inverse=True,
+    return_counts=True)`` gives them: each label's rank among the distinct labels, and how
+    often each distinct label occurs.  Linear in the labels and their largest value (a dense
+    table; the labels here are ``node · bodies + body``) instead of a sort."""
+    size = 0
+    for g in group:
+        size = max(size, g + 1)
+    rank = np.zeros(size, dtype=np.int64)
+    for g in group:
+        rank[g] = 1
+    distinct = 0
+    for g in range(size):
+        if rank[g]:
+            rank[g] = distinct
+            distinct += 1
+    inverse = np.empty(len(group), dtype=np.int64)
+    counts = np.zeros(distinct, dtype=np.int64)
+    for i in range(len(group)):
+        inverse[i] = rank[group[i]]
+        counts[inverse[i]] += 1
+    return inverse, counts
+
+
+@numba.njit(cache=True)
 def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no cover
     r"""Blocks coupling the rows of each group: ``Σ_{i,k} Bn_i[r] ⊗ (α_i U_k[m] + β_i V_k[m])``.
 
@@ -302,13 +393,14 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
     of every block among them: ``(slot (K,), pair rows, pair cols)``.
 
     Linear in the number of blocks: a counting sort of the row nodes ``(i, r)`` (not of
-    every block), a slot per column node within a row (first seen first), then the row's
-    few columns put in order and the slots renumbered.
+    every block), then per row node its distinct columns (marked in a table of the nodes),
+    put in order (an insertion sort: a row has few), and each block's slot read back from
+    the table.
     """
     m = ids.shape[1]
     own_rows = len(live) * m
     own_count = own_rows * m
-    instances = own_rows + len(extra_rows)
+    count = own_count + len(extra_rows)
     start = np.zeros(num_nodes + 1, dtype=np.int64)
     for li in range(len(live)):
         for r in range(m):
@@ -317,7 +409,7 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
         start[extra_rows[j] + 1] += 1
     for n in range(num_nodes):
         start[n + 1] += start[n]
-    order = np.empty(instances, dtype=np.int32)  # row instances by row node, in input order
+    order = np.empty(own_rows + len(extra_rows), dtype=np.int64)  # row instances by row node
     fill = start[:-1].copy()
     for li in range(len(live)):
         for r in range(m):
@@ -327,52 +419,42 @@ def pair_slots(live, ids, extra_rows, extra_cols, num_nodes):  # pragma: no cove
     for j in range(len(extra_rows)):
         order[fill[extra_rows[j]]] = own_rows + j
         fill[extra_rows[j]] += 1
-    seen = np.full(num_nodes, -1, dtype=np.int64)
-    slot = np.empty(own_count + len(extra_rows), dtype=np.int32)
-    out_rows = np.empty(own_count + len(extra_rows), dtype=np.int64)
-    out_cols = np.empty(own_count + len(extra_rows), dtype=np.int64)
-    rank = np.empty(own_count + len(extra_rows), dtype=np.int64)
+    slot_of = np.full(num_nodes, -1, dtype=np.int64)  # a column's slot in the current row
+    slot = np.empty(count, dtype=np.int32)
+    out_rows = np.empty(count, dtype=np.int64)
+    out_cols = np.empty(count, dtype=np.int64)
     total = 0
     for row in range(num_nodes):
         first = total
-        for pass_ in range(2):  # 0: first-seen slots, 1: the sorted ones
-            for a in range(start[row], start[row + 1]):
-                instance = order[a]
-                if instance < own_rows:  # row i's blocks (r, 0..m-1)
-                    i, k0, width = live[instance // m], instance * m, m
-                else:  # one extra block
-                    i, k0, width = -1, own_count + instance - own_rows, 1
-                for c in range(width):
-                    k = k0 + c
-                    if pass_ == 1:
-                        slot[k] = seen[slot[k] - first]
-                        continue
-                    col = ids[i, c] if i >= 0 else extra_cols[instance - own_rows]
-                    s = seen[col]
-                    if s < 0:
-                        s = total
-                        seen[col] = s
-                        out_cols[s] = col
-                        total += 1
-                    slot[k] = s
-            if pass_ == 1:
-                for s in range(first, total):
-                    seen[s - first] = -1
-                break
-            for s in range(first, total):
-                seen[out_cols[s]] = -1
-                out_rows[s] = row
-                rank[s] = s
-            # columns in increasing order within the row (insertion sort: a row has few)
-            for s in range(first + 1, total):
-                col, moved = out_cols[s], rank[s]
-                j = s - 1
-                while j >= first and out_cols[j] > col:
-                    out_cols[j + 1], rank[j + 1] = out_cols[j], rank[j]
-                    j -= 1
-                out_cols[j + 1], rank[j + 1] = col, moved
-            for s in range(first, total):  # rank[s]: the first-seen slot now at s
-                seen[rank[s] - first] = s
+        for a in range(start[row], start[row + 1]):  # the row's distinct columns
+            instance = order[a]
+            own = instance < own_rows
+            for c in range(m if own else 1):
+                col = ids[live[instance // m], c] if own else extra_cols[instance - own_rows]
+                if slot_of[col] < 0:
+                    slot_of[col] = 0
+                    out_cols[total] = col
+                    total += 1
+        for s in range(first + 1, total):  # in increasing order
+            col = out_cols[s]
+            j = s - 1
+            while j >= first and out_cols[j] > col:
+                out_cols[j + 1] = out_cols[j]
+                j -= 1
+            out_cols[j + 1] = col
+        for s in range(first, total):
+            slot_of[out_cols[s]] = s
+            out_rows[s] = row
+        for a in range(start[row], start[row + 1]):  # every block's slot
+            instance = order[a]
+            if instance < own_rows:
+                i, k0 = live[instance // m], instance * m
+                for c in range(m):
+                    slot[k0 + c] = slot_of[ids[i, c]]
+            else:
+                slot[own_count + instance - own_rows] = slot_of[extra_cols[instance - own_rows]]
+        for s in range(first, total):
+            slot_of[out_cols[s]] = -1
     return slot, out_rows[:total], out_cols[:total]
 
 

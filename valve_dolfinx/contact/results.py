@@ -17,6 +17,7 @@ import numpy as np
 
 from valve_dolfinx.contact.kernels import (
     group_blocks,
+    group_index,
     nodal_forces,
     row_block_sums,
     row_gradients,
@@ -170,7 +171,7 @@ class ContactRows:
     def _group_presence(self, inverse: np.ndarray | None = None
                         ) -> tuple[np.ndarray, np.ndarray]:
         """``G`` of every row's group and ``c_i = Π_{j≠i}(1 - p_j)`` (``∂G/∂p_i``);
-        ``inverse``: the rows' group indices, if known (``np.unique(group)``'s).
+        ``inverse``: the rows' group indices, if known (:func:`group_index`'s).
 
         ``G = 1 - Π_j (1 - p_j)`` over the rows of a group: 1 as soon as one row
         is fully present (a node over the shared edge of two coplanar faces gets
@@ -181,7 +182,7 @@ class ContactRows:
         if self.group is None:
             return p, np.ones(len(p))
         if inverse is None:
-            _, inverse = np.unique(self.group, return_inverse=True)
+            inverse, _ = group_index(self.group)
         exact_one = p >= 1.0
         log_slack = np.where(exact_one, 0.0, np.log(np.maximum(1.0 - p, 1e-300)))
         total = np.bincount(inverse, log_slack)[inverse]       # Σ log(1-p) over p < 1
@@ -247,8 +248,7 @@ class ContactRows:
         p = np.ones(count) if self.presence is None else self.presence
         inverse = None
         if self.group is not None:
-            _, inverse, group_size = np.unique(self.group, return_inverse=True,
-                                               return_counts=True)
+            inverse, group_size = group_index(self.group)
         G, c = self._group_presence(inverse)
         f = self.f
         magnitude = w * G * f

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["SideMemory", "present_side"]
@@ -58,31 +59,39 @@ class SideMemory:
         order = np.argsort(keys, kind="stable")
         return cls(keys[order], np.asarray(sides)[order].astype(np.int8), int(num_triangles))
 
-    def _find(self, keys: np.ndarray) -> np.ndarray:
-        """Side of each key, 0 where it is not remembered."""
-        out = np.zeros(len(keys), dtype=np.int8)
-        if len(self.keys) == 0 or len(keys) == 0:
-            return out
-        at = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
-        hit = self.keys[at] == keys
-        out[hit] = self.sides[at[hit]]
-        return out
-
     def lookup(self, node: np.ndarray, tri: np.ndarray, adjacent: np.ndarray) -> np.ndarray:
         """Sides of the pairs ``(node, tri)``: remembered, else the side the node has on the
         first remembered triangle of ``adjacent[tri]`` (the same body's triangles around
         it, :func:`~valve_dolfinx.contact.exclusions.adjacent_triangles`), else 0 (a new
         pair)."""
-        node = np.asarray(node, dtype=np.int64)
-        tri = np.asarray(tri, dtype=np.int64)
-        m = self.num_triangles
-        side = self._find(node * m + tri)
-        unknown = np.flatnonzero(side == 0)
-        for j in range(adjacent.shape[1] if len(unknown) else 0):
-            around = adjacent[tri[unknown], j]
-            found = np.where(around >= 0, self._find(node[unknown] * m + around), 0)
-            side[unknown] = found
-            unknown = unknown[found == 0]
-            if len(unknown) == 0:
+        return _lookup(self.keys, self.sides, np.asarray(node, dtype=np.int64),
+                       np.asarray(tri, dtype=np.int64), np.asarray(adjacent, dtype=np.int64),
+                       self.num_triangles)
+
+
+@numba.njit(cache=True)
+def _remembered(keys, sides, key):  # pragma: no cover
+    """The side remembered for ``key`` (a binary search of the sorted ``keys``), 0 if none."""
+    lo, hi = 0, len(keys)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return sides[lo] if lo < len(keys) and keys[lo] == key else np.int8(0)
+
+
+@numba.njit(cache=True)
+def _lookup(keys, sides, node, tri, adjacent, num_triangles):  # pragma: no cover
+    out = np.zeros(len(node), dtype=np.int8)
+    for i in range(len(node)):
+        side = _remembered(keys, sides, node[i] * num_triangles + tri[i])
+        for j in range(adjacent.shape[1]):
+            if side != 0:
                 break
-        return side
+            around = adjacent[tri[i], j]
+            if around >= 0:
+                side = _remembered(keys, sides, node[i] * num_triangles + around)
+        out[i] = side
+    return out

@@ -48,7 +48,12 @@ from valve_dolfinx.contact.geometry import (
     closest_point_on_triangles,
     triangle_frames,
 )
-from valve_dolfinx.contact.kernels import near_pairs, presence_gradients
+from valve_dolfinx.contact.kernels import (
+    group_index,
+    near_pairs,
+    presence_gradients,
+    row_presence,
+)
 from valve_dolfinx.contact.law import (
     DEFAULT_PARAMETERS,
     ContactParameters,
@@ -124,12 +129,6 @@ class _TriangleFrames:
 
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
-
-
-def _ramp(x: np.ndarray, width: float) -> np.ndarray:
-    """C¹ smoothstep: 0 for ``x <= 0``, 1 for ``x >= width``."""
-    xi = np.clip(np.asarray(x, dtype=float) / width, 0.0, 1.0)
-    return xi * xi * (3.0 - 2.0 * xi)
 
 
 @dataclass(frozen=True)
@@ -427,36 +426,14 @@ class SurfaceContact:
         node, tri, d0, gap, lam, offset, plane_lam, n_tri, frames = self._candidates(
             x, nodes, clock)
         s = self._side(node, tri, d0, f_ext, n_tri)
-        edge = ~np.isnan(gap)
         # face contacts: signed plane distance; edge/vertex contacts: distance to the
-        # closest point, only for nodes on their own side of the triangle's plane
+        # closest point; each row faded in and out smoothly (its presence)
         thickness = p.thickness * self.thickness_scale[node, self.triangle_body[tri]]
-        d = np.where(edge, gap, s * d0) - thickness
-        normal = s[:, None] * n_tri
-        edge_normal = offset[edge] / np.maximum(gap[edge], 1e-300)[:, None]
-        normal[edge] = edge_normal
-        # presence of each row, faded smoothly to 0 where it appears or vanishes, so that
-        # no row enters or leaves the blend with a finite weight (a jump in the residual):
-        # edge/vertex rows fade out as the node reaches the triangle's plane (behind it
-        # the neighbouring face takes over), every row as d reaches the cut-off
         eps = p.blend_distance
-        side_distance = s * d0
-        face_lam_min = np.minimum(np.minimum(plane_lam[:, 0], plane_lam[:, 1]), plane_lam[:, 2])
-        # face rows: Π_j ramp(λ_j + band), smooth also near the vertices (a min would kink)
         band = self._row_bands(node, tri)
-        fades = _ramp(plane_lam + band, band)
-        band_fade = fades[:, 0] * fades[:, 1] * fades[:, 2]
-        # edge/vertex rows also fade in with the in-plane distance of the node's projection
-        # from the triangle, √(gap² − d0²): where the projection re-enters the triangle its
-        # face row takes over, and a row vanishing with a finite weight there would make the
-        # blend (and the residual) jump, and Newton cycle (a graft node at a free edge)
-        in_plane = np.sqrt(np.maximum(np.where(edge, gap, 0.0) ** 2 - d0 ** 2, 0.0))
-        edge_fade = _ramp(side_distance, eps) * _ramp(in_plane, eps)
-        presence = np.where(edge, edge_fade, band_fade)
-        if p.taper > 0.0:  # with taper = 0 the literal law jumps at h anyway
-            presence *= _ramp(p.cutoff - d, eps)
-        else:
-            presence *= d < p.cutoff
+        edge, d, normal, side_distance, face_lam_min, in_plane, presence = row_presence(
+            s, d0, gap, offset, plane_lam, n_tri, thickness, band, eps, p.taper > 0.0,
+            p.cutoff)
         keep = (d > -p.penetration_depth) & (presence > 0.0)
         weight = self._pair_weight(node, tri)
         keep &= weight > 0.0
@@ -686,7 +663,7 @@ class SurfaceContact:
         present rows (``p = 1``) blend as ``e^{-d/ε}``.
         """
         group = node * len(self.body_labels) + self.triangle_body[tri]
-        _, inverse = np.unique(group, return_inverse=True)
+        inverse, _ = group_index(group)
         # the signed distance orders the surfaces from the most penetrated to the farthest;
         # |d| would put a penetration and a gap of the same size on a par, and has a kink
         if presence is not None:

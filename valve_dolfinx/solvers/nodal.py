@@ -91,8 +91,17 @@ class NodalCoupling:
     def displacements(self, state: dolfinx.fem.Function) -> np.ndarray:
         """(N, 3) nodal displacement (the layout's column components) on every rank."""
         bs, off = self.layout.block_size, self.layout.col_offset
-        local = state.x.array.reshape(-1, bs)[self._owned_local_block, off:off + 3]
-        return self._allgather_nodal(local)
+        blocks = state.x.array.reshape(-1, bs)
+        if self.comm.size == 1:  # one gather, node by node
+            return blocks[self._local_block_of_node, off:off + 3]
+        return self._allgather_nodal(blocks[self._owned_local_block, off:off + 3])
+
+    @cached_property
+    def _local_block_of_node(self) -> np.ndarray:
+        """``(N,)`` local dof block of every node (one process: every node is owned)."""
+        out = np.empty(self.num_nodes, dtype=np.int64)
+        out[self._gather_order] = self._owned_local_block
+        return out
 
     def positions(self, state: dolfinx.fem.Function) -> np.ndarray:
         """(N, 3) current nodal positions x₀ + u on every rank."""
