@@ -57,56 +57,62 @@ _ON_FEATURE = 1e-12
 
 
 @numba.njit(cache=True)
-def _face_terms(x, p, tri, lam, normal, grad, dn, dlam, work):  # pragma: no cover
-    """``∂n/∂x_m`` ``(4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(3, 4, 3)`` of a face contact of node
-    ``p`` with triangle ``tri`` (``grad`` ``(3, 3)``: its barycentric gradients
-    ``g_j``), written into ``dn``, ``dlam`` (zero on entry); ``work`` a scratch buffer of
-    64 values."""
+def _face_terms(x, row, node, support, lam, normal, grad, dn, dlam, dnhat):  # pragma: no cover
+    """``∂n/∂x_m`` ``(4, 3, 3)`` and ``∂λ_j/∂x_m`` ``(3, 4, 3)`` of contact ``row``, a face
+    contact of node ``p`` with triangle ``tri`` (``grad`` ``(3, 3)``: its barycentric
+    gradients ``g_j``), written into ``dn``, ``dlam`` (zero on entry); ``dnhat`` a
+    ``(3, 3, 3)`` scratch buffer (``∂n̂/∂x_k``).  The arrays are those of all contacts: the
+    row's views are taken here, not passed (passing views costs more than the terms)."""
+    p, tri, lam, normal, grad = node[row], support[row], lam[row], normal[row], grad[row]
+    dn, dlam = dn[row], dlam[row]
     a, b, c = tri[0], tri[1], tri[2]
-    e1, e2, nhat, r = work[0:3], work[3:6], work[6:9], work[9:12]
-    for i in range(3):
-        e1[i] = x[b, i] - x[a, i]
-        e2[i] = x[c, i] - x[a, i]
-        r[i] = x[p, i] - x[a, i]
-    N0 = e1[1] * e2[2] - e1[2] * e2[1]
-    N1 = e1[2] * e2[0] - e1[0] * e2[2]
-    N2 = e1[0] * e2[1] - e1[1] * e2[0]
+    e10, e11, e12 = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+    e20, e21, e22 = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+    r0, r1, r2 = x[p, 0] - x[a, 0], x[p, 1] - x[a, 1], x[p, 2] - x[a, 2]
+    N0 = e11 * e22 - e12 * e21
+    N1 = e12 * e20 - e10 * e22
+    N2 = e10 * e21 - e11 * e20
     length = math.sqrt(N0 * N0 + N1 * N1 + N2 * N2)
-    nhat[0], nhat[1], nhat[2] = N0 / length, N1 / length, N2 / length
-    side = np.sign(nhat[0] * normal[0] + nhat[1] * normal[1] + nhat[2] * normal[2])
+    n0, n1, n2 = N0 / length, N1 / length, N2 / length
+    side = np.sign(n0 * normal[0] + n1 * normal[1] + n2 * normal[2])
     # ∂n̂/∂x_k = (I - n̂ n̂ᵀ) K_k / |N|, K_a = [e2 - e1]×, K_b = -[e2]×, K_c = [e1]×
-    dnhat = work[12:39].reshape((3, 3, 3))
-    K = work[39:48].reshape((3, 3))
     for k in range(3):
         sign = -1.0 if k == 1 else 1.0
-        v0 = e2[0] - e1[0] if k == 0 else (e2[0] if k == 1 else e1[0])
-        v1 = e2[1] - e1[1] if k == 0 else (e2[1] if k == 1 else e1[1])
-        v2 = e2[2] - e1[2] if k == 0 else (e2[2] if k == 1 else e1[2])
-        K[0, 0], K[0, 1], K[0, 2] = 0.0, sign * -v2, sign * v1
-        K[1, 0], K[1, 1], K[1, 2] = sign * v2, 0.0, sign * -v0
-        K[2, 0], K[2, 1], K[2, 2] = sign * -v1, sign * v0, 0.0
+        if k == 0:
+            v0, v1, v2 = e20 - e10, e21 - e11, e22 - e12
+        elif k == 1:
+            v0, v1, v2 = e20, e21, e22
+        else:
+            v0, v1, v2 = e10, e11, e12
+        K00, K01, K02 = 0.0, sign * -v2, sign * v1
+        K10, K11, K12 = sign * v2, 0.0, sign * -v0
+        K20, K21, K22 = sign * -v1, sign * v0, 0.0
         for i in range(3):
-            P0 = (1.0 if i == 0 else 0.0) - nhat[i] * nhat[0]
-            P1 = (1.0 if i == 1 else 0.0) - nhat[i] * nhat[1]
-            P2 = (1.0 if i == 2 else 0.0) - nhat[i] * nhat[2]
-            for s in range(3):
-                dnhat[k, i, s] = (P0 * K[0, s] + P1 * K[1, s] + P2 * K[2, s]) / length
-                dn[1 + k, i, s] = side * dnhat[k, i, s]
-    d0 = dot3(nhat[0], nhat[1], nhat[2], r[0], r[1], r[2])
+            ni = n0 if i == 0 else (n1 if i == 1 else n2)
+            P0 = (1.0 if i == 0 else 0.0) - ni * n0
+            P1 = (1.0 if i == 1 else 0.0) - ni * n1
+            P2 = (1.0 if i == 2 else 0.0) - ni * n2
+            t0 = (P0 * K00 + P1 * K10 + P2 * K20) / length
+            t1 = (P0 * K01 + P1 * K11 + P2 * K21) / length
+            t2 = (P0 * K02 + P1 * K12 + P2 * K22) / length
+            dnhat[k, i, 0], dnhat[k, i, 1], dnhat[k, i, 2] = t0, t1, t2
+            dn[1 + k, i, 0], dn[1 + k, i, 1], dn[1 + k, i, 2] = side * t0, side * t1, side * t2
+    d0 = dot3(n0, n1, n2, r0, r1, r2)
     # dλ_j = g_j·(dx_p - Σ_k λ_k dx_k - d₀ dn̂)
     for j in range(3):
-        for s in range(3):
-            dlam[j, 0, s] = grad[j, s]
+        g0, g1, g2 = grad[j, 0], grad[j, 1], grad[j, 2]
+        dlam[j, 0, 0], dlam[j, 0, 1], dlam[j, 0, 2] = g0, g1, g2
         for k in range(3):
             for s in range(3):
-                g_dn = (grad[j, 0] * dnhat[k, 0, s] + grad[j, 1] * dnhat[k, 1, s]
-                        + grad[j, 2] * dnhat[k, 2, s])
+                g_dn = g0 * dnhat[k, 0, s] + g1 * dnhat[k, 1, s] + g2 * dnhat[k, 2, s]
                 dlam[j, 1 + k, s] = -lam[k] * grad[j, s] - d0 * g_dn
 
 
 @numba.njit(cache=True)
-def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
+def _feature_terms(x, row, node, support, lam, normal, dn, dlam):  # pragma: no cover
     """The same for an edge or vertex contact (``dn``, ``dlam`` zero on entry)."""
+    p, tri, lam, normal, dn, dlam = node[row], support[row], lam[row], normal[row], dn[row], \
+        dlam[row]
     q0 = 0.0 + lam[0] * x[tri[0], 0] + lam[1] * x[tri[1], 0] + lam[2] * x[tri[2], 0]
     q1 = 0.0 + lam[0] * x[tri[0], 1] + lam[1] * x[tri[1], 1] + lam[2] * x[tri[2], 1]
     q2 = 0.0 + lam[0] * x[tri[0], 2] + lam[1] * x[tri[1], 2] + lam[2] * x[tri[2], 2]
@@ -162,13 +168,12 @@ def _feature_terms(x, p, tri, lam, normal, dn, dlam):  # pragma: no cover
 
 @numba.njit(cache=True)
 def _all_terms(x, node, support, lam, normal, edge, grad, dn, dlam):  # pragma: no cover
-    work = np.empty(64)
-    for i in range(len(node)):
-        if edge[i]:
-            _feature_terms(x, node[i], support[i], lam[i], normal[i], dn[i], dlam[i])
+    dnhat = np.empty((3, 3, 3))
+    for row in range(len(node)):
+        if edge[row]:
+            _feature_terms(x, row, node, support, lam, normal, dn, dlam)
         else:
-            _face_terms(x, node[i], support[i], lam[i], normal[i], grad[i], dn[i], dlam[i],
-                        work)
+            _face_terms(x, row, node, support, lam, normal, grad, dn, dlam, dnhat)
 
 
 def direction_derivatives(x: np.ndarray, node: np.ndarray, support: np.ndarray,
