@@ -24,7 +24,8 @@ dead end (it is still drawn on the orifice map, and logged).
 
 Cost: exact distances are computed only where the Euclidean distance
 transform of the voxels a sheet passes through cannot decide (its error is
-about one voxel): about 5 s and 0.7 GB for a closed valve at 0.1 mm voxels.
+about one voxel), and the transform only over the box of the sheet widened by
+the distances that matter.
 """
 
 from __future__ import annotations
@@ -88,21 +89,31 @@ def through_flow(positions: np.ndarray, valve: ValveMesh, threshold: float, radi
 
     # The distance transform of the voxels a sheet passes through (sampled every
     # voxel/4) lies within [d − (√3/2)·voxel, d + (√3/2 + 1/(4√3))·voxel] of the
-    # exact distance d; only voxels it cannot decide get the exact distance.
+    # exact distance d; only voxels it cannot decide get the exact distance.  It is taken
+    # over the box of the sheet's voxels widened by the largest distance that matters
+    # (voxels farther out are free and decided): within the box every voxel's nearest
+    # sheet voxel is inside it, so its distance is the whole grid's.
     below_err, above_err = 0.87 * voxel, 1.05 * voxel
+    pad = int(math.ceil((reach + above_err) / voxel)) + 1
     free = np.ones(shape, dtype=bool)
     exact_count = 0
     for patch in valve.leaflets:
-        crossed = np.zeros(shape, dtype=bool)
         pts = _sheet_samples(positions[patch.nodes], patch.triangles, 0.25 * voxel)
         idx = np.floor((pts - origin) / voxel).astype(np.int64)
-        inside = np.all((idx >= 0) & (idx < shape), axis=1)
-        crossed[tuple(idx[inside].T)] = True
+        idx = idx[np.all((idx >= 0) & (idx < shape), axis=1)]
+        if len(idx) == 0:  # the sheet is outside the grid
+            continue
+        low = np.maximum(idx.min(axis=0) - pad, 0)
+        box = tuple(slice(a, b) for a, b in zip(low, np.minimum(idx.max(axis=0) + pad + 1,
+                                                                 shape), strict=True))
+        crossed = np.zeros([b.stop - b.start for b in box], dtype=bool)
+        crossed[tuple((idx - low).T)] = True
         approx = distance_transform_edt(~crossed, sampling=voxel)
         del crossed
-        undecided = free & (approx > reach - below_err) & (approx <= reach + above_err)
-        free &= approx > reach - below_err
-        shell = np.argwhere(undecided)
+        near = free[box]  # a view: blocking a voxel here blocks it in the grid
+        undecided = near & (approx > reach - below_err) & (approx <= reach + above_err)
+        near &= approx > reach - below_err
+        shell = np.argwhere(undecided) + low
         del approx, undecided
         centres = origin + (shell + 0.5) * voxel
         free[tuple(shell.T)] = distance_to_surface(centres, positions[patch.nodes],
