@@ -66,20 +66,24 @@ def row_presence(side, d0, gap, offset, plane_lam, plane_normal, thickness, band
     for i in range(count):
         edge[i] = not np.isnan(gap[i])
         side_distance[i] = side[i] * d0[i]
-        d[i] = (gap[i] if edge[i] else side_distance[i]) - thickness[i]
-        scale = max(gap[i], 1e-300)
-        for a in range(3):
-            normal[i, a] = offset[i, a] / scale if edge[i] else side[i] * plane_normal[i, a]
         low = plane_lam[i, 0] if plane_lam[i, 0] < plane_lam[i, 1] else plane_lam[i, 1]
         lam_min[i] = low if low < plane_lam[i, 2] else plane_lam[i, 2]
-        fade = _ramp(plane_lam[i, 0] + band[i, 0], band[i, 0])
-        fade = fade * _ramp(plane_lam[i, 1] + band[i, 1], band[i, 1])
-        fade = fade * _ramp(plane_lam[i, 2] + band[i, 2], band[i, 2])
-        g = gap[i] if edge[i] else 0.0
-        spread = g * g - d0[i] * d0[i]
-        in_plane[i] = np.sqrt(spread if spread >= 0.0 else 0.0)
         if edge[i]:
+            d[i] = gap[i] - thickness[i]
+            scale = max(gap[i], 1e-300)
+            for a in range(3):
+                normal[i, a] = offset[i, a] / scale
+            spread = gap[i] * gap[i] - d0[i] * d0[i]
+            in_plane[i] = np.sqrt(spread if spread >= 0.0 else 0.0)
             fade = _ramp(side_distance[i], eps) * _ramp(in_plane[i], eps)
+        else:
+            d[i] = side_distance[i] - thickness[i]
+            for a in range(3):
+                normal[i, a] = side[i] * plane_normal[i, a]
+            in_plane[i] = 0.0
+            fade = _ramp(plane_lam[i, 0] + band[i, 0], band[i, 0])
+            fade = fade * _ramp(plane_lam[i, 1] + band[i, 1], band[i, 1])
+            fade = fade * _ramp(plane_lam[i, 2] + band[i, 2], band[i, 2])
         if tapered:
             fade = fade * _ramp(cutoff - d[i], eps)
         else:
