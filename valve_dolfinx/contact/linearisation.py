@@ -111,8 +111,8 @@ def _face_terms(x, row, node, support, lam, normal, grad, dn, dlam, dnhat):  # p
 @numba.njit(cache=True)
 def _feature_terms(x, row, node, support, lam, normal, dn, dlam):  # pragma: no cover
     """The same for an edge or vertex contact (``dn``, ``dlam`` zero on entry)."""
-    p, tri, lam, normal, dn, dlam = node[row], support[row], lam[row], normal[row], dn[row], \
-        dlam[row]
+    p, tri, lam, normal = node[row], support[row], lam[row], normal[row]
+    dn, dlam = dn[row], dlam[row]
     q0 = 0.0 + lam[0] * x[tri[0], 0] + lam[1] * x[tri[1], 0] + lam[2] * x[tri[2], 0]
     q1 = 0.0 + lam[0] * x[tri[0], 1] + lam[1] * x[tri[1], 1] + lam[2] * x[tri[2], 1]
     q2 = 0.0 + lam[0] * x[tri[0], 2] + lam[1] * x[tri[1], 2] + lam[2] * x[tri[2], 2]

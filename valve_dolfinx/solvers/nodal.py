@@ -81,9 +81,6 @@ class NodalCoupling:
     def _allgather_nodal(self, owned_values: np.ndarray) -> np.ndarray:
         """(N, 3) array of per-node values on every rank from each rank's owned values."""
         out = np.empty((self.num_nodes, owned_values.shape[1]))
-        if self.comm.size == 1:  # one part: no message to pack
-            out[self._gather_order] = owned_values
-            return out
         parts = self.comm.allgather(np.ascontiguousarray(owned_values))
         out[self._gather_order] = np.concatenate(parts)
         return out
