@@ -7,7 +7,7 @@ time of the solve (forms are compiled beforehand) and the peak resident memory
 of the process.  Each size runs in a fresh process so the memory figures are its own.
 The last columns are the relative error of the mean radius against the exact
 membrane solution (T = pR/2, one scalar equation) and the observed convergence
-rate between successive sizes (docs/convergence.md).
+rate between successive sizes (docs/verification.md, "Sphere convergence").
 
     python benchmarks/membrane.py [--sizes 2.0 1.0 0.5] [--np 1]
 """
