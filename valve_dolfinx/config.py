@@ -57,7 +57,7 @@ __all__ = [
 #: 1 mmHg in kPa (80 mmHg = 10.666 kPa)
 MMHG_TO_KPA = 0.133322
 #: Contact of the closing valve (SPEC §5 law, k = 10 mN/mm, h = 0.1 mm) with the numerical
-#: choices of docs/contact.md: the leaflets' contact surfaces are offset 0.125 mm (half of
+#: choices of docs/numerics.md §4: the leaflets' contact surfaces are offset 0.125 mm (half of
 #: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
 #: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
 #: The side of every node-triangle pair, between leaflets as within one, is the side the node
@@ -71,7 +71,7 @@ COMMISSURE_TAPER_MM = 2.5
 #: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
 #: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
 FREE_EDGE_BAND = 1.0
-#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/closure.md)
+#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
 BENDING_MODULUS_KPA = 200.0
 #: paths to the loaded equilibrium (CaseConfig.solver): pseudo-transient continuation (the
 #: default) and damped BDF2 dynamics (SPEC §4, the cross-check)
@@ -102,8 +102,9 @@ class CaseConfig:
 
     ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
     ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
-    regularises the slack free-edge tip at the triple point, without which the
-    three-leaflet valve does not converge (docs/closure.md).
+    gives the slack free-edge tip at the triple point a length scale instead of a fold
+    at the scale of the mesh (docs/model.md §3; its effect on the figure of merit:
+    docs/numerics.md §7).
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
     pseudo-transient continuation with PETSc TS and SNES, contact and bending
     in the Newton system from the first step,
