@@ -375,3 +375,45 @@ def test_run_out_of_budget_is_reported(limit, words):
     assert len(states) == report.steps and residual == report.residual_mN
     assert np.array_equal(model.u.x.array, last)
     assert solver.static_residual()[0] == pytest.approx(report.residual_mN, rel=1e-12)
+
+
+class ToleranceRecordingSolver(PseudoTransientSolver):
+    """Records the relative tolerance in force at the start of every Newton solve."""
+
+    def _make_ts(self):
+        ts = super()._make_ts()
+        self.rtol_per_solve: list[tuple[int, float]] = []
+
+        def monitor(snes, its, fnorm):
+            if its == 0:
+                self.rtol_per_solve.append((ts.getStepNumber(), snes.getTolerances()[0]))
+
+        ts.getSNES().setMonitor(monitor)
+        return ts
+
+
+def test_steps_after_the_valve_settled_end_at_the_looser_tolerance():
+    """Each step is solved to ``newton_rtol`` while the static residual of the last accepted
+    state is at or above ``settled_residual_mN``, and to ``newton_rtol_settled`` once it is
+    below; the switch does not move the equilibrium (the run with it off, to 1e-10 mm)."""
+    threshold = 0.05  # the slack sheet starts at ~0.9 mN and ends at 1e-8 mN
+    params = {"residual_tolerance": TIGHT, "newton_rtol": 0.05, "newton_rtol_settled": 0.5}
+    model, bc = slack_sheet(6)
+    solver = ToleranceRecordingSolver(model, [bc], 2.0, PseudoTransientParameters(
+        settled_residual_mN=threshold, **params))
+    report = solver.solve()
+    assert report.converged, report.reason
+    settled = model.u.x.array.copy()
+    residuals = [entry["residual_mN"] for entry in report.history]
+    assert min(residuals) < threshold < max(residuals)  # both regimes occur
+    rtols = []
+    for step, rtol in solver.rtol_per_solve:
+        last = residuals[step - 1] if step >= 1 else np.inf  # the state the step starts from
+        assert rtol == (0.5 if last < threshold else 0.05), (step, last)
+        rtols.append(rtol)
+    assert {0.05, 0.5} <= set(rtols)
+    model, bc = slack_sheet(6)
+    off = PseudoTransientSolver(model, [bc], 2.0, PseudoTransientParameters(
+        settled_residual_mN=0.0, **params)).solve()
+    assert off.converged, off.reason
+    assert np.max(np.abs(model.u.x.array - settled)) < 1e-10

@@ -276,6 +276,10 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "newton_motion_mm": ("mm", "largest nodal motion of one Newton update"),
         "newton_max_it": ("", "Newton iterations per step"),
         "newton_rtol": ("", "relative residual reduction that ends a step's Newton solve"),
+        "settled_residual_mN": ("mN", "static residual below which the steps' Newton solves "
+                                "end at newton_rtol_settled (0: never)"),
+        "newton_rtol_settled": ("", "newton_rtol once the static residual is below "
+                                "settled_residual_mN"),
         "newton_cycle_tolerance": ("", "relative repetition of the residual norms that ends "
                                    "a Newton solve caught in a cycle of period 2 or 3 (0: never)"),
         "newton_reversal_damping": ("", "factor on a Newton update that points back along "

@@ -47,8 +47,17 @@ class PseudoTransientParameters:
     newton_max_it, newton_rtol
         Newton iterations per step and the relative residual reduction that ends
         a step's Newton solve; a step whose Newton solve fails is retried with
-        half the Δτ.  0.5 takes a third fewer Newton iterations over the study grid
-        but moves the resting states of path-sensitive cases (docs/numerics.md, §2).
+        half the Δτ.  0.5 throughout takes a third fewer Newton iterations over the
+        study grid but moves the resting states of path-sensitive cases
+        (docs/numerics.md, §2).
+    settled_residual_mN, newton_rtol_settled
+        Once the static residual of the accepted state is below
+        ``settled_residual_mN`` (1 mN: a tenth of the pressure force on a node of the
+        default mesh), the valve has come to its resting state and only the way down to
+        ``residual_tolerance`` remains: a step's Newton solve then ends at
+        ``newton_rtol_settled`` (0.5: once its residual has halved) instead of
+        ``newton_rtol``.  Above it the steps are solved to ``newton_rtol``, which
+        keeps the path by which the valve chooses its state.
     newton_cycle_tolerance
         A Newton solve whose residual norms repeat every second or third iteration
         to this relative tolerance has settled into a cycle and ends as failed at
@@ -89,6 +98,8 @@ class PseudoTransientParameters:
     newton_motion_mm: float = 0.1
     newton_max_it: int = 12
     newton_rtol: float = 0.05
+    settled_residual_mN: float = 1.0
+    newton_rtol_settled: float = 0.5
     newton_cycle_tolerance: float = 1e-3
     newton_reversal_damping: float = 0.5
     max_steps: int = 4000
@@ -112,6 +123,10 @@ class PseudoTransientParameters:
                     unit="mm", hint="keep it below the contact's penetration window")
         check_range("newton_max_it", self.newton_max_it, 1, 1000)
         check_range("newton_rtol", self.newton_rtol, 0.0, 1.0, low_open=True)
+        check_range("settled_residual_mN", self.settled_residual_mN, 0.0, 1e3, unit="mN",
+                    hint="1 mN is the default; 0 solves every step to newton_rtol")
+        check_range("newton_rtol_settled", self.newton_rtol_settled, 0.0, 1.0,
+                    low_open=True)
         check_range("newton_cycle_tolerance", self.newton_cycle_tolerance, 0.0, 0.1,
                     hint="1e-3 is the default; 0 lets cycling solves run to newton_max_it")
         check_range("newton_reversal_damping", self.newton_reversal_damping, 0.0, 1.0,

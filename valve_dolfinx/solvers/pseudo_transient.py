@@ -18,7 +18,10 @@ the static problem.  Δτ is also limited so that no node moves further than
 ``max_step_motion_mm`` in one step, and every Newton update is scaled so that
 no node moves further than ``newton_motion_mm`` between two contact
 evaluations (a line-search pre-check), which keeps nodes from tunnelling
-through a surface.
+through a surface.  A step's Newton solve ends once its residual has fallen by
+``newton_rtol``; once the static residual of the accepted state is below
+``settled_residual_mN`` (the valve has come to its resting state), by
+``newton_rtol_settled`` instead.
 
 **The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
 nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
@@ -349,6 +352,9 @@ class PseudoTransientSolver:
             new_dt = min(new_dt, dt * p.max_step_motion_mm / motion)
         self._r_prev = r_two
         ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
+        # once the valve has settled, a step's solve ends sooner
+        settled = r_inf < p.settled_residual_mN
+        ts.getSNES().setTolerances(rtol=p.newton_rtol_settled if settled else p.newton_rtol)
 
     def _ramped_pressure(self, step: int) -> float:
         """The pressure of the step after ``step`` accepted ones: the target reached in
