@@ -103,7 +103,7 @@ def pressed_sheets():
     solver = NewtonRecordingSolver(
         model, [clamp_boundary(model)], 2.0,
         PseudoTransientParameters(residual_tolerance=1e-10, newton_rtol=1e-12,
-                                  newton_rtol_settled=1e-12, newton_max_it=30),
+                                  newton_max_it=30),
         hooks=[contact_hook([contact], cells, model.pressure)])
     report = solver.solve()
     x = solver.coupling.positions(model.u)

@@ -19,9 +19,8 @@ the static problem.  Δτ is also limited so that no node moves further than
 no node moves further than ``newton_motion_mm`` between two contact
 evaluations (a line-search pre-check), which keeps nodes from tunnelling
 through a surface.  A step's Newton solve ends once its residual has fallen by
-``newton_rtol``; once the static residual of the accepted state is below
-``settled_residual_mN`` (the valve has come to its resting state), by
-``newton_rtol_settled`` instead.
+``newton_rtol``; with ``settled_residual_mN`` set (off by default), once the static
+residual of the accepted state is below it, by ``newton_rtol_settled`` instead.
 
 **The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
 nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
@@ -352,7 +351,7 @@ class PseudoTransientSolver:
             new_dt = min(new_dt, dt * p.max_step_motion_mm / motion)
         self._r_prev = r_two
         ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
-        # once the valve has settled, a step's solve ends sooner
+        # once the valve has settled (if settled_residual_mN > 0), a step's solve ends sooner
         settled = r_inf < p.settled_residual_mN
         ts.getSNES().setTolerances(rtol=p.newton_rtol_settled if settled else p.newton_rtol)
 
