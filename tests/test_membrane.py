@@ -322,15 +322,18 @@ def last_states(model):
 
 
 class CountingSolver(PseudoTransientSolver):
-    """Counts the iterations of every Newton solve it runs with an SNES monitor of its own."""
+    """Counts the iterations of every Newton solve it runs with an SNES monitor of its own,
+    and records the step and the relative tolerance in force when each solve starts."""
 
     def _make_ts(self):
         ts = super()._make_ts()
         self.iterations_per_solve: list[int] = []
+        self.rtol_per_solve: list[tuple[int, float]] = []
 
         def monitor(snes, its, fnorm):
             if its == 0:
                 self.iterations_per_solve.append(0)
+                self.rtol_per_solve.append((ts.getStepNumber(), snes.getTolerances()[0]))
             else:
                 self.iterations_per_solve[-1] = its
 
@@ -377,21 +380,6 @@ def test_run_out_of_budget_is_reported(limit, words):
     assert solver.static_residual()[0] == pytest.approx(report.residual_mN, rel=1e-12)
 
 
-class ToleranceRecordingSolver(PseudoTransientSolver):
-    """Records the relative tolerance in force at the start of every Newton solve."""
-
-    def _make_ts(self):
-        ts = super()._make_ts()
-        self.rtol_per_solve: list[tuple[int, float]] = []
-
-        def monitor(snes, its, fnorm):
-            if its == 0:
-                self.rtol_per_solve.append((ts.getStepNumber(), snes.getTolerances()[0]))
-
-        ts.getSNES().setMonitor(monitor)
-        return ts
-
-
 def test_steps_after_the_valve_settled_end_at_the_looser_tolerance():
     """Each step is solved to ``newton_rtol`` while the static residual of the last accepted
     state is at or above ``settled_residual_mN``, and to ``newton_rtol_settled`` once it is
@@ -399,7 +387,7 @@ def test_steps_after_the_valve_settled_end_at_the_looser_tolerance():
     threshold = 0.05  # the slack sheet starts at ~0.9 mN and ends at 1e-8 mN
     params = {"residual_tolerance": TIGHT, "newton_rtol": 0.05, "newton_rtol_settled": 0.5}
     model, bc = slack_sheet(6)
-    solver = ToleranceRecordingSolver(model, [bc], 2.0, PseudoTransientParameters(
+    solver = CountingSolver(model, [bc], 2.0, PseudoTransientParameters(
         settled_residual_mN=threshold, **params))
     report = solver.solve()
     assert report.converged, report.reason

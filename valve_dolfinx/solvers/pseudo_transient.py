@@ -351,9 +351,9 @@ class PseudoTransientSolver:
             new_dt = min(new_dt, dt * p.max_step_motion_mm / motion)
         self._r_prev = r_two
         ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
-        # once the valve has settled (if settled_residual_mN > 0), a step's solve ends sooner
-        settled = r_inf < p.settled_residual_mN
-        ts.getSNES().setTolerances(rtol=p.newton_rtol_settled if settled else p.newton_rtol)
+        if p.settled_residual_mN > 0.0:  # once the valve has settled, a step's solve ends sooner
+            settled = r_inf < p.settled_residual_mN
+            ts.getSNES().setTolerances(rtol=p.newton_rtol_settled if settled else p.newton_rtol)
 
     def _ramped_pressure(self, step: int) -> float:
         """The pressure of the step after ``step`` accepted ones: the target reached in
