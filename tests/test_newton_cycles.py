@@ -157,3 +157,30 @@ def test_damping_factor_one_disables_it():
 def test_out_of_range_damping_names_the_parameter(factor):
     with pytest.raises(ParameterError, match="newton_reversal_damping"):
         PseudoTransientParameters(newton_reversal_damping=factor)
+
+
+def test_a_cycle_across_solves_is_damped_after_carry_over():
+    """Solves of one update each (a pseudo-time step ending at a loose tolerance): from x₀
+    the first lands on −x₀, the second would land back on x₀.  Carried over, the second
+    solve's first update (+2x₀) reverses the first solve's last (−2x₀) and is halved: it
+    lands on the root."""
+    damping = NewtonReversalDamping(0.5)
+    _, _, first = newton_on_arctan(CYCLE, damping=damping, max_it=1)
+    assert first[-1] == pytest.approx(math.atan(CYCLE), rel=1e-9)  # on −x₀
+    damping.carry_over()
+    _, _, second = newton_on_arctan(-CYCLE, damping=damping, max_it=1)
+    assert second[-1] < 1e-14
+    assert damping.damped == damping.damped_first == 1
+
+
+def test_without_carry_over_a_solves_first_update_is_never_damped():
+    """A step retried after a failed solve starts undamped: the cycle across solves goes on."""
+    damping = NewtonReversalDamping(0.5)
+    newton_on_arctan(CYCLE, damping=damping, max_it=1)
+    _, _, second = newton_on_arctan(-CYCLE, damping=damping, max_it=1)
+    assert second[-1] == pytest.approx(math.atan(CYCLE), rel=1e-9)  # back on x₀
+    damping.carry_over()
+    newton_on_arctan(CYCLE, damping=damping, max_it=1)  # the carry-over is used here
+    _, _, fourth = newton_on_arctan(-CYCLE, damping=damping, max_it=1)
+    assert fourth[-1] == pytest.approx(math.atan(CYCLE), rel=1e-9)
+    assert damping.damped == 1

@@ -115,21 +115,38 @@ class NewtonReversalDamping:
     two sides of the cycle.  On Newton's exact two-cycle of ``f(x) = arctan x``
     (``x₀ → −x₀ → x₀``) ``factor = 1/2`` lands on the root.  The dot products are global,
     so every rank decides alike; ``factor = 1`` disables it.
+
+    The same cycle runs across solves when each ends after one update (a pseudo-time
+    step whose solve stops at a loose tolerance): after :meth:`carry_over` the next
+    solve's first update is compared with this solve's last one.  A time stepper calls
+    it after every accepted step, so a step retried after a failed solve starts
+    undamped.
     """
 
     def __init__(self, factor: float) -> None:
         self.factor = float(factor)
         self.previous: PETSc.Vec | None = None
-        #: updates damped (reported by the solver's log)
+        self._carried = False
+        #: updates damped (reported by the solver's log), and of those the first
+        #: updates of a solve
         self.damped = 0
+        self.damped_first = 0
+
+    def carry_over(self) -> None:
+        """Compare the first update of the next solve with the last update of this one."""
+        self._carried = True
 
     def __call__(self, iteration: int, y: PETSc.Vec) -> None:
         previous = self.previous
-        if self.factor < 1.0 and iteration >= 1 and previous is not None:
+        compare = iteration >= 1 or self._carried
+        if iteration == 0:
+            self._carried = False
+        if self.factor < 1.0 and compare and previous is not None:
             scale = y.norm() * previous.norm()
             if scale > 0.0 and y.dot(previous) < -REVERSAL_COSINE * scale:
                 y.scale(self.factor)
                 self.damped += 1
+                self.damped_first += iteration == 0
         if previous is None:
             self.previous = previous = y.duplicate()
         y.copy(previous)

@@ -19,8 +19,10 @@ the static problem.  Δτ is also limited so that no node moves further than
 no node moves further than ``newton_motion_mm`` between two contact
 evaluations (a line-search pre-check), which keeps nodes from tunnelling
 through a surface.  A step's Newton solve ends once its residual has fallen by
-``newton_rtol``; with ``settled_residual_mN`` set (off by default), once the static
-residual of the accepted state is below it, by ``newton_rtol_settled`` instead.
+``newton_rtol``, or, once the static residual of the accepted state is below
+``settled_residual_mN``, by ``newton_rtol_settled``.  An update that reverses the previous
+one, within a solve or from the last update of the previous accepted step, is damped
+(``newton_reversal_damping``).
 
 **The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
 nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
@@ -311,6 +313,7 @@ class PseudoTransientSolver:
             accept = getattr(hook, "accept_state", None)
             if accept is not None:
                 accept(self.u)
+        self._reversals.carry_over()  # a cycle across steps is damped as one within a solve
         r_inf, r_two = self.static_residual()  # at the pressure the step was solved at
         self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
         dt = ts.getTimeStep()
@@ -407,9 +410,9 @@ class PseudoTransientSolver:
         X.destroy()
         log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton iterations in "
                  "%d failed solves, %d of which ended in a cycle; %d reversing Newton "
-                 "updates damped)",
+                 "updates damped, %d of them a step's first)",
                  "converged" if self.report.converged else "NOT converged",
                  self.report.reason, self.report.wall_time_s,
                  self.report.rejected_newton_iterations, self.report.rejected_steps,
-                 self._cycles.stopped, self._reversals.damped)
+                 self._cycles.stopped, self._reversals.damped, self._reversals.damped_first)
         return self.report
