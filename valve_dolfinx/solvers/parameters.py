@@ -55,10 +55,9 @@ class PseudoTransientParameters:
         ``settled_residual_mN``, a step's Newton solve ends at ``newton_rtol_settled``
         (0.5: once its residual has halved) instead of ``newton_rtol``; above it the
         steps are solved to ``newton_rtol``, which keeps the path by which the valve
-        chooses its state.  Off by default (0 mN).  At 1 mN (a tenth of the pressure
-        force on a node of the default mesh) the study grid takes 15 % fewer Newton
-        iterations with the same results but one cell, while the pure-membrane normal
-        valve (``bending_modulus_kpa = 0``) no longer converges (docs/numerics.md, §2).
+        chooses its state.  The default 1 mN is a tenth of the pressure force on a node
+        of the default mesh: the leaflets are in place (docs/numerics.md, §2); 0 solves
+        every step to ``newton_rtol``.
     newton_cycle_tolerance
         A Newton solve whose residual norms repeat every second or third iteration
         to this relative tolerance has settled into a cycle and ends as failed at
@@ -67,11 +66,12 @@ class PseudoTransientParameters:
         runs measured no solve that went on to converge was ever cut at 1e-3, so
         the result does not depend on it.
     newton_reversal_damping
-        A Newton update that points back along the previous one of the same solve
-        (cosine below -0.9: the iterates jump to and fro across a kink of the
-        residual, such as the relaxed membrane energy's taut/wrinkled switch) is
-        scaled by this factor, so that the iterate lands between the two sides
-        instead of on the other one (1: never).
+        A Newton update that points back along the previous one (cosine below -0.9:
+        the iterates jump to and fro across a kink of the residual, such as the
+        relaxed membrane energy's taut/wrinkled switch) is scaled by this factor, so
+        that the iterate lands between the two sides instead of on the other one
+        (1: never).  A step's first update is compared with the last update of the
+        previous accepted step: solves of one update each cycle across steps.
     max_steps
         Limit on pseudo-time steps (accepted + rejected).
     wall_time_limit_s
@@ -96,7 +96,7 @@ class PseudoTransientParameters:
     newton_motion_mm: float = 0.1
     newton_max_it: int = 12
     newton_rtol: float = 0.05
-    settled_residual_mN: float = 0.0
+    settled_residual_mN: float = 1.0
     newton_rtol_settled: float = 0.5
     newton_cycle_tolerance: float = 1e-3
     newton_reversal_damping: float = 0.5
@@ -122,8 +122,7 @@ class PseudoTransientParameters:
         check_range("newton_max_it", self.newton_max_it, 1, 1000)
         check_range("newton_rtol", self.newton_rtol, 0.0, 1.0, low_open=True)
         check_range("settled_residual_mN", self.settled_residual_mN, 0.0, 1e3, unit="mN",
-                    hint="0 (the default) solves every step to newton_rtol; 1 mN is the "
-                    "faster setting")
+                    hint="1 mN is the default; 0 solves every step to newton_rtol")
         check_range("newton_rtol_settled", self.newton_rtol_settled, 0.0, 1.0,
                     low_open=True)
         check_range("newton_cycle_tolerance", self.newton_cycle_tolerance, 0.0, 0.1,
