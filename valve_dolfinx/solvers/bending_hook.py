@@ -33,9 +33,6 @@ class BendingHook:
         self._rows, self._cols = coo.row[keep], coo.col[keep]
         self._values = coo.data[keep]  # the 3×3 blocks are value·I
         self._csr: tuple[np.ndarray, ...] | None = None  # made on first use
-        # K in a matrix with the Jacobian's sparsity pattern, and that pattern's identity
-        self._K_like: PETSc.Mat | None = None
-        self._pattern: tuple[int, float] | None = None
 
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
         x = self.coupling.positions(state)
@@ -46,28 +43,9 @@ class BendingHook:
         return self._rows, self._cols
 
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
-        """``A += K`` (``A`` is assembled first, collectively).
-
-        K is kept in a matrix with ``A``'s sparsity pattern, so that adding it is one
-        vector update of the stored values (``MatAXPY``, same pattern), a tenth of the
-        time of inserting its ~60 entries per row.  When ``A``'s pattern has changed
-        since (the contact adds pairs), K is inserted row by row from a CSR copy of its
-        3×3 blocks K_ij·I (:meth:`NodalCoupling.block_csr`) and that matrix is made
-        again.  Either way each entry of ``A`` receives K_ij in one addition.
-        """
-        A.assemble()
-        pattern = (A.handle, A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
-        if pattern == self._pattern:
-            A.axpy(1.0, self._K_like, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            return
+        """``A += K``, row by row from a CSR copy of K's 3×3 blocks made once
+        (:meth:`NodalCoupling.block_csr`); the blocks are K_ij·I."""
         if self._csr is None:
             blocks = self._values[:, None, None] * np.eye(3)
             self._csr = self.coupling.block_csr(self._rows, self._cols, blocks)
         self.coupling.add_csr(A, self._csr)
-        A.assemble()
-        if self._K_like is not None:
-            self._K_like.destroy()
-        self._K_like = A.duplicate(copy=False)
-        self.coupling.add_csr(self._K_like, self._csr)
-        self._K_like.assemble()
-        self._pattern = (A.handle, A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
