@@ -55,7 +55,7 @@ class PseudoTransientParameters:
         ``settled_residual_mN``, a step's Newton solve ends at ``newton_rtol_settled``
         (0.5: once its residual has halved) instead of ``newton_rtol``.  0 (the
         default) solves every step to ``newton_rtol``.  1 mN (a tenth of the pressure
-        force on a node of the default mesh) saves a sixth of the study grid's Newton
+        force on a node of the default mesh) saves 14 % of the study grid's Newton
         iterations, but the looser settled steps can carry a case into a neighbouring
         resting state: W21/H27 with the numerical mass ×4 came to rest 0.19 mm lower
         (docs/numerics.md, §2).
