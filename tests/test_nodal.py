@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
+from valve_dolfinx.solvers.nodal import BlockPattern, NodalCoupling, NodalLayout
 
 
 @pytest.mark.parametrize("block_size", [3, 6])
@@ -87,3 +87,56 @@ def test_summed_blocks_go_in_as_given_and_rows_ascend():
     assert len(np.unique(matrix_rows)) == len(matrix_rows) == 3 * len(np.unique(rows))
     for a, b in zip(indptr[:-1], indptr[1:], strict=True):
         assert np.all(np.diff(columns[a:b]) > 0)
+
+
+def test_block_pattern_grows_the_pattern_insertion_would_make():
+    """A matrix whose pattern is grown by BlockPattern before each assembly ends with the same
+    pattern and the same entries, bit for bit, as one that grows as blocks are inserted
+    outside its pattern, without any reallocation; a block inserted behind the pattern's back
+    is read back before the next growth, so it is kept; an unassembled matrix is left alone."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 3)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    coupling = NodalCoupling(V)
+    n, size = coupling.num_nodes, 3 * coupling.num_nodes
+    rng = np.random.default_rng(3)
+    # a banded starting pattern (each node with its two neighbours), then three assemblies,
+    # each adding it and a new random set of blocks (some inside the band, most outside)
+    band = [(i, j) for i in range(n) for j in range(max(i - 1, 0), min(i + 2, n))]
+    rounds = [(rng.integers(0, n, 25), rng.integers(0, n, 25), rng.normal(size=(25, 3, 3)))
+              for _ in range(3)]
+    taken = set(band).union(*({*zip(r.tolist(), c.tolist())} for r, c, _ in rounds))
+    unannounced = next((i, j) for i in range(n) for j in range(n) if (i, j) not in taken)
+
+    def run(pattern: BlockPattern | None):
+        A = PETSc.Mat().createAIJ(((size, size), (size, size)), bsize=3, nnz=9,
+                                  comm=MPI.COMM_SELF)
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        rows, cols = np.array(band).T
+        assert pattern is None or not pattern.include(A, rows, cols)  # not assembled yet
+        coupling.add_blocks(A, rows, cols, np.ones((len(rows), 3, 3)))
+        A.assemble()
+        mallocs = []  # reallocations while each assembly inserts
+        for k, (r, c, b) in enumerate(rounds):
+            if pattern is not None:
+                grew = pattern.include(A, *coupling.merge_blocks(r, c, b)[:2])
+                assert grew
+                assert not pattern.include(A, *coupling.merge_blocks(r, c, b)[:2])
+            A.zeroEntries()
+            before = A.getInfo()["mallocs"]
+            coupling.add_blocks(A, rows, cols, np.ones((len(rows), 3, 3)))
+            coupling.add_blocks(A, r, c, b)
+            if k == 1:  # a block no one announced: outside the pattern and a reallocation
+                coupling.add_blocks(A, [unannounced[0]], [unannounced[1]], np.full((1, 3, 3), 2.0))
+            A.assemble()
+            mallocs.append(A.getInfo()["mallocs"] - before)
+        return A.getValuesCSR(), mallocs
+
+    (ip0, j0, v0), mallocs0 = run(None)
+    pattern = BlockPattern(coupling)
+    (ip1, j1, v1), mallocs1 = run(pattern)
+    assert np.array_equal(ip0, ip1) and np.array_equal(j0, j1) and np.array_equal(v0, v1)
+    assert pattern.grown == 3
+    assert min(mallocs0) > 3 and mallocs1[0] == mallocs1[2] == 0 < mallocs1[1]  # unannounced
+    with pytest.raises(ValueError, match="one process"):
+        BlockPattern(NodalCoupling(dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (6,))),
+                                   NodalLayout(6, 3, 0)))

@@ -75,6 +75,7 @@ class ContactHook:
         self._key: np.ndarray | None = None
         self._has_jacobian = False
         self._results: list = []
+        self._merged: tuple | None = None  # (results, their merged blocks)
         self._unit_forces: np.ndarray | None = None  # pressure forces per kPa, accepted state
 
     def _evaluate(self, state: dolfinx.fem.Function, jacobian: bool) -> list:
@@ -100,10 +101,26 @@ class ContactHook:
         for result in self._evaluate(state, jacobian=False):
             self.coupling.add_forces(b, result.forces, scale=-1.0)
 
+    def _merged_blocks(self, state: dolfinx.fem.Function) -> list[tuple]:
+        """Each model's Jacobian blocks at ``state``, summed per (row, column) node pair
+        (:meth:`NodalCoupling.merge_blocks`)."""
+        results = self._evaluate(state, jacobian=True)
+        if self._merged is None or self._merged[0] is not results:
+            self._merged = (results, [self.coupling.merge_blocks(r.jac_rows, r.jac_cols,
+                                                                 r.jac_blocks)
+                                      for r in results])
+        return self._merged[1]
+
+    def jacobian_couplings(self, state: dolfinx.fem.Function) -> tuple[np.ndarray, np.ndarray]:
+        """(row nodes, column nodes) of the blocks :meth:`add_jacobian` adds at ``state``,
+        for the matrix's pattern (:class:`~valve_dolfinx.solvers.nodal.BlockPattern`)."""
+        merged = self._merged_blocks(state)
+        return (np.concatenate([m[0] for m in merged] or [np.empty(0, np.int64)]),
+                np.concatenate([m[1] for m in merged] or [np.empty(0, np.int64)]))
+
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
-        for result in self._evaluate(state, jacobian=True):
-            self.coupling.add_blocks(A, result.jac_rows, result.jac_cols, result.jac_blocks,
-                                     scale=-1.0)
+        for rows, cols, blocks in self._merged_blocks(state):
+            self.coupling.add_merged_blocks(A, rows, cols, blocks, scale=-1.0)
 
     def accept_state(self, state: dolfinx.fem.Function) -> None:
         """Record an accepted (time/load) step: sides and driving forces come from it."""

@@ -25,7 +25,7 @@ from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.contact.kernels import scalar_rows, sum_blocks, summed_already
 from valve_dolfinx.geometry.distributed import node_to_dof
 
-__all__ = ["NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
+__all__ = ["BlockPattern", "NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
 
 
 @dataclass(frozen=True)
@@ -120,16 +120,20 @@ class NodalCoupling:
                    blocks: np.ndarray, scale: float = 1.0) -> None:
         """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block (duplicates add).
 
-        The blocks are summed per (row, column) pair first (:meth:`_merge_blocks`), then
-        inserted matrix row by matrix row (:meth:`add_csr`), so that every matrix entry
-        receives one addition: the sums do not depend on the order of insertion.
+        The blocks are summed per (row, column) pair first (:meth:`merge_blocks`), then
+        inserted matrix row by matrix row (:meth:`add_merged_blocks`), so that every matrix
+        entry receives one addition: the sums do not depend on the order of insertion.
         """
-        rows, cols, blocks = self._merge_blocks(row_nodes, col_nodes, blocks)
-        if len(rows):
-            self.add_csr(A, self._scalar_rows(rows, cols, blocks, scale))
+        self.add_merged_blocks(A, *self.merge_blocks(row_nodes, col_nodes, blocks), scale=scale)
 
-    def _merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def add_merged_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
+                          blocks: np.ndarray, scale: float = 1.0) -> None:
+        """:meth:`add_blocks` of blocks :meth:`merge_blocks` has summed already."""
+        if len(row_nodes):
+            self.add_csr(A, self._scalar_rows(row_nodes, col_nodes, blocks, scale))
+
+    def merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The blocks summed per (row node, column node) pair, sorted by row then column,
         all-zero blocks left out (:func:`~valve_dolfinx.contact.kernels.sum_blocks`: each
         sum in the blocks' order); blocks that are so already (the contact Jacobian's,
@@ -181,6 +185,75 @@ class NodalCoupling:
         """``(K, 3)`` global matrix columns of the nodes' three position components."""
         return (self._matrix_bases[1][nodes][:, None] + np.arange(3)).astype(PETSc.IntType)
 
+
+class BlockPattern:
+    """The 3×3 node blocks of a one-process matrix's sparsity pattern, grown once per
+    assembly.
+
+    A matrix of a plain displacement space (block size 3) whose assembly adds blocks
+    outside its pattern (contact pairs that have just come close) reallocates its storage
+    for each new row segment: tens of copies of the whole matrix per assembly on the
+    valve.  :meth:`include`, called before an assembly with the blocks it will add, sets
+    the pattern to its present one plus those blocks in one preallocation instead.  The
+    pattern, and so every factorisation, is the one the insertions would have produced.
+    (A matrix distributed over several processes grows at insertion, as PETSc does it.)
+
+    Parameters
+    ----------
+    coupling
+        The node ↔ index map of the matrix (one process, block size 3, offsets 0).
+    """
+
+    def __init__(self, coupling: NodalCoupling):
+        if coupling.layout != NodalLayout() or coupling.comm.size != 1:
+            raise ValueError("a block pattern needs one process and the plain displacement "
+                             "layout")
+        self.coupling = coupling
+        #: sorted keys ``row block · B + column block`` of the matrix's blocks (None: not
+        #: read yet)
+        self.keys: np.ndarray | None = None
+        #: preallocations made by :meth:`include`
+        self.grown = 0
+
+    def _read(self, A: PETSc.Mat) -> None:
+        """The blocks of the (assembled) matrix's present pattern: the columns ``3c`` of its
+        rows ``3b`` (the entries of a block row are its blocks')."""
+        self._num_blocks = A.getSize()[1] // 3
+        indptr, cols, _ = A.getValuesCSR()
+        rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+        first = (rows % 3 == 0) & (cols % 3 == 0)
+        self.keys = rows[first] // 3 * self._num_blocks + cols[first] // 3
+
+    def include(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray) -> bool:
+        """Extend ``A``'s pattern by the blocks ``(row node, column node)`` that it lacks;
+        True if it did.  The entries stay, their values do not: call it before assembling
+        ``A``.  A matrix not assembled yet is left alone (its first assembly makes its
+        pattern)."""
+        if not A.assembled:
+            return False
+        if self.keys is None or A.getInfo()["nz_used"] != 9 * len(self.keys):
+            self._read(A)  # first call, or blocks inserted since the last one
+        block = self.coupling.block_of_node
+        keys = (block[np.asarray(row_nodes, dtype=np.int64)] * self._num_blocks
+                + block[np.asarray(col_nodes, dtype=np.int64)])
+        found = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        new = keys[self.keys[found] != keys]
+        if not len(new):
+            return False
+        self.keys = np.union1d(self.keys, new)
+        A.setPreallocationCSR(self._scalar_pattern())
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self.grown += 1
+        return True
+
+    def _scalar_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """(row pointer, columns) of the blocks' scalar entries
+        (:func:`~valve_dolfinx.contact.kernels.scalar_rows` of zero blocks)."""
+        row_block, col_block = np.divmod(self.keys, self._num_blocks)
+        indptr, columns, _, _ = scalar_rows(
+            row_block, col_block, np.zeros((len(self.keys), 3, 3)), 0.0,
+            3 * np.arange(self._num_blocks), 3 * np.arange(self._num_blocks))
+        return indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType)
 
 def pressure_nodal_forces(x: np.ndarray, triangles: np.ndarray, pressure: float,
                           side: float = -1.0) -> np.ndarray:

@@ -64,7 +64,7 @@ from valve_dolfinx.solvers.callbacks import (
     NewtonCycleStop,
     NewtonReversalDamping,
 )
-from valve_dolfinx.solvers.nodal import NodalCoupling
+from valve_dolfinx.solvers.nodal import BlockPattern, NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
 
@@ -152,8 +152,9 @@ class PseudoTransientSolver:
     def _create_jacobian(self) -> PETSc.Mat:
         """The Jacobian's matrix: the form's sparsity plus the node couplings the hooks
         declare (``coupled_nodes()``, e.g. the bending stencil), so that inserting them
-        does not reallocate the matrix; contact pairs, which change, may still add
-        entries."""
+        does not reallocate the matrix.  Contact pairs, which change, add entries: on one
+        process the blocks a hook announces (``jacobian_couplings(u)``) are put in the
+        pattern in one step before each assembly (:class:`BlockPattern`)."""
         pattern = fem.create_sparsity_pattern(self.J_form)
         imap = self.model.V.dofmap.index_map
         for hook in self.hooks:
@@ -172,6 +173,8 @@ class PseudoTransientSolver:
         pattern.finalize()
         J = dolfinx.cpp.la.petsc.create_matrix(self.model.domain.comm, pattern)
         J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        # one process: the pattern grows once per Jacobian, before its assembly
+        self._pattern = BlockPattern(self.coupling) if self.coupling.comm.size == 1 else None
         return J
 
     # --- timing ------------------------------------------------------------------------
@@ -214,6 +217,12 @@ class PseudoTransientSolver:
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
         t0 = time.perf_counter()
         self._set_state(X, Xdot)
+        if self._pattern is not None:  # the blocks the hooks will add, in the pattern at once
+            for hook in self.hooks:
+                couplings = getattr(hook, "jacobian_couplings", None)
+                if couplings is not None:
+                    self._pattern.include(J, *couplings(self.u))
+                    t0 = self._lap(hook.timing_name, t0)
         self.shift.value = a
         J.zeroEntries()
         fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
