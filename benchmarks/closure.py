@@ -10,8 +10,8 @@ runs find it warm; the table shows the first ("cold") and the median warm run.
 
 The time of a run is split exclusively (nested calls are charged to the innermost) by
 wrapping, inside the subprocess only: ``dolfinx.jit.ffcx_jit`` (form compilation),
-the solver's residual and Jacobian callbacks (assembly), the contact and bending hooks,
-the solver's post-step (step control, diagnostics), ``analyse_case`` (coaptation
+the solver's residual and Jacobian callbacks (assembly), the contact and bending hooks
+(contact includes putting its pairs into the Jacobian's pattern), the solver's post-step (step control, diagnostics), ``analyse_case`` (coaptation
 analysis), ``output.write_case``/``write_result`` (output); what is left of the solve is
 "linear solve + PETSc" (LU factorisation and solves, TS/SNES), what is left of the run is
 "mesh, root, setup" (Gmsh, distribution, root step, function spaces, sparsity).  Peak
@@ -98,6 +98,7 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
     from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.solvers.bending_hook import BendingHook
     from valve_dolfinx.solvers.contact_hook import ContactHook
+    from valve_dolfinx.solvers.nodal import BlockPattern
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
     cache = tempfile.TemporaryDirectory(prefix="ffcx-cache-")
@@ -111,8 +112,10 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
     clock.wrap(PseudoTransientSolver, "_post_step", "post-step")
     clock.wrap(PseudoTransientSolver, "solve", "linear solve + PETSc")
     for hook, label in ((ContactHook, "contact"), (BendingHook, "bending")):
-        for name in ("add_residual", "add_jacobian", "accept_state", "diagnostics"):
+        for name in ("add_residual", "jacobian_couplings", "add_jacobian", "accept_state",
+                     "diagnostics"):
             clock.wrap(hook, name, label)
+    clock.wrap(BlockPattern, "include", "contact")  # the contact pairs' matrix entries
     clock.wrap(closure, "analyse_case", "analysis")
     for name in ("write_case", "write_result"):
         clock.wrap(output, name, "output")

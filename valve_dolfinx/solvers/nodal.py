@@ -240,7 +240,8 @@ class BlockPattern:
         new = keys[self.keys[found] != keys]
         if not len(new):
             return False
-        self.keys = np.union1d(self.keys, new)
+        new = np.unique(new)  # into the sorted keys (a merge, not a sort of them all)
+        self.keys = np.insert(self.keys, np.searchsorted(self.keys, new), new)
         A.setPreallocationCSR(self._scalar_pattern())
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self.grown += 1
