@@ -256,6 +256,7 @@ class BlockPattern:
             3 * np.arange(self._num_blocks), 3 * np.arange(self._num_blocks))
         return indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType)
 
+
 def pressure_nodal_forces(x: np.ndarray, triangles: np.ndarray, pressure: float,
                           side: float = -1.0) -> np.ndarray:
     """Consistent nodal forces of a uniform follower pressure on linear triangles, (N, 3).
