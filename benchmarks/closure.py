@@ -11,8 +11,9 @@ runs find it warm; the table shows the first ("cold") and the median warm run.
 The time of a run is split exclusively (nested calls are charged to the innermost) by
 wrapping, inside the subprocess only: ``dolfinx.jit.ffcx_jit`` (form compilation),
 the solver's residual and Jacobian callbacks (assembly), the contact and bending hooks
-(contact includes putting its pairs into the Jacobian's pattern), the solver's post-step (step control, diagnostics), ``analyse_case`` (coaptation
-analysis), ``output.write_case``/``write_result`` (output); what is left of the solve is
+(contact includes putting its pairs into the Jacobian's pattern), the solver's post-step
+(step control, diagnostics), ``analyse_case`` (coaptation analysis),
+``output.write_case``/``write_result`` (output); what is left of the solve is
 "linear solve + PETSc" (LU factorisation and solves, TS/SNES), what is left of the run is
 "mesh, root, setup" (Gmsh, distribution, root step, function spaces, sparsity).  Peak
 memory is the subprocess's ``ru_maxrss`` after the run.  The speed targets checked below

@@ -116,19 +116,12 @@ class NodalCoupling:
         rows = self.row_indices(nodes)
         b.setValues(rows.ravel(), (scale * forces[nodes]).ravel(), addv=PETSc.InsertMode.ADD)
 
-    def add_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
-                   blocks: np.ndarray, scale: float = 1.0) -> None:
-        """A[rows(row_node), cols(col_node)] += scale·block for each 3×3 block (duplicates add).
-
-        The blocks are summed per (row, column) pair first (:meth:`merge_blocks`), then
-        inserted matrix row by matrix row (:meth:`add_merged_blocks`), so that every matrix
-        entry receives one addition: the sums do not depend on the order of insertion.
-        """
-        self.add_merged_blocks(A, *self.merge_blocks(row_nodes, col_nodes, blocks), scale=scale)
-
     def add_merged_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
                           blocks: np.ndarray, scale: float = 1.0) -> None:
-        """:meth:`add_blocks` of blocks :meth:`merge_blocks` has summed already."""
+        """A[rows(row_node), cols(col_node)] += scale·block for 3×3 blocks that
+        :meth:`merge_blocks` has summed per (row, column) pair, inserted matrix row by matrix
+        row (:meth:`add_csr`): every matrix entry receives one addition, so the sums do not
+        depend on the order of insertion."""
         if len(row_nodes):
             self.add_csr(A, self._scalar_rows(row_nodes, col_nodes, blocks, scale))
 
@@ -147,7 +140,7 @@ class NodalCoupling:
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
-        """3×3 blocks (as for :meth:`add_blocks`) by global matrix row, for :meth:`add_csr`:
+        """3×3 blocks (as for :meth:`add_merged_blocks`) by global matrix row, for :meth:`add_csr`:
         (row pointer, global columns, values, global rows).  Distinct (row, column) pairs."""
         order = np.argsort(row_nodes, kind="stable")
         return self._scalar_rows(np.asarray(row_nodes, dtype=np.int64)[order],

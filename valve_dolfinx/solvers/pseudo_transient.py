@@ -126,6 +126,8 @@ class PseudoTransientSolver:
         self.F_form, self.J_form = self._forms()
         self.F_vec = fem_petsc.create_vector(V)
         self.J_mat = self._create_jacobian()
+        # one process: the Jacobian's pattern grows once per assembly, before it
+        self._pattern = BlockPattern(self.coupling) if self.coupling.comm.size == 1 else None
         imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
         local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs]
                                   or [np.empty(0, np.int32)])
@@ -173,8 +175,6 @@ class PseudoTransientSolver:
         pattern.finalize()
         J = dolfinx.cpp.la.petsc.create_matrix(self.model.domain.comm, pattern)
         J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        # one process: the pattern grows once per Jacobian, before its assembly
-        self._pattern = BlockPattern(self.coupling) if self.coupling.comm.size == 1 else None
         return J
 
     # --- timing ------------------------------------------------------------------------
