@@ -21,7 +21,8 @@ from valve_dolfinx.contact import (
     SurfaceContact,
     vertex_adjacency,
 )
-from valve_dolfinx.contact.surface import FACE_BAND
+from valve_dolfinx.contact.results import StepClock
+from valve_dolfinx.contact.surface import FACE_BAND, _TriangleFrames
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 K, H = 10.0, 0.1
@@ -763,3 +764,30 @@ def test_edge_row_fades_in_as_the_projection_leaves_the_triangle():
         step = eps * rng.normal(size=(5, 3))
         fd = contact.evaluate(x + step, f_ext).forces - contact.evaluate(x - step, f_ext).forces
         np.testing.assert_allclose(J @ step.ravel(), (fd / 2).ravel(), rtol=1e-5, atol=1e-10)
+
+
+def test_search_finds_every_pair_of_the_fade_bands_corners_and_all():
+    """The box test may pass extra pairs but must lose none that the narrow phase keeps.
+
+    A face row whose projection lies in its fade band ``{λ_j > -b_j}`` beyond a corner of
+    its triangle (two coordinates negative) has a finite presence: a box that cut it off
+    would make it appear with a jump in the force.  The band of a lone flat obtuse triangle
+    (every side a free edge, band 1) reaches its corner ``3X_0 - X_1 - X_2 = (-1.5, -0.15)``,
+    five times the triangle's largest altitude from vertex 0; a grid of free nodes 0.1 above
+    and below its plane, every (node, triangle) pair through the narrow phase's tests, and
+    all of them must be among the searched ones."""
+    u, v = np.meshgrid(np.linspace(-2.0, 3.0, 51), np.linspace(-1.0, 1.2, 23), indexing="ij")
+    grid = np.stack([u.ravel(), v.ravel(), np.full(u.size, 0.1)], axis=1)
+    x = np.concatenate([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.15, 0.0]], grid,
+                        grid * [1.0, 1.0, -1.0]])
+    triangles = np.array([[0, 1, 2]])
+    contact = SurfaceContact(triangles, len(x), ContactParameters(), boundary_band=1.0)
+    xt = np.ascontiguousarray(x.T)
+    frames = _TriangleFrames.at(xt, triangles)
+    nodes = np.arange(3, len(x))
+    found = contact._narrow(xt, frames, *contact._search(xt, frames, nodes, StepClock()))
+    every = contact._narrow(xt, frames, *contact._near(
+        xt, frames, nodes, np.zeros(len(nodes), dtype=np.int64), contact.search_distance))
+    face_corner = np.isnan(every[3]) & (np.sum(every[6] < 0.0, axis=1) == 2)
+    assert face_corner.sum() > 50                   # face rows beyond a corner are in the test
+    np.testing.assert_array_equal(np.sort(found[0]), np.sort(every[0]))

@@ -98,6 +98,25 @@ _BOUND_MARGIN = 1e-6
 TRACKING_FACTOR = 2.0
 
 
+def _band_corners(xt: np.ndarray, triangles: np.ndarray, band: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The fade bands' triangles ``{λ_j ≥ -b_j}`` as ``(xt, triangles)`` of their own.
+
+    Corner ``k`` is where the two other coordinates are at their band's end:
+    ``Y_k = X_k + Σ_{j≠k} b_j (X_k − X_j)``.  ``xt`` ``(3, N)`` holds the node
+    coordinates by axis, ``band`` ``(M, 3)`` the band of each triangle's side ``j``
+    (opposite vertex ``j``); the result is ``(3, 3M)`` corners and their ``(M, 3)`` ids."""
+    vertices = xt[:, triangles]  # (3, M, 3)
+    corners = vertices.copy()
+    for k in range(3):
+        for j in range(3):
+            if j != k:
+                corners[:, :, k] += band[:, j] * (vertices[:, :, k] - vertices[:, :, j])
+    count = len(triangles)
+    return (corners.reshape(3, 3 * count),
+            np.arange(3 * count, dtype=np.int64).reshape(count, 3))
+
+
 @dataclass(frozen=True)
 class _TriangleFrames:
     """Per-triangle data of the projection test, by axis ``(3, M)``.
@@ -528,14 +547,16 @@ class SurfaceContact:
                                slack=PRISM_SLACK)
         # nodes beyond an edge or vertex, within the cut-off of it, meet the triangle too:
         # widen the prism boxes in the triangle's plane (by h·√(1 - n_i²) along axis i)
-        # face rows reach their band beyond the sides (a fraction of the triangle's height,
-        # wide beyond a free edge): widen by that too, or a large triangle's band is cut
-        # off by the box and its row appears with a jump
-        extent = self.side_band * np.asarray(frames.altitudes).T
-        width = np.maximum(self.params.reach, extent.max(axis=1))
-        lateral = width * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
+        lateral = self.params.reach * np.sqrt(np.maximum(1.0 - frames.normal**2, 0.0))
         lo -= lateral
         hi += lateral
+        # face rows reach over the fade band, the triangle {λ_j ≥ -b_j}: its prism's box
+        # too, corners and all, or a row whose projection lies beyond a corner is cut off
+        # by the box and appears with a finite presence (a jump in the residual)
+        band_lo, band_hi = padded_bounds(*_band_corners(xt, self.triangles, self.side_band),
+                                         distance, frames.normal, slack=PRISM_SLACK)
+        np.minimum(lo, band_lo, out=lo)
+        np.maximum(hi, band_hi, out=hi)
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
         found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0), np.empty((0, 3)),
