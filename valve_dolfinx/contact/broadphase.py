@@ -86,6 +86,33 @@ def padded_bounds(xt: np.ndarray, triangles: np.ndarray, pad: float,
     return lo - margin, hi + margin
 
 
+
+@numba.njit(cache=True)
+def include_bands(xt, triangles, band, normal, pad, lo, hi):  # pragma: no cover
+    """Grow the boxes ``lo``, ``hi`` ``(3, M)`` to hold each triangle's fade band prism.
+
+    The band of triangle ``t`` is the triangle ``{λ_j ≥ -band[t, j]}`` around it (``λ_j``
+    its barycentric coordinates), whose corner ``k`` lies at
+    ``Y_k = X_k + Σ_{j≠k} b_j (X_k − X_j) = (1 + Σ_j b_j) X_k − Σ_j b_j X_j``; its prism
+    is swept ``±pad`` along the unit ``normal``, i.e. ``pad·|n_i|`` along axis ``i``.
+    ``xt`` holds the node coordinates by axis, ``(3, N)``."""
+    for t in range(triangles.shape[0]):
+        b0, b1, b2 = band[t, 0], band[t, 1], band[t, 2]
+        scale = 1.0 + b0 + b1 + b2
+        for axis in range(3):
+            x0 = xt[axis, triangles[t, 0]]
+            x1 = xt[axis, triangles[t, 1]]
+            x2 = xt[axis, triangles[t, 2]]
+            shift = b0 * x0 + b1 * x1 + b2 * x2
+            y0, y1, y2 = scale * x0 - shift, scale * x1 - shift, scale * x2 - shift
+            margin = pad * abs(normal[axis, t])
+            low = min(y0, y1, y2) - margin
+            high = max(y0, y1, y2) + margin
+            if low < lo[axis, t]:
+                lo[axis, t] = low
+            if high > hi[axis, t]:
+                hi[axis, t] = high
+
 @dataclass(frozen=True)
 class CellGrid:
     """A grid of ``cell × cell × step`` cells: square columns along the sweep axis ``axes[2]``.

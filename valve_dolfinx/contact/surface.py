@@ -36,7 +36,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from valve_dolfinx.contact.broadphase import BLOCK_SIZE, CellIndex, padded_bounds
+from valve_dolfinx.contact.broadphase import (
+    BLOCK_SIZE,
+    CellIndex,
+    include_bands,
+    padded_bounds,
+)
 from valve_dolfinx.contact.exclusions import (
     adjacent_triangles,
     merge_exclusions,
@@ -96,25 +101,6 @@ _BOUND_MARGIN = 1e-6
 #: many search distances of its plane at the accepted states (see
 #: :mod:`~valve_dolfinx.contact.sides`): farther than a pseudo-time step moves a node
 TRACKING_FACTOR = 2.0
-
-
-def _band_corners(xt: np.ndarray, triangles: np.ndarray, band: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """The fade bands' triangles ``{λ_j ≥ -b_j}`` as ``(xt, triangles)`` of their own.
-
-    Corner ``k`` is where the two other coordinates are at their band's end:
-    ``Y_k = X_k + Σ_{j≠k} b_j (X_k − X_j)``.  ``xt`` ``(3, N)`` holds the node
-    coordinates by axis, ``band`` ``(M, 3)`` the band of each triangle's side ``j``
-    (opposite vertex ``j``); the result is ``(3, 3M)`` corners and their ``(M, 3)`` ids."""
-    vertices = xt[:, triangles]  # (3, M, 3)
-    corners = vertices.copy()
-    for k in range(3):
-        for j in range(3):
-            if j != k:
-                corners[:, :, k] += band[:, j] * (vertices[:, :, k] - vertices[:, :, j])
-    count = len(triangles)
-    return (corners.reshape(3, 3 * count),
-            np.arange(3 * count, dtype=np.int64).reshape(count, 3))
 
 
 @dataclass(frozen=True)
@@ -553,10 +539,7 @@ class SurfaceContact:
         # face rows reach over the fade band, the triangle {λ_j ≥ -b_j}: its prism's box
         # too, corners and all, or a row whose projection lies beyond a corner is cut off
         # by the box and appears with a finite presence (a jump in the residual)
-        band_lo, band_hi = padded_bounds(*_band_corners(xt, self.triangles, self.side_band),
-                                         distance, frames.normal, slack=PRISM_SLACK)
-        np.minimum(lo, band_lo, out=lo)
-        np.maximum(hi, band_hi, out=hi)
+        include_bands(xt, self.triangles, self.side_band, frames.normal, distance, lo, hi)
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
         found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0), np.empty((0, 3)),
