@@ -86,7 +86,6 @@ def padded_bounds(xt: np.ndarray, triangles: np.ndarray, pad: float,
     return lo - margin, hi + margin
 
 
-
 @numba.njit(cache=True)
 def include_bands(xt, triangles, band, normal, pad, lo, hi):  # pragma: no cover
     """Grow the boxes ``lo``, ``hi`` ``(3, M)`` to hold each triangle's fade band prism.
@@ -112,6 +111,7 @@ def include_bands(xt, triangles, band, normal, pad, lo, hi):  # pragma: no cover
                 lo[axis, t] = low
             if high > hi[axis, t]:
                 hi[axis, t] = high
+
 
 @dataclass(frozen=True)
 class CellGrid:

@@ -140,8 +140,9 @@ class NodalCoupling:
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
-        """3×3 blocks (as for :meth:`add_merged_blocks`) by global matrix row, for :meth:`add_csr`:
-        (row pointer, global columns, values, global rows).  Distinct (row, column) pairs."""
+        """3×3 blocks (as for :meth:`add_merged_blocks`) by global matrix row, for
+        :meth:`add_csr`: (row pointer, global columns, values, global rows).  Distinct
+        (row, column) pairs."""
         order = np.argsort(row_nodes, kind="stable")
         return self._scalar_rows(np.asarray(row_nodes, dtype=np.int64)[order],
                                  np.asarray(col_nodes, dtype=np.int64)[order],
