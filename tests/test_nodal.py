@@ -15,8 +15,8 @@ def add_blocks(coupling: NodalCoupling, A: PETSc.Mat, rows, cols, blocks, scale:
     coupling.add_merged_blocks(A, *coupling.merge_blocks(rows, cols, blocks), scale=scale)
 
 
-@pytest.mark.parametrize("block_size", [3, 6])
-def test_blocks_are_added_at_their_nodes(block_size):
+@pytest.mark.parametrize("block_size, mat_type", [(3, "aij"), (3, "baij"), (6, "aij")])
+def test_blocks_are_added_at_their_nodes(block_size, mat_type):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 3, 4)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (block_size,)))
     layout = NodalLayout() if block_size == 3 else NodalLayout(6, 3, 0)
@@ -32,9 +32,10 @@ def test_blocks_are_added_at_their_nodes(block_size):
     rng = np.random.default_rng(1)
     rows, cols = rng.integers(0, n, 300), rng.integers(0, n, 300)  # many duplicates
     blocks = rng.normal(size=(300, 3, 3))
-    A = PETSc.Mat().createAIJ(((size, size), (size, size)), bsize=block_size,
-                              comm=MPI.COMM_SELF)
-    A.setPreallocationNNZ(size)
+    A = PETSc.Mat().create(comm=MPI.COMM_SELF)
+    A.setSizes(((size, size), (size, size)), bsize=block_size)
+    A.setType(mat_type)
+    A.setPreallocationNNZ(size if mat_type == "aij" else n)
     add_blocks(coupling, A, rows, cols, blocks, scale=-2.0)
     A.assemble()
     expected = np.zeros((size, size))
@@ -55,7 +56,8 @@ def _coupling_with_block_order(block_of_node: np.ndarray) -> NodalCoupling:
     return coupling
 
 
-def test_summed_blocks_go_in_as_given_and_rows_ascend():
+@pytest.mark.parametrize("mat_type", ["aij", "baij"])
+def test_summed_blocks_go_in_as_given_and_rows_ascend(mat_type):
     """Blocks already summed per pair (the contact Jacobian's) skip the summation: the matrix
     is the same as for the same blocks split into random parts, the caller's blocks are not
     scaled in place, and every matrix row is handed to PETSc with ascending columns although
@@ -69,8 +71,10 @@ def test_summed_blocks_go_in_as_given_and_rows_ascend():
     kept = blocks.copy()
 
     def assembled(r, c, b):
-        A = PETSc.Mat().createAIJ(((3 * n, 3 * n), (3 * n, 3 * n)), bsize=3, comm=MPI.COMM_SELF)
-        A.setPreallocationNNZ(3 * n)
+        A = PETSc.Mat().create(comm=MPI.COMM_SELF)
+        A.setSizes(((3 * n, 3 * n), (3 * n, 3 * n)), bsize=3)
+        A.setType(mat_type)
+        A.setPreallocationNNZ(3 * n if mat_type == "aij" else n)
         add_blocks(coupling, A, r, c, b, scale=-0.5)
         A.assemble()
         return A.getValues(range(3 * n), range(3 * n))
@@ -88,7 +92,7 @@ def test_summed_blocks_go_in_as_given_and_rows_ascend():
     split = (np.concatenate([rows, rows])[order], np.concatenate([cols, cols])[order],
              np.concatenate([part, blocks - part])[order])
     assert np.allclose(assembled(*split), expected, rtol=0.0, atol=1e-14)
-    indptr, columns, values, matrix_rows = coupling.block_csr(rows, cols, blocks)
+    indptr, columns, values, matrix_rows = coupling.block_csr(rows, cols, blocks).scalar
     assert len(np.unique(matrix_rows)) == len(matrix_rows) == 3 * len(np.unique(rows))
     for a, b in zip(indptr[:-1], indptr[1:], strict=True):
         assert np.all(np.diff(columns[a:b]) > 0)
@@ -113,8 +117,8 @@ def test_block_pattern_grows_the_pattern_insertion_would_make():
     unannounced = next((i, j) for i in range(n) for j in range(n) if (i, j) not in taken)
 
     def run(pattern: BlockPattern | None):
-        A = PETSc.Mat().createAIJ(((size, size), (size, size)), bsize=3, nnz=9,
-                                  comm=MPI.COMM_SELF)
+        A = PETSc.Mat().createBAIJ(((size, size), (size, size)), bsize=3, nnz=3,
+                                   comm=MPI.COMM_SELF)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         rows, cols = np.array(band).T
         assert pattern is None or not pattern.include(A, rows, cols)  # not assembled yet

@@ -7,7 +7,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from valve_dolfinx._compat import PETSc, dolfinx
-from valve_dolfinx.solvers.nodal import NodalCoupling
+from valve_dolfinx.solvers.nodal import BlockRows, NodalCoupling
 
 __all__ = ["BendingHook"]
 
@@ -32,7 +32,7 @@ class BendingHook:
         keep = coo.data != 0.0
         self._rows, self._cols = coo.row[keep], coo.col[keep]
         self._values = coo.data[keep]  # the 3×3 blocks are value·I
-        self._csr: tuple[np.ndarray, ...] | None = None  # made on first use
+        self._csr: BlockRows | None = None  # made on first use
 
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
         x = self.coupling.positions(state)

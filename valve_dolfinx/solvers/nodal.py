@@ -25,7 +25,7 @@ from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.contact.kernels import scalar_rows, sum_blocks, summed_already
 from valve_dolfinx.geometry.distributed import node_to_dof
 
-__all__ = ["BlockPattern", "NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
+__all__ = ["BlockPattern", "BlockRows", "NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,45 @@ class NodalLayout:
     block_size: int = 3
     row_offset: int = 0
     col_offset: int = 0
+
+
+#: PETSc matrix types that store 3×3 blocks (with the plain layout's block size 3)
+_BLOCK_MATRICES = (PETSc.Mat.Type.SEQBAIJ, PETSc.Mat.Type.MPIBAIJ)
+
+
+class BlockRows:
+    """``scale``·3×3 node blocks, sorted by row node (the blocks of a row consecutive),
+    ready for insertion into a matrix (:meth:`NodalCoupling.add_csr`) as either of two
+    compressed-row arrays, each made when first asked for and kept."""
+
+    def __init__(self, coupling: NodalCoupling, rows: np.ndarray, cols: np.ndarray,
+                 blocks: np.ndarray, scale: float = 1.0):
+        self._coupling = coupling
+        self.rows, self.cols = rows, cols
+        self.blocks = np.ascontiguousarray(blocks, dtype=np.float64)
+        self.scale = float(scale)
+
+    @cached_property
+    def scalar(self) -> tuple[np.ndarray, ...]:
+        """One row per matrix row (:func:`~valve_dolfinx.contact.kernels.scalar_rows` at
+        the coupling's global indices): (row pointer, columns, values, matrix rows), the
+        columns of a row ascending."""
+        row_base, col_base = self._coupling._matrix_bases
+        indptr, columns, values, matrix_rows = scalar_rows(
+            self.rows, self.cols, self.blocks, self.scale, row_base, col_base)
+        return (indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType), values,
+                matrix_rows.astype(PETSc.IntType))
+
+    @cached_property
+    def blocked(self) -> tuple[np.ndarray, ...]:
+        """One row per block row of a block matrix of the plain layout: (block row
+        pointer, block columns, values block after block, block rows)."""
+        block = self._coupling.block_of_node
+        starts = np.flatnonzero(np.concatenate([[True], self.rows[1:] != self.rows[:-1]]))
+        indptr = np.append(starts, len(self.rows))
+        return (indptr.astype(PETSc.IntType), block[self.cols].astype(PETSc.IntType),
+                (self.scale * self.blocks).ravel(), block[self.rows[starts]].astype(
+                    PETSc.IntType))
 
 
 class NodalCoupling:
@@ -119,11 +158,11 @@ class NodalCoupling:
     def add_merged_blocks(self, A: PETSc.Mat, row_nodes: np.ndarray, col_nodes: np.ndarray,
                           blocks: np.ndarray, scale: float = 1.0) -> None:
         """A[rows(row_node), cols(col_node)] += scale·block for 3×3 blocks that
-        :meth:`merge_blocks` has summed per (row, column) pair, inserted matrix row by matrix
-        row (:meth:`add_csr`): every matrix entry receives one addition, so the sums do not
-        depend on the order of insertion."""
+        :meth:`merge_blocks` has summed per (row, column) pair (:meth:`add_csr`): every
+        matrix entry receives one addition, so the sums do not depend on the order of
+        insertion."""
         if len(row_nodes):
-            self.add_csr(A, self._scalar_rows(row_nodes, col_nodes, blocks, scale))
+            self.add_csr(A, BlockRows(self, row_nodes, col_nodes, blocks, scale))
 
     def merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -139,24 +178,13 @@ class NodalCoupling:
         return sum_blocks(rows, cols, blocks, self.num_nodes)
 
     def block_csr(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
-                  ) -> tuple[np.ndarray, ...]:
-        """3×3 blocks (as for :meth:`add_merged_blocks`) by global matrix row, for
-        :meth:`add_csr`: (row pointer, global columns, values, global rows).  Distinct
-        (row, column) pairs."""
+                  ) -> BlockRows:
+        """3×3 blocks with distinct (row, column) pairs sorted by row node, to be inserted
+        (:meth:`add_csr`) more than once."""
         order = np.argsort(row_nodes, kind="stable")
-        return self._scalar_rows(np.asarray(row_nodes, dtype=np.int64)[order],
-                                 np.asarray(col_nodes, dtype=np.int64)[order],
-                                 np.asarray(blocks, dtype=np.float64)[order], 1.0)
-
-    def _scalar_rows(self, rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray,
-                     scale: float) -> tuple[np.ndarray, ...]:
-        """:func:`~valve_dolfinx.contact.kernels.scalar_rows` at this layout's global
-        indices, in PETSc's integer type; the blocks of a row node consecutive."""
-        row_base, col_base = self._matrix_bases
-        indptr, columns, values, matrix_rows = scalar_rows(
-            rows, cols, np.ascontiguousarray(blocks), float(scale), row_base, col_base)
-        return (indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType), values,
-                matrix_rows.astype(PETSc.IntType))
+        return BlockRows(self, np.asarray(row_nodes, dtype=np.int64)[order],
+                         np.asarray(col_nodes, dtype=np.int64)[order],
+                         np.asarray(blocks, dtype=np.float64)[order])
 
     @cached_property
     def _matrix_bases(self) -> tuple[np.ndarray, np.ndarray]:
@@ -164,12 +192,17 @@ class NodalCoupling:
         base = self.block_of_node * self.layout.block_size
         return base + self.layout.row_offset, base + self.layout.col_offset
 
-    @staticmethod
-    def add_csr(A: PETSc.Mat, csr: tuple[np.ndarray, ...]) -> None:
-        """A += the rows of :meth:`block_csr`, one insertion per matrix row (inserting
-        block by block costs a call per block: ~50 ms for the valve's bending matrix)."""
-        indptr, cols, values, rows = csr
-        A.setValuesIJV(indptr, cols, values, addv=PETSc.InsertMode.ADD, rowmap=rows)
+    def add_csr(self, A: PETSc.Mat, blocks: BlockRows) -> None:
+        """A += the blocks, one insertion per block row of a block matrix of the plain
+        layout, else per matrix row (inserting block by block costs a call per block:
+        ~50 ms for the valve's bending matrix)."""
+        if self.layout == NodalLayout() and A.getType() in _BLOCK_MATRICES:
+            indptr, columns, values, rows = blocks.blocked
+            A.setValuesBlockedIJV(indptr, columns, values, addv=PETSc.InsertMode.ADD,
+                                  rowmap=rows)
+        else:
+            indptr, columns, values, rows = blocks.scalar
+            A.setValuesIJV(indptr, columns, values, addv=PETSc.InsertMode.ADD, rowmap=rows)
 
     def row_indices(self, nodes: np.ndarray) -> np.ndarray:
         """``(K, 3)`` global matrix rows of the nodes' three force components."""
@@ -181,16 +214,19 @@ class NodalCoupling:
 
 
 class BlockPattern:
-    """The 3×3 node blocks of a one-process matrix's sparsity pattern, grown once per
-    assembly.
+    """The 3×3 node blocks of a one-process block matrix's sparsity pattern, grown once
+    per assembly.
 
-    A matrix of a plain displacement space (block size 3) whose assembly adds blocks
-    outside its pattern (contact pairs that have just come close) reallocates its storage
-    for each new row segment: tens of copies of the whole matrix per assembly on the
-    valve.  :meth:`include`, called before an assembly with the blocks it will add, sets
-    the pattern to its present one plus those blocks in one preallocation instead.  The
-    pattern, and so every factorisation, is the one the insertions would have produced.
-    (A matrix distributed over several processes grows at insertion, as PETSc does it.)
+    A block matrix (``seqbaij``) of a plain displacement space (block size 3) whose
+    assembly adds blocks outside its pattern (contact pairs that have just come close)
+    reallocates its storage for each new row segment: tens of copies of the whole matrix
+    per assembly on the valve.  :meth:`include`, called before an assembly with the blocks
+    it will add, sets the pattern to its present one plus those blocks in one
+    preallocation instead.  The pattern, and so every factorisation, is the one the
+    insertions would have produced.  PETSc does not count that preallocation as a change
+    of the matrix's nonzero pattern: a factorisation of the matrix must be set up anew
+    after :meth:`include` has grown it.  (A matrix distributed over several processes
+    grows at insertion, as PETSc does it.)
 
     Parameters
     ----------
@@ -223,6 +259,8 @@ class BlockPattern:
         True if it did.  The entries stay, their values do not: call it before assembling
         ``A``.  A matrix not assembled yet is left alone (its first assembly makes its
         pattern)."""
+        if A.getType() != PETSc.Mat.Type.SEQBAIJ:
+            raise TypeError(f"a block pattern grows a 'seqbaij' matrix, not {A.getType()!r}")
         if not A.assembled:
             return False
         if self.keys is None or A.getInfo()["nz_used"] != 9 * len(self.keys):
@@ -236,19 +274,16 @@ class BlockPattern:
             return False
         new = np.unique(new)  # into the sorted keys (a merge, not a sort of them all)
         self.keys = np.insert(self.keys, np.searchsorted(self.keys, new), new)
-        A.setPreallocationCSR(self._scalar_pattern())
+        A.setPreallocationCSR(self._block_pattern())
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self.grown += 1
         return True
 
-    def _scalar_pattern(self) -> tuple[np.ndarray, np.ndarray]:
-        """(row pointer, columns) of the blocks' scalar entries
-        (:func:`~valve_dolfinx.contact.kernels.scalar_rows` of zero blocks)."""
+    def _block_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """(block row pointer, block columns) of the blocks."""
         row_block, col_block = np.divmod(self.keys, self._num_blocks)
-        indptr, columns, _, _ = scalar_rows(
-            row_block, col_block, np.zeros((len(self.keys), 3, 3)), 0.0,
-            3 * np.arange(self._num_blocks), 3 * np.arange(self._num_blocks))
-        return indptr.astype(PETSc.IntType), columns.astype(PETSc.IntType)
+        indptr = np.searchsorted(row_block, np.arange(self._num_blocks + 1))
+        return indptr.astype(PETSc.IntType), col_block.astype(PETSc.IntType)
 
 
 def pressure_nodal_forces(x: np.ndarray, triangles: np.ndarray, pressure: float,

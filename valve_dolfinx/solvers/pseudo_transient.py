@@ -173,7 +173,7 @@ class PseudoTransientSolver:
             for a, b in zip(starts[:-1], starts[1:], strict=True):
                 pattern.insert(rows[a:a + 1].astype(np.int32), cols[a:b].astype(np.int32))
         pattern.finalize()
-        J = dolfinx.cpp.la.petsc.create_matrix(self.model.domain.comm, pattern)
+        J = dolfinx.cpp.la.petsc.create_matrix(self.model.domain.comm, pattern, "baij")
         J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         return J
 
@@ -221,7 +221,10 @@ class PseudoTransientSolver:
             for hook in self.hooks:
                 couplings = getattr(hook, "jacobian_couplings", None)
                 if couplings is not None:
-                    self._pattern.include(J, *couplings(self.u))
+                    if self._pattern.include(J, *couplings(self.u)) and ts is not None:
+                        # a BAIJ preallocation leaves the matrix's nonzero state as it was:
+                        # without a reset the LU would reuse the old pattern's analysis
+                        ts.getSNES().getKSP().getPC().reset()
                     t0 = self._lap(hook.timing_name, t0)
         self.shift.value = a
         J.zeroEntries()
