@@ -29,6 +29,7 @@ from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.symmetry import distance_up_to_mirror
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
+from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
 #: SPEC §7 fields every result.json carries
 RESULT_FIELDS = ("graft_width_pct", "graft_height_pct", "converged", "min_coaptation_height_mm",
@@ -141,6 +142,34 @@ def test_pressure_ramp_reaches_the_unique_equilibrium_at_full_pressure():
     assert ramped.min_coaptation_height_mm == pytest.approx(full.min_coaptation_height_mm,
                                                             abs=SAME)
     assert ramped.coaptation_area_mm2 == pytest.approx(full.coaptation_area_mm2, rel=0.01)
+
+
+def test_predictor_moves_the_start_of_newton_not_the_equilibrium(monkeypatch):
+    """The linear predictor (``predictor_motion_mm``) moves where each step's Newton solve
+    starts, by at most its cap at any node, and so the path, but not the equilibrium: the
+    reference at 1.6 mm comes to rest at the same coaptation heights with and without it."""
+    cap = 0.1
+    moves = []  # the largest nodal motion of each prediction
+    predict = PseudoTransientSolver._predict
+
+    def spy(self, snes, x):
+        before = x.array_r.copy()
+        predict(self, snes, x)
+        moves.append(np.max(np.linalg.norm((x.array_r - before).reshape(-1, 3), axis=1)))
+
+    monkeypatch.setattr(PseudoTransientSolver, "_predict", spy)
+    plain, predicted = (run_case(_reference_config(mesh_size=1.6, pseudo_transient=_ptc(
+        predictor_motion_mm=motion)), comm=MPI.COMM_SELF, figures=False, fields_output=False)
+        for motion in (0.0, cap))
+    for result in (plain, predicted):
+        _assert_converged_and_sealed(result)
+    assert len(moves) >= predicted.time_steps  # one per Newton solve, none without it
+    assert max(moves) == pytest.approx(cap, rel=1e-12)  # the early steps' are capped
+    assert plain.newton_iterations != predicted.newton_iterations
+    assert predicted.min_coaptation_height_mm == pytest.approx(
+        plain.min_coaptation_height_mm, abs=SAME)
+    assert predicted.central_coaptation_height_mm == pytest.approx(
+        plain.central_coaptation_height_mm, abs=SAME)
 
 
 @pytest.mark.parametrize("limit, words", [({"max_steps": 3}, "max_steps = 3"),

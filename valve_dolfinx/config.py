@@ -284,6 +284,8 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
                                    "a Newton solve caught in a cycle of period 2 or 3 (0: never)"),
         "newton_reversal_damping": ("", "factor on a Newton update that points back along "
                                     "the previous one (1: never)"),
+        "predictor_motion_mm": ("mm", "largest nodal motion of the linear predictor that "
+                                "starts each step's Newton solve (0: none)"),
         "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),
         "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
         "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),

@@ -73,6 +73,13 @@ class PseudoTransientParameters:
         that the iterate lands between the two sides instead of on the other one
         (1: never).  A step's first update is compared with the last update of the
         previous accepted step: solves of one update each cycle across steps.
+    predictor_motion_mm
+        Each step's Newton solve starts from the accepted state moved on by the last
+        accepted step's motion, scaled by the ratio of the pseudo-time steps (a linear
+        predictor), at most this far at any node (mm); 0 (the default): from the accepted
+        state.  The equilibrium is the same; the path is not.  0.1 took W21/H27 from
+        1 709 to 611 Newton iterations (failed solves included) and W21/H40 from 2 970 to
+        1 978, to the same figures of merit (docs/numerics.md, §2).
     max_steps
         Limit on pseudo-time steps (accepted + rejected).
     wall_time_limit_s
@@ -101,6 +108,7 @@ class PseudoTransientParameters:
     newton_rtol_settled: float = 0.5
     newton_cycle_tolerance: float = 1e-3
     newton_reversal_damping: float = 0.5
+    predictor_motion_mm: float = 0.0
     max_steps: int = 4000
     wall_time_limit_s: float = 900.0
     pressure_ramp_steps: int = 0
@@ -131,6 +139,9 @@ class PseudoTransientParameters:
         check_range("newton_reversal_damping", self.newton_reversal_damping, 0.0, 1.0,
                     low_open=True, unit="",
                     hint="0.5 (the default) halves a reversing update; 1 leaves it as it is")
+        check_range("predictor_motion_mm", self.predictor_motion_mm, 0.0, 10.0, unit="mm",
+                    hint="0 (the default) starts each step's Newton solve at the accepted "
+                    "state; keep it below the contact's penetration window")
         check_range("max_steps", self.max_steps, 1, 1e7)
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
                     unit="s")

@@ -249,6 +249,23 @@ class PseudoTransientSolver:
             y.scale(cap / motion)
         self._reversals(self._snes.getIterationNumber(), y)
 
+    def _predict(self, snes: PETSc.SNES, x: PETSc.Vec) -> None:
+        """SNES initial guess: the accepted state ``x`` moved on by the last accepted step's
+        motion times the ratio of this step's Δτ to that step's, scaled down so that no
+        node moves further than ``predictor_motion_mm`` (a failed step's retry, with half
+        the Δτ, starts from half the prediction)."""
+        if self._last_step is None:
+            return
+        motion, dt = self._last_step
+        guess = motion * (self._ts.getTimeStep() / dt)
+        largest = self._largest_node_motion(guess)
+        cap = self.params.predictor_motion_mm
+        if largest > cap:
+            guess *= cap / largest
+        guess[self._bc_local] = 0.0
+        with x.localForm() as local:
+            local.array[:len(guess)] += guess
+
     def _largest_node_motion(self, owned: np.ndarray) -> float:
         local = owned.reshape(-1, 3)
         value = float(np.max(np.linalg.norm(local, axis=1), initial=0.0))
@@ -306,6 +323,8 @@ class PseudoTransientSolver:
         ts.setFromOptions()
         self._snes = ts.getSNES()
         ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
+        if p.predictor_motion_mm > 0.0:
+            ts.getSNES().setInitialGuess(guard.wrap(self._predict))
         ts.getSNES().setMonitor(guard.wrap(self._cycles))
         ts.setPostStep(guard.wrap(self._post_step))
         return ts
@@ -313,7 +332,12 @@ class PseudoTransientSolver:
     def _post_step(self, ts: PETSc.TS) -> None:
         p, r = self.params, self.report
         t0 = time.perf_counter()
-        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
+        solution = ts.getSolution().array_r.copy()
+        dt = ts.getTimeStep()
+        # the owned dofs' motion over this step, for the next step's predictor
+        self._last_step = (solution - self._accepted, dt)
+        self._accepted = solution
+        self.u.x.petsc_vec.array[:] = solution
         self.u.x.scatter_forward()
         displacement = self.coupling.displacements(self.u)
         step = np.linalg.norm(displacement - self._last_displacement, axis=1)
@@ -328,7 +352,6 @@ class PseudoTransientSolver:
         self._reversals.carry_over()  # a cycle across steps is damped as one within a solve
         r_inf, r_two = self.static_residual()  # at the pressure the step was solved at
         self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
-        dt = ts.getTimeStep()
         r.steps = ts.getStepNumber()
         r.time = ts.getTime()
         r.newton_iterations += ts.getSNES().getIterationNumber()
@@ -391,8 +414,10 @@ class PseudoTransientSolver:
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self.model.pressure.value = self._ramped_pressure(0)
         self._last_displacement = self.coupling.displacements(self.u)
+        self._accepted = self.u.x.petsc_vec.array_r.copy()  # owned dofs, last accepted
+        self._last_step = None  # (owned dofs' motion, Δτ) of the last accepted step
         _, self._r_prev = self.static_residual()
-        ts = self._make_ts()
+        ts = self._ts = self._make_ts()
         X = self.u.x.petsc_vec.copy()
         try:
             ts.solve(X)
