@@ -10,6 +10,15 @@ from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.solvers.nodal import BlockPattern, NodalCoupling, NodalLayout
 
 
+def empty_matrix(size: int, block_size: int, mat_type: str) -> PETSc.Mat:
+    """A ``size`` × ``size`` matrix of ``mat_type`` with room for every entry of its rows."""
+    A = PETSc.Mat().create(comm=MPI.COMM_SELF)
+    A.setSizes(((size, size), (size, size)), bsize=block_size)
+    A.setType(mat_type)
+    A.setPreallocationNNZ(size if mat_type == "aij" else size // block_size)
+    return A
+
+
 def add_blocks(coupling: NodalCoupling, A: PETSc.Mat, rows, cols, blocks, scale: float = 1.0):
     """A += the blocks, summed per node pair first (as the contact hook inserts them)."""
     coupling.add_merged_blocks(A, *coupling.merge_blocks(rows, cols, blocks), scale=scale)
@@ -32,10 +41,7 @@ def test_blocks_are_added_at_their_nodes(block_size, mat_type):
     rng = np.random.default_rng(1)
     rows, cols = rng.integers(0, n, 300), rng.integers(0, n, 300)  # many duplicates
     blocks = rng.normal(size=(300, 3, 3))
-    A = PETSc.Mat().create(comm=MPI.COMM_SELF)
-    A.setSizes(((size, size), (size, size)), bsize=block_size)
-    A.setType(mat_type)
-    A.setPreallocationNNZ(size if mat_type == "aij" else n)
+    A = empty_matrix(size, block_size, mat_type)
     add_blocks(coupling, A, rows, cols, blocks, scale=-2.0)
     A.assemble()
     expected = np.zeros((size, size))
@@ -71,10 +77,7 @@ def test_summed_blocks_go_in_as_given_and_rows_ascend(mat_type):
     kept = blocks.copy()
 
     def assembled(r, c, b):
-        A = PETSc.Mat().create(comm=MPI.COMM_SELF)
-        A.setSizes(((3 * n, 3 * n), (3 * n, 3 * n)), bsize=3)
-        A.setType(mat_type)
-        A.setPreallocationNNZ(3 * n if mat_type == "aij" else n)
+        A = empty_matrix(3 * n, 3, mat_type)
         add_blocks(coupling, A, r, c, b, scale=-0.5)
         A.assemble()
         return A.getValues(range(3 * n), range(3 * n))

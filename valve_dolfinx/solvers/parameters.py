@@ -77,9 +77,10 @@ class PseudoTransientParameters:
         Each step's Newton solve starts from the accepted state moved on by the last
         accepted step's motion, scaled by the ratio of the pseudo-time steps (a linear
         predictor), at most this far at any node (mm); 0 (the default): from the accepted
-        state.  The equilibrium is the same; the path is not.  0.1 took W21/H27 from
-        1 709 to 611 Newton iterations (failed solves included) and W21/H40 from 2 970 to
-        1 978, to the same figures of merit (docs/numerics.md, §2).
+        state.  The equilibria are the same; the path is not.  0.1 took W21/H27 from
+        1 709 to 540 Newton iterations (failed solves included) and W21/H40 from 2 970 to
+        1 215, to the same figures of merit, but ten path-sensitive cells of the study grid
+        came to rest in other states (docs/numerics.md, §2).
     max_steps
         Limit on pseudo-time steps (accepted + rejected).
     wall_time_limit_s

@@ -321,7 +321,7 @@ class PseudoTransientSolver:
         ts.setMaxSteps(p.max_steps)
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         ts.setFromOptions()
-        self._snes = ts.getSNES()
+        self._ts, self._snes = ts, ts.getSNES()
         ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
         if p.predictor_motion_mm > 0.0:
             ts.getSNES().setInitialGuess(guard.wrap(self._predict))
@@ -417,7 +417,7 @@ class PseudoTransientSolver:
         self._accepted = self.u.x.petsc_vec.array_r.copy()  # owned dofs, last accepted
         self._last_step = None  # (owned dofs' motion, Δτ) of the last accepted step
         _, self._r_prev = self.static_residual()
-        ts = self._ts = self._make_ts()
+        ts = self._make_ts()
         X = self.u.x.petsc_vec.copy()
         try:
             ts.solve(X)
