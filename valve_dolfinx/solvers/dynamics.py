@@ -44,6 +44,7 @@ import ufl
 from valve_dolfinx._compat import PETSc, dolfinx
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
+from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual
 from valve_dolfinx.solvers.callbacks import InterruptGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
@@ -207,27 +208,12 @@ class DampedDynamicsSolver:
                 f"{ts.getSNES().getFunctionNorm():.3g})")
             raise _Stalled(self.report.reason)
         self._set_state(t, X, Xdot)
-        with F.localForm() as f_local:
-            f_local.set(0.0)
-        fem_petsc.assemble_vector(F, self.G_form)
-        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        for hook in self.hooks:
-            hook.add_residual(self.U, F)
-        F.assemble()
-        fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
+        assemble_residual(F, self.G_form, self.U, self.hooks, self.bcs, X)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
-        hooks = self.hooks
         self._set_state(t, X, Xdot)
         self.shift.value = a
-        J.zeroEntries()
-        fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
-        J.assemble(PETSc.Mat.AssemblyType.FLUSH)
-        for hook in hooks:
-            hook.add_jacobian(self.U, J)
-        J.assemble()
-        if hooks:
-            J.zeroRows(self._bc_rows, diag=1.0)
+        assemble_jacobian(J, self.J_form, self.U, self.hooks, self.bcs, self._bc_rows)
 
     # --- the run -------------------------------------------------------------------
     def _make_ts(self) -> PETSc.TS:

@@ -59,6 +59,7 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
+from valve_dolfinx.solvers.assembly import Laps, assemble_jacobian, assemble_residual
 from valve_dolfinx.solvers.callbacks import (
     InterruptGuard,
     NewtonCycleStop,
@@ -135,7 +136,7 @@ class PseudoTransientSolver:
         self._bc_rows = (imap.local_range[0] * bs + self._bc_local).astype(PETSc.IntType)
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self._progress: Callable[[dict], None] | None = None
-        self._clock: dict[str, float] = {}
+        self._laps = Laps()
 
     # --- forms -------------------------------------------------------------------------
     def _forms(self):
@@ -177,12 +178,6 @@ class PseudoTransientSolver:
         J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         return J
 
-    # --- timing ------------------------------------------------------------------------
-    def _lap(self, name: str, t0: float) -> float:
-        now = time.perf_counter()
-        self._clock[name] = self._clock.get(name, 0.0) + now - t0
-        return now
-
     # --- PETSc callbacks ---------------------------------------------------------------
     def _set_state(self, X: PETSc.Vec, Xdot: PETSc.Vec | None) -> None:
         X.copy(self.u.x.petsc_vec)
@@ -200,22 +195,12 @@ class PseudoTransientSolver:
                 f"{ts.getStepNumber()} (Newton kept failing; last |R| = "
                 f"{self.report.residual_mN:.3g} mN)")
             raise _Stop(self.report.reason)
-        t0 = time.perf_counter()
+        self._laps.start()
         self._set_state(X, Xdot)
-        with F.localForm() as f_local:
-            f_local.set(0.0)
-        fem_petsc.assemble_vector(F, self.F_form)
-        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        t0 = self._lap("residual_assembly", t0)
-        for hook in self.hooks:
-            hook.add_residual(self.u, F)
-            t0 = self._lap(getattr(hook, "timing_name", "hooks"), t0)
-        F.assemble()
-        fem_petsc.set_bc(F, self.bcs, x0=X, alpha=-1.0)
-        self._lap("residual_assembly", t0)
+        assemble_residual(F, self.F_form, self.u, self.hooks, self.bcs, X, self._laps)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
-        t0 = time.perf_counter()
+        self._laps.start()
         self._set_state(X, Xdot)
         if self._pattern is not None:  # the blocks the hooks will add, in the pattern at once
             for hook in self.hooks:
@@ -225,19 +210,10 @@ class PseudoTransientSolver:
                         # a BAIJ preallocation leaves the matrix's nonzero state as it was:
                         # without a reset the LU would reuse the old pattern's analysis
                         ts.getSNES().getKSP().getPC().reset()
-                    t0 = self._lap(hook.timing_name, t0)
+                    self._laps(hook.timing_name)
         self.shift.value = a
-        J.zeroEntries()
-        fem_petsc.assemble_matrix(J, self.J_form, bcs=self.bcs, diag=1.0)
-        J.assemble(PETSc.Mat.AssemblyType.FLUSH)
-        t0 = self._lap("jacobian_assembly", t0)
-        for hook in self.hooks:
-            hook.add_jacobian(self.u, J)
-            t0 = self._lap(getattr(hook, "timing_name", "hooks"), t0)
-        J.assemble()
-        if len(self.hooks):
-            J.zeroRows(self._bc_rows, diag=1.0)
-        self._lap("jacobian_assembly", t0)
+        assemble_jacobian(J, self.J_form, self.u, self.hooks, self.bcs, self._bc_rows,
+                          self._laps)
 
     def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """Line-search pre-check: scale the Newton update so that no node moves further
@@ -331,7 +307,7 @@ class PseudoTransientSolver:
 
     def _post_step(self, ts: PETSc.TS) -> None:
         p, r = self.params, self.report
-        t0 = time.perf_counter()
+        self._laps.start()
         solution = ts.getSolution().array_r.copy()
         dt = ts.getTimeStep()
         # the owned dofs' motion over this step, for the next step's predictor
@@ -369,7 +345,7 @@ class PseudoTransientSolver:
         r.history.append(entry)
         if self._progress is not None:
             self._progress(entry)
-        self._lap("post_step", t0)
+        self._laps("post_step")  # after the static residual's own laps
         elapsed = time.perf_counter() - self._t0
         if r_inf < p.residual_tolerance and ts.getStepNumber() >= p.pressure_ramp_steps:
             r.converged = True
@@ -410,7 +386,7 @@ class PseudoTransientSolver:
         self._cycles = NewtonCycleStop(self.params.newton_cycle_tolerance)
         self._reversals = NewtonReversalDamping(self.params.newton_reversal_damping)
         self._t0 = time.perf_counter()
-        self._clock = {}
+        self._laps = Laps()
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self.model.pressure.value = self._ramped_pressure(0)
         self._last_displacement = self.coupling.displacements(self.u)
@@ -442,7 +418,7 @@ class PseudoTransientSolver:
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
         self.report.wall_time_s = time.perf_counter() - self._t0
-        self.report.timings = dict(self._clock)
+        self.report.timings = dict(self._laps.seconds)
         ts.destroy()
         X.destroy()
         log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton iterations in "

@@ -1,0 +1,85 @@
+"""The residual and Jacobian of a solve with hooks, as both solver paths assemble them.
+
+The UFL forms go in first (the membrane, pressure and, per path, the mass or inertia
+terms), then every hook's nodal forces or 3×3 blocks (contact, bending), then the
+Dirichlet conditions.  A hook has ``add_residual(state, b)`` and ``add_jacobian(state,
+A)``; its optional ``timing_name`` labels its share of the :class:`Laps`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from valve_dolfinx._compat import PETSc, dolfinx
+
+__all__ = ["Laps", "assemble_jacobian", "assemble_residual"]
+
+fem_petsc = dolfinx.fem.petsc
+
+
+class Laps:
+    """Wall-clock seconds per named part of a solve: each call charges the time since the
+    previous call (or :meth:`start`) to its name."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def start(self) -> None:
+        """Start the next lap now."""
+        self._last = time.perf_counter()
+
+    def __call__(self, name: str) -> None:
+        now = time.perf_counter()
+        self.seconds[name] = self.seconds.get(name, 0.0) + now - self._last
+        self._last = now
+
+
+def _no_laps(name: str) -> None:
+    pass
+
+
+def _hook_name(hook) -> str:
+    return getattr(hook, "timing_name", "hooks")
+
+
+def assemble_residual(F: PETSc.Vec, form: dolfinx.fem.Form, state: dolfinx.fem.Function,
+                      hooks: Sequence, bcs: Sequence[dolfinx.fem.DirichletBC], X: PETSc.Vec,
+                      laps: Laps | None = None) -> None:
+    """``F`` = the form's vector plus the hooks' forces at ``state``, and ``-(X - g)`` on
+    the Dirichlet dofs (so that Newton's update moves them onto their values ``g``)."""
+    lap = _no_laps if laps is None else laps
+    with F.localForm() as f_local:
+        f_local.set(0.0)
+    fem_petsc.assemble_vector(F, form)
+    F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    lap("residual_assembly")
+    for hook in hooks:
+        hook.add_residual(state, F)
+        lap(_hook_name(hook))
+    F.assemble()
+    fem_petsc.set_bc(F, bcs, x0=X, alpha=-1.0)
+    lap("residual_assembly")
+
+
+def assemble_jacobian(J: PETSc.Mat, form: dolfinx.fem.Form, state: dolfinx.fem.Function,
+                      hooks: Sequence, bcs: Sequence[dolfinx.fem.DirichletBC],
+                      bc_rows: np.ndarray, laps: Laps | None = None) -> None:
+    """``J`` = the form's matrix plus the hooks' blocks at ``state``, with identity rows
+    ``bc_rows`` (the Dirichlet dofs this rank owns: the hooks' blocks are cleared from
+    them)."""
+    lap = _no_laps if laps is None else laps
+    J.zeroEntries()
+    fem_petsc.assemble_matrix(J, form, bcs=bcs, diag=1.0)
+    J.assemble(PETSc.Mat.AssemblyType.FLUSH)
+    lap("jacobian_assembly")
+    for hook in hooks:
+        hook.add_jacobian(state, J)
+        lap(_hook_name(hook))
+    J.assemble()
+    if len(hooks):
+        J.zeroRows(bc_rows, diag=1.0)
+    lap("jacobian_assembly")
