@@ -183,6 +183,10 @@ def test_stop_during_the_pressure_ramp_says_so(limit, words):
     assert words in state.report.reason
     assert "during the pressure ramp" in state.report.reason
     assert "pressure_ramp_steps = 10" in state.report.reason
+    # the timed parts are charged once each: together within the solve's wall time
+    assert 0.0 < sum(state.report.timings.values()) <= state.report.wall_time_s
+    assert {"residual_assembly", "jacobian_assembly", "contact", "post_step"} <= set(
+        state.report.timings)
 
 
 def test_failed_solve_is_reported_and_written(tmp_path):

@@ -326,6 +326,7 @@ class PseudoTransientSolver:
             if accept is not None:
                 accept(self.u)
         self._reversals.carry_over()  # a cycle across steps is damped as one within a solve
+        self._laps("post_step")  # the static residual's assembly keeps its own laps
         r_inf, r_two = self.static_residual()  # at the pressure the step was solved at
         self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
         r.steps = ts.getStepNumber()
@@ -345,7 +346,7 @@ class PseudoTransientSolver:
         r.history.append(entry)
         if self._progress is not None:
             self._progress(entry)
-        self._laps("post_step")  # after the static residual's own laps
+        self._laps("post_step")
         elapsed = time.perf_counter() - self._t0
         if r_inf < p.residual_tolerance and ts.getStepNumber() >= p.pressure_ramp_steps:
             r.converged = True
