@@ -495,6 +495,15 @@ def test_recommendation_smallest_qualifying_graft():
     assert rec.max_neighbour_step_mm == pytest.approx(1.0)  # W0/H13 -> W0/H27
     assert rec.shortfall_mm is None and "W14/H0" in rec.text and "0.50" in rec.text
     assert recommend(rows, target_mm=3.3).recommended == "W14/H13"
+    # within the path resolution (0.3 mm) of the target 3.0 mm: W7/H13 (3.2); not W7/H0
+    # (2.6), nor the leaking W0/H27 (3.4 mm) or the unconverged W7/H27
+    assert rec.resolution_mm == 0.3
+    assert rec.near_target == pytest.approx({"W7/H13": 3.2})
+    assert "W7/H13 3.20 mm" in rec.text
+    sharp = recommend(rows, resolution_mm=0.15)
+    assert sharp.near_target == {} and "that close to the target: none" in sharp.text
+    wide = recommend(rows, resolution_mm=0.45)  # W7/H0 2.6 (-0.4) joins, smaller than W7/H13
+    assert list(wide.near_target) == ["W7/H0", "W7/H13"]
 
 
 def test_recommendation_when_none_qualifies():
@@ -511,8 +520,10 @@ def test_recommendation_when_none_qualifies():
     tie = recommend([_row(None, None, 2.90391), _row(0, 0, 2.0), _row(7, 0, 2.90381)])
     assert tie.best == "W7/H0" and tie.shortfall_mm == pytest.approx(1e-4)
     assert "0.00010 mm short" in tie.text and "2.90381 mm" in tie.text
+    assert rec.near_target == {}  # W0/H0 (2.0) is 1.5 mm short; the best is not listed
     no_normal = recommend(rows[1:])
     assert no_normal.target_mm is None and "--target-coaptation" in no_normal.target_source
+    assert no_normal.near_target == {} and "path resolution" not in no_normal.text
     assert no_normal.best == "W7/H0"
     unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]])
     assert unconverged.target_mm is None and "did not converge" in unconverged.text

@@ -11,7 +11,9 @@ preferring converged and competent cases) and by how much it falls short.
 A single number hides how sharp the optimum is, so the recommendation also
 lists how much the figure of merit changes from the chosen cell to each of its
 grid neighbours, and the largest and median change between neighbouring cells
-over the whole grid.
+over the whole grid.  It also names the other sound grafts whose figure lies within
+the model's path resolution of the target (:data:`PATH_RESOLUTION_MM`): a margin
+smaller than that does not tell them apart.
 """
 
 from __future__ import annotations
@@ -23,6 +25,12 @@ from dataclasses import asdict, dataclass, field
 __all__ = ["Recommendation", "recommend", "flat_area_ratio"]
 
 FIGURE = "min_coaptation_height_mm"
+
+#: Differences of the figure of merit below this (mm) are within the model's path
+#: resolution at the default 0.8 mm mesh: the same graft on another numerical path (round-off
+#: of another CPU, another step control, another initial placement) comes to rest up to
+#: about this much higher or lower in most cells (docs/numerics.md §7, "Resolution").
+PATH_RESOLUTION_MM = 0.3
 
 
 def flat_area_ratio(row: dict) -> float:
@@ -51,7 +59,9 @@ class Recommendation:
     ``recommended`` is the chosen case's name (None if no case qualifies);
     ``best`` the case closest to the target when none does, with ``shortfall_mm``.
     ``neighbours`` maps each grid neighbour of the chosen (or best) cell to the
-    change of the figure of merit from that cell.
+    change of the figure of merit from that cell.  ``near_target`` maps the other
+    converged, sealed grafts whose figure lies within ``resolution_mm`` of the target
+    to their figure (smallest flat area first).
     """
 
     target_mm: float | None
@@ -67,6 +77,8 @@ class Recommendation:
     max_neighbour_step_mm: float | None = None
     median_neighbour_step_mm: float | None = None
     qualifying: list[str] = field(default_factory=list)
+    resolution_mm: float = PATH_RESOLUTION_MM
+    near_target: dict[str, float] = field(default_factory=dict)
     text: str = ""
 
     def to_dict(self) -> dict:
@@ -100,7 +112,8 @@ def _steps(grafts: list[dict]) -> tuple[float | None, float | None]:
     return max(steps), statistics.median(steps)
 
 
-def recommend(rows: list[dict], target_mm: float | None = None) -> Recommendation:
+def recommend(rows: list[dict], target_mm: float | None = None,
+              resolution_mm: float = PATH_RESOLUTION_MM) -> Recommendation:
     """The smallest sound graft that reaches the target coaptation, or the best and its shortfall.
 
     Parameters
@@ -112,6 +125,9 @@ def recommend(rows: list[dict], target_mm: float | None = None) -> Recommendatio
     target_mm
         Minimum coaptation height to reach; None takes the normal valve's (which
         then has to have converged).
+    resolution_mm
+        Differences of the figure below this are read as within the model's path
+        resolution: the sound grafts within it of the target are named beside the choice.
     """
     normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
     grafts = [r for r in rows if r.get("graft_width_pct") is not None]
@@ -170,6 +186,19 @@ def recommend(rows: list[dict], target_mm: float | None = None) -> Recommendatio
                     f"The best is **{rec.best}** ({quality}) with "
                     f"{rec.best_height_mm:.{digits}f} mm, "
                     f"{max(rec.shortfall_mm, 0.0):.{digits}f} mm short.")
+    if rec.target_mm is not None:
+        rec.resolution_mm = float(resolution_mm)
+        near = [r for r in grafts if _sound(r) and r is not centre
+                and abs(_value(r) - rec.target_mm) < rec.resolution_mm]
+        near.sort(key=lambda r: (flat_area_ratio(r), r["graft_width_pct"],
+                                 r["graft_height_pct"]))
+        rec.near_target = {_label(r): _value(r) for r in near}
+        listed = (", ".join(f"{k} {v:.2f} mm" for k, v in rec.near_target.items())
+                  if near else "none")
+        lines.append(f"Differences below {rec.resolution_mm:.2g} mm are within the model's "
+                     f"path resolution at the default mesh (docs/numerics.md §7, "
+                     f"\"Resolution\"); the other converged, sealed grafts that close to "
+                     f"the target: {listed}.")
     if centre is not None:
         by_size = {(r["graft_width_pct"], r["graft_height_pct"]): r for r in grafts}
         here = _value(centre)
