@@ -43,6 +43,11 @@ def _value(row: dict | None) -> float:
     return float(v) if isinstance(v, int | float) and math.isfinite(v) else math.nan
 
 
+def _size_order(row: dict) -> tuple[float, float, float]:
+    """Smallest flat area first; ties: narrower, then lower."""
+    return flat_area_ratio(row), row["graft_width_pct"], row["graft_height_pct"]
+
+
 def _label(row: dict) -> str:
     return f"W{row['graft_width_pct']:g}/H{row['graft_height_pct']:g}"
 
@@ -142,8 +147,7 @@ def recommend(rows: list[dict], target_mm: float | None = None,
     qualifying = []
     if rec.target_mm is not None:
         qualifying = [r for r in grafts if _sound(r) and _value(r) >= rec.target_mm]
-    qualifying.sort(key=lambda r: (flat_area_ratio(r), r["graft_width_pct"],
-                                   r["graft_height_pct"]))
+    qualifying.sort(key=_size_order)
     rec.qualifying = [_label(r) for r in qualifying]
     rec.max_neighbour_step_mm, rec.median_neighbour_step_mm = _steps(grafts)
     lines = []
@@ -190,8 +194,7 @@ def recommend(rows: list[dict], target_mm: float | None = None,
         rec.resolution_mm = float(resolution_mm)
         near = [r for r in grafts if _sound(r) and r is not centre
                 and abs(_value(r) - rec.target_mm) < rec.resolution_mm]
-        near.sort(key=lambda r: (flat_area_ratio(r), r["graft_width_pct"],
-                                 r["graft_height_pct"]))
+        near.sort(key=_size_order)
         rec.near_target = {_label(r): _value(r) for r in near}
         listed = (", ".join(f"{k} {v:.2f} mm" for k, v in rec.near_target.items())
                   if near else "none")
