@@ -15,7 +15,7 @@ import numpy as np
 
 from valve_dolfinx._compat import PETSc, dolfinx
 
-__all__ = ["Laps", "assemble_jacobian", "assemble_residual"]
+__all__ = ["Laps", "assemble_jacobian", "assemble_residual", "owned_bc_dofs"]
 
 fem_petsc = dolfinx.fem.petsc
 
@@ -36,6 +36,16 @@ class Laps:
         now = time.perf_counter()
         self.seconds[name] = self.seconds.get(name, 0.0) + now - self._last
         self._last = now
+
+
+def owned_bc_dofs(space: dolfinx.fem.FunctionSpace, bcs: Sequence[dolfinx.fem.DirichletBC]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The Dirichlet dofs this rank owns: (local indices, global matrix rows in PETSc's
+    integer type)."""
+    imap, bs = space.dofmap.index_map, space.dofmap.index_map_bs
+    local = np.concatenate([bc.dof_indices()[0] for bc in bcs] or [np.empty(0, np.int32)])
+    local = local[local < imap.size_local * bs]
+    return local, (imap.local_range[0] * bs + local).astype(PETSc.IntType)
 
 
 def _no_laps(name: str) -> None:

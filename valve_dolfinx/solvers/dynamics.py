@@ -44,7 +44,7 @@ import ufl
 from valve_dolfinx._compat import PETSc, dolfinx
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
-from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual
+from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual, owned_bc_dofs
 from valve_dolfinx.solvers.callbacks import InterruptGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
@@ -125,11 +125,7 @@ class DampedDynamicsSolver:
         self.F_vec = fem_petsc.create_vector(self.W)
         self.J_mat = fem_petsc.create_matrix(self.J_form)
         self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        bs = 6
-        imap = self.W.dofmap.index_map
-        local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs])
-        local_bc = local_bc[local_bc < imap.size_local * bs]
-        self._bc_rows = (imap.local_range[0] * bs + local_bc).astype(PETSc.IntType)
+        _, self._bc_rows = owned_bc_dofs(self.W, self.bcs)
         self._snes_options = snes_options or {}
         self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
         self._ts = None

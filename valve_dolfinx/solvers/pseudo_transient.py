@@ -59,7 +59,12 @@ import ufl
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
-from valve_dolfinx.solvers.assembly import Laps, assemble_jacobian, assemble_residual
+from valve_dolfinx.solvers.assembly import (
+    Laps,
+    assemble_jacobian,
+    assemble_residual,
+    owned_bc_dofs,
+)
 from valve_dolfinx.solvers.callbacks import (
     InterruptGuard,
     NewtonCycleStop,
@@ -129,11 +134,7 @@ class PseudoTransientSolver:
         self.J_mat = self._create_jacobian()
         # one process: the Jacobian's pattern grows once per assembly, before it
         self._pattern = BlockPattern(self.coupling) if self.coupling.comm.size == 1 else None
-        imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
-        local_bc = np.concatenate([bc.dof_indices()[0] for bc in self.bcs]
-                                  or [np.empty(0, np.int32)])
-        self._bc_local = local_bc[local_bc < imap.size_local * bs]
-        self._bc_rows = (imap.local_range[0] * bs + self._bc_local).astype(PETSc.IntType)
+        self._bc_local, self._bc_rows = owned_bc_dofs(V, self.bcs)
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self._progress: Callable[[dict], None] | None = None
         self._laps = Laps()
