@@ -13,6 +13,7 @@ from valve_dolfinx.contact.geometry import triangle_frames
 from valve_dolfinx.contact.kernels import (
     group_blocks,
     group_index,
+    narrow_rows,
     near_pairs,
     row_block_sums,
     sum_blocks,
@@ -198,3 +199,73 @@ def test_near_pairs_keeps_exactly_the_pairs_the_definitions_keep():
     assert np.allclose(got[3], [k[3] for k in kept], rtol=0.0, atol=1e-12)
     assert np.allclose(got[4], [k[4] for k in kept], rtol=0.0, atol=1e-12)
     assert np.array_equal(got[5], [k[5] for k in kept])
+
+
+def _closest_on_triangle(p, a, b, c):
+    """Closest point of triangle abc to p from the definitions: the plane projection if it
+    falls inside, else the nearest of the three sides' closest points (clamped projections
+    onto the segments)."""
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n)
+    q = p - ((p - a) @ n) * n
+    basis = np.stack([b - a, c - a], axis=1)
+    v, w = np.linalg.lstsq(basis, q - a, rcond=None)[0]
+    if v >= 0.0 and w >= 0.0 and v + w <= 1.0:
+        return q
+    sides = [(a, b), (b, c), (c, a)]
+    points = [s + np.clip((p - s) @ (e - s) / ((e - s) @ (e - s)), 0.0, 1.0) * (e - s)
+              for s, e in sides]
+    return min(points, key=lambda q: np.linalg.norm(p - q))
+
+
+def test_narrow_rows_are_the_face_rows_then_the_edge_rows_within_reach():
+    rng = np.random.default_rng(11)
+    num_tri, num_nodes = 30, 50
+    x = np.concatenate([rng.normal(size=(num_tri * 3, 3)), rng.normal(size=(num_nodes, 3))])
+    triangles = np.arange(num_tri * 3).reshape(num_tri, 3)
+    node = np.repeat(np.arange(num_tri * 3, len(x)), num_tri)
+    tri = np.tile(np.arange(num_tri), num_nodes)
+    a, b, c = (x[triangles[tri, j]] for j in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    r = x[node] - a
+    d0 = np.einsum("ij,ij->i", r, normal)
+    lam = np.empty((len(node), 3))
+    for k in range(len(node)):
+        basis = np.stack([b[k] - a[k], c[k] - a[k], normal[k]], axis=1)
+        lam[k, 1:] = np.linalg.solve(basis, r[k])[:2]
+    lam[:, 0] = 1.0 - lam[:, 1] - lam[:, 2]
+    in_band = np.all(lam > -0.1, axis=1)
+    beyond = np.zeros(len(node))  # a lower bound of the in-plane distance: the weakest one
+    reach, tolerance = 0.5, 1e-10
+    normal_by_axis = np.zeros((3, num_tri))
+    normal_by_axis[:, tri[:num_tri]] = normal[:num_tri].T
+    got = narrow_rows(node, tri, d0, lam, beyond, in_band, np.ascontiguousarray(x.T),
+                      triangles, normal_by_axis, reach, reach + 1e-6, tolerance)
+    face = np.flatnonzero(in_band)
+    edge, gaps, closest = [], [], []
+    for k in np.flatnonzero((lam.min(axis=1) < -tolerance) & (np.abs(d0) < reach + 1e-6)):
+        q = _closest_on_triangle(x[node[k]], a[k], b[k], c[k])
+        if np.linalg.norm(x[node[k]] - q) < reach:
+            edge.append(k)
+            gaps.append(np.linalg.norm(x[node[k]] - q))
+            closest.append(q)
+    assert 20 < len(edge) and 20 < len(face)  # both kinds, and pairs of both kinds left out
+    assert len(face) + len(edge) < len(node) // 2
+    rows = np.concatenate([face, edge])
+    assert np.array_equal(got[0], node[rows]) and np.array_equal(got[1], tri[rows])
+    assert np.array_equal(got[2], d0[rows])
+    assert np.isnan(got[3][:len(face)]).all()
+    assert np.allclose(got[3][len(face):], gaps, rtol=0.0, atol=1e-12)
+    # face rows: the projection's coordinates and the offset along the normal
+    assert np.array_equal(got[4][:len(face)], lam[face])
+    assert np.allclose(got[5][:len(face)], d0[face, None] * normal[face], rtol=0.0,
+                       atol=1e-15)
+    # edge rows: the closest point's coordinates (they sum to 1 and give the point) and the
+    # offset from it
+    weights = got[4][len(face):]
+    assert np.allclose(weights.sum(axis=1), 1.0, atol=1e-14) and (weights >= 0.0).all()
+    corners = np.stack([a[edge], b[edge], c[edge]], axis=1)
+    assert np.allclose(np.einsum("kj,kjx->kx", weights, corners), closest, atol=1e-12)
+    assert np.allclose(got[5][len(face):], x[node[edge]] - np.array(closest), atol=1e-12)
+    assert np.array_equal(got[6], lam[rows])

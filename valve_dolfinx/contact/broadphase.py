@@ -1,7 +1,7 @@
 """Broad phase of the contact search: nodes inside padded triangle bounding boxes.
 
 The padded axis-aligned bounding boxes (AABBs) of the triangles are matched
-against the nodes with a uniform grid built from NumPy sorts and prefix sums:
+against the nodes with a uniform grid built from a counting sort and prefix sums:
 
 * the two axes along which the boxes are widest are cut into square columns
   of edge ``cell``; the third, the *sweep axis*, into thinner levels;
@@ -15,10 +15,9 @@ against the nodes with a uniform grid built from NumPy sorts and prefix sums:
 * the runs are walked and their nodes filtered with the exact box test, box by
   box (a loop compiled by Numba).
 
-The work is ``O(S log S)`` for the sort of the ``S`` queried nodes, linear in
-the number of grid cells (bounded by a multiple of the nodes and boxes), of
-box–column runs and of pairs; there is no Python loop over nodes or
-triangles, only over blocks of :data:`BLOCK_SIZE` boxes, which keeps the
+The work is linear in the queried nodes, the grid cells (bounded by a multiple
+of the nodes and boxes), the box–column runs and the pairs; there is no Python
+loop over nodes or triangles, only over blocks of :data:`BLOCK_SIZE` boxes, which keeps the
 temporaries cache-sized.
 """
 
@@ -156,7 +155,7 @@ class CellGrid:
         step = max(_STEP_FACTOR * float(mean_extent[sweep]), tiny)
 
         def shape_for(cell: float, step: float) -> tuple[int, int, int]:
-            # same rounding as _index (np.floor of a quotient, not //), so that
+            # same rounding as _cell_keys (floor of a quotient, not //), so that
             # the upper corner of the widest box falls in the last cell
             return (int(np.floor(span[a] / cell)) + 1, int(np.floor(span[b] / cell)) + 1,
                     int(np.floor(span[sweep] / step)) + 1)
@@ -173,19 +172,63 @@ class CellGrid:
     def num_cells(self) -> int:
         return self.shape[0] * self.shape[1] * self.shape[2]
 
-    def _index(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        a, b, c = self.axes
-        o = self.origin
-        return (np.floor((p[a] - o[a]) / self.cell).astype(np.int64),
-                np.floor((p[b] - o[b]) / self.cell).astype(np.int64),
-                np.floor((p[c] - o[c]) / self.step).astype(np.int64))
-
     def point_keys(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Keys of points ``(3, K)`` and a mask of those inside the grid (others match no box)."""
-        i, j, level = self._index(p)
-        inside = (i >= 0) & (i < self.shape[0]) & (j >= 0) & (j < self.shape[1]) \
-            & (level >= 0) & (level < self.shape[2])
-        return (i * self.shape[1] + j) * self.shape[2] + level, inside
+        keys = _cell_keys(np.ascontiguousarray(p, dtype=float), self.origin, self.cell,
+                          self.step, np.array(self.shape, dtype=np.int64),
+                          np.array(self.axes, dtype=np.int64))
+        return keys, keys >= 0
+
+
+@numba.njit(cache=True)
+def _cell_keys(pt, origin, cell, step, shape, axes):  # pragma: no cover
+    """:class:`CellGrid` key of each point ``(3, K)``, -1 for a point outside the grid.
+
+    Cell ``i`` along an axis is ``floor((p - origin) / cell)``: the rounding of
+    :func:`_box_pairs`, so that the upper corner of the widest box falls in the last cell."""
+    a, b, c = axes[0], axes[1], axes[2]
+    keys = np.empty(pt.shape[1], dtype=np.int64)
+    for k in range(pt.shape[1]):
+        qi = (pt[a, k] - origin[a]) / cell
+        qj = (pt[b, k] - origin[b]) / cell
+        ql = (pt[c, k] - origin[c]) / step
+        if not (0.0 <= qi < shape[0] and 0.0 <= qj < shape[1] and 0.0 <= ql < shape[2]):
+            keys[k] = -1  # (NaN too)
+            continue
+        keys[k] = ((np.int64(math.floor(qi)) * shape[1] + np.int64(math.floor(qj))) * shape[2]
+                   + np.int64(math.floor(ql)))
+    return keys
+
+
+@numba.njit(cache=True)
+def _sorted_by_cell(xt, nodes, origin, cell, step, shape, axes, num_cells):  # pragma: no cover
+    """The ``nodes`` inside the grid sorted by key (a stable counting sort), their
+    coordinates ``(3, S)`` in that order, and ``first`` ``(num_cells + 1,)``: the position
+    of the first node of each cell or later (:class:`CellIndex`)."""
+    pt = np.empty((3, len(nodes)))
+    for k in range(len(nodes)):
+        for axis in range(3):
+            pt[axis, k] = xt[axis, nodes[k]]
+    keys = _cell_keys(pt, origin, cell, step, shape, axes)
+    first = np.zeros(num_cells + 1, dtype=np.int64)
+    for key in keys:
+        if key >= 0:
+            first[key + 1] += 1
+    for key in range(num_cells):
+        first[key + 1] += first[key]
+    fill = first[:-1].copy()
+    sorted_nodes = np.empty(first[num_cells], dtype=np.int64)
+    sorted_xt = np.empty((3, first[num_cells]))
+    for k in range(len(nodes)):
+        key = keys[k]
+        if key < 0:
+            continue
+        position = fill[key]
+        sorted_nodes[position] = nodes[k]
+        for axis in range(3):
+            sorted_xt[axis, position] = pt[axis, k]
+        fill[key] += 1
+    return sorted_nodes, sorted_xt, first
 
 
 @numba.njit(cache=True)
@@ -209,7 +252,7 @@ def _box_pairs(lo, hi, origin, cell, step, shape, axes, first, sorted_nodes,
         for b in range(lo.shape[1]):
             lo0, lo1, lo2 = lo[0, b], lo[1, b], lo[2, b]
             hi0, hi1, hi2 = hi[0, b], hi[1, b], hi[2, b]
-            # the cell index of a corner, rounded as CellGrid._index rounds
+            # the cell index of a corner, rounded as _cell_keys rounds
             i0 = np.int64(math.floor((lo[ax, b] - origin[ax]) / cell))
             i1 = np.int64(math.floor((hi[ax, b] - origin[ax]) / cell))
             j0 = np.int64(math.floor((lo[bx, b] - origin[bx]) / cell))
@@ -254,15 +297,13 @@ class CellIndex:
             return
         max_cells = _CELLS_PER_ITEM * (len(nodes) + lo.shape[1]) + (1 << 16)
         self.grid = CellGrid.covering(lo, hi, max_cells)
-        keys, on_grid = self.grid.point_keys(xt[:, nodes])
-        keys, nodes = keys[on_grid], nodes[on_grid]
-        order = np.argsort(keys, kind="stable")
-        self.sorted_nodes = nodes[order]
-        #: coordinates of the sorted nodes, by axis: the box test reads them run by run
-        self.sorted_xt = np.ascontiguousarray(xt[:, self.sorted_nodes])
-        #: ``first[k]``: position in ``sorted_nodes`` of the first node of cell ``k`` or later.
-        self.first = np.zeros(self.grid.num_cells + 1, dtype=np.int64)
-        np.cumsum(np.bincount(keys, minlength=self.grid.num_cells), out=self.first[1:])
+        grid = self.grid
+        #: the nodes sorted by key; their coordinates by axis, which the box test reads
+        #: run by run; ``first[k]``: position of the first node of cell ``k`` or later
+        self.sorted_nodes, self.sorted_xt, self.first = _sorted_by_cell(
+            xt, np.asarray(nodes, dtype=np.int64), grid.origin, grid.cell, grid.step,
+            np.array(grid.shape, dtype=np.int64), np.array(grid.axes, dtype=np.int64),
+            grid.num_cells)
 
     def box_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(node, box)`` of indexed nodes inside the closed boxes ``[lo, hi]``, ``(3, K)``.

@@ -145,42 +145,49 @@ def dot3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
 
 
 @numba.njit(cache=True)
+def closest_point_weights(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):  # pragma: no cover
+    """Barycentric coordinates ``(u, v, w)`` of the point of triangle ``(a, b, c)`` closest
+    to ``p`` (one pair of :func:`closest_point_on_triangles`, for compiled loops)."""
+    ab0, ab1, ab2 = b0 - a0, b1 - a1, b2 - a2
+    ac0, ac1, ac2 = c0 - a0, c1 - a1, c2 - a2
+    ap0, ap1, ap2 = p0 - a0, p1 - a1, p2 - a2
+    bp0, bp1, bp2 = p0 - b0, p1 - b1, p2 - b2
+    cp0, cp1, cp2 = p0 - c0, p1 - c1, p2 - c2
+    d1 = dot3(ab0, ab1, ab2, ap0, ap1, ap2)
+    d2 = dot3(ac0, ac1, ac2, ap0, ap1, ap2)
+    d3 = dot3(ab0, ab1, ab2, bp0, bp1, bp2)
+    d4 = dot3(ac0, ac1, ac2, bp0, bp1, bp2)
+    d5 = dot3(ab0, ab1, ab2, cp0, cp1, cp2)
+    d6 = dot3(ac0, ac1, ac2, cp0, cp1, cp2)
+    vc = d1 * d4 - d3 * d2
+    vb = d5 * d2 - d1 * d6
+    va = d3 * d6 - d5 * d4
+    # the regions in Ericson's order; the first that holds wins
+    if d1 <= 0 and d2 <= 0:                                      # vertex a
+        return 1.0, 0.0, 0.0
+    if d3 >= 0 and d4 <= d3:                                     # vertex b
+        return 0.0, 1.0, 0.0
+    if vc <= 0 and d1 >= 0 and d3 <= 0:                          # edge ab
+        t = d1 / (d1 - d3)
+        return 1 - t, t, 0.0
+    if d6 >= 0 and d5 <= d6:                                     # vertex c
+        return 0.0, 0.0, 1.0
+    if vb <= 0 and d2 >= 0 and d6 <= 0:                          # edge ac
+        t = d2 / (d2 - d6)
+        return 1 - t, 0.0, t
+    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:            # edge bc
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1 - t, t
+    denom = 1.0 / (va + vb + vc)                                 # face interior
+    v, w = vb * denom, vc * denom
+    return 1 - v - w, v, w
+
+
+@numba.njit(cache=True)
 def _closest_points(p, a, b, c, q, bary):  # pragma: no cover
     for i in range(len(p)):
-        ab0, ab1, ab2 = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2]
-        ac0, ac1, ac2 = c[i, 0] - a[i, 0], c[i, 1] - a[i, 1], c[i, 2] - a[i, 2]
-        ap0, ap1, ap2 = p[i, 0] - a[i, 0], p[i, 1] - a[i, 1], p[i, 2] - a[i, 2]
-        bp0, bp1, bp2 = p[i, 0] - b[i, 0], p[i, 1] - b[i, 1], p[i, 2] - b[i, 2]
-        cp0, cp1, cp2 = p[i, 0] - c[i, 0], p[i, 1] - c[i, 1], p[i, 2] - c[i, 2]
-        d1 = dot3(ab0, ab1, ab2, ap0, ap1, ap2)
-        d2 = dot3(ac0, ac1, ac2, ap0, ap1, ap2)
-        d3 = dot3(ab0, ab1, ab2, bp0, bp1, bp2)
-        d4 = dot3(ac0, ac1, ac2, bp0, bp1, bp2)
-        d5 = dot3(ab0, ab1, ab2, cp0, cp1, cp2)
-        d6 = dot3(ac0, ac1, ac2, cp0, cp1, cp2)
-        vc = d1 * d4 - d3 * d2
-        vb = d5 * d2 - d1 * d6
-        va = d3 * d6 - d5 * d4
-        # the regions in Ericson's order; the first that holds wins
-        if d1 <= 0 and d2 <= 0:                                      # vertex a
-            u, v, w = 1.0, 0.0, 0.0
-        elif d3 >= 0 and d4 <= d3:                                   # vertex b
-            u, v, w = 0.0, 1.0, 0.0
-        elif vc <= 0 and d1 >= 0 and d3 <= 0:                        # edge ab
-            t = d1 / (d1 - d3)
-            u, v, w = 1 - t, t, 0.0
-        elif d6 >= 0 and d5 <= d6:                                   # vertex c
-            u, v, w = 0.0, 0.0, 1.0
-        elif vb <= 0 and d2 >= 0 and d6 <= 0:                        # edge ac
-            t = d2 / (d2 - d6)
-            u, v, w = 1 - t, 0.0, t
-        elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:          # edge bc
-            t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-            u, v, w = 0.0, 1 - t, t
-        else:                                                        # face interior
-            denom = 1.0 / (va + vb + vc)
-            v, w = vb * denom, vc * denom
-            u = 1 - v - w
+        u, v, w = closest_point_weights(p[i, 0], p[i, 1], p[i, 2], a[i, 0], a[i, 1], a[i, 2],
+                                        b[i, 0], b[i, 1], b[i, 2], c[i, 0], c[i, 1], c[i, 2])
         bary[i, 0], bary[i, 1], bary[i, 2] = u, v, w
         for k in range(3):
             q[i, k] = u * a[i, k] + v * b[i, k] + w * c[i, k]

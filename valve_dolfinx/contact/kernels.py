@@ -12,12 +12,14 @@ run in the order written, so a result is the same to the last bit from run to ru
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
-from valve_dolfinx.contact.geometry import dot3
+from valve_dolfinx.contact.geometry import closest_point_weights, dot3
 
-__all__ = ["group_blocks", "group_index", "near_pairs", "pair_slots", "row_block_sums",
+__all__ = ["group_blocks", "group_index", "narrow_rows", "near_pairs", "pair_slots", "row_block_sums",
            "row_gradients", "row_presence", "nodal_forces", "plane_distances",
            "presence_gradients",
            "sum_blocks", "summed_already", "scalar_rows"]
@@ -645,3 +647,66 @@ def near_pairs(node, tri, xt, origin, normal, grad1, grad2, altitudes, node_body
         kept += 1
     return (out_node[:kept], out_tri[:kept], out_d0[:kept], out_lam[:kept],
             out_beyond[:kept], out_in_band[:kept])
+
+
+@numba.njit(cache=True)
+def narrow_rows(node, tri, d0, lam, beyond, in_band, xt, triangles, normal, reach, bound,
+                inside_tolerance):  # pragma: no cover
+    """The rows of the pairs :func:`near_pairs` kept
+    (:meth:`~valve_dolfinx.contact.surface.SurfaceContact._narrow`): first the face rows
+    (``in_band``), then the edge/vertex rows: the pairs whose projection lies outside the
+    triangle (a barycentric coordinate below ``-inside_tolerance``) with the lower bound
+    ``√(beyond² + d0²)`` on their distance below ``bound`` and their closest point on the
+    triangle within ``reach``, each in the order of the input (a pair whose projection
+    lies in the fade band outside the triangle makes one row of each kind).
+
+    Returns ``node, tri``, ``d0``, the distance ``gap`` to the closest point (NaN on face
+    rows), the barycentric coordinates ``(K, 3)`` of the closest point (the projection's on
+    face rows), the offset ``(K, 3)`` of the node from it (``d0 n`` on face rows) and those
+    of the projection.
+    """
+    count = len(node)
+    size = 2 * count  # a pair in a face's fade band, outside the triangle, makes both rows
+    out_node = np.empty(size, dtype=np.int64)
+    out_tri = np.empty(size, dtype=np.int64)
+    out_d0 = np.empty(size)
+    out_gap = np.empty(size)
+    out_lam = np.empty((size, 3))
+    out_offset = np.empty((size, 3))
+    out_plane_lam = np.empty((size, 3))
+    kept = 0
+    for k in range(count):
+        if not in_band[k]:
+            continue
+        t = tri[k]
+        out_node[kept], out_tri[kept], out_d0[kept], out_gap[kept] = node[k], t, d0[k], np.nan
+        for j in range(3):
+            out_lam[kept, j] = lam[k, j]
+            out_plane_lam[kept, j] = lam[k, j]
+            out_offset[kept, j] = d0[k] * normal[j, t]
+        kept += 1
+    for k in range(count):
+        l0, l1, l2 = lam[k, 0], lam[k, 1], lam[k, 2]
+        if l0 != l0 or l1 != l1 or l2 != l2:  # np.min of a degenerate triangle's NaN
+            continue
+        if not (min(l0, min(l1, l2)) < -inside_tolerance
+                and math.hypot(beyond[k], d0[k]) < bound):
+            continue
+        p, t = node[k], tri[k]
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        u, v, w = closest_point_weights(xt[0, p], xt[1, p], xt[2, p], xt[0, a], xt[1, a],
+                                        xt[2, a], xt[0, b], xt[1, b], xt[2, b], xt[0, c],
+                                        xt[1, c], xt[2, c])
+        o0 = xt[0, p] - (u * xt[0, a] + v * xt[0, b] + w * xt[0, c])
+        o1 = xt[1, p] - (u * xt[1, a] + v * xt[1, b] + w * xt[1, c])
+        o2 = xt[2, p] - (u * xt[2, a] + v * xt[2, b] + w * xt[2, c])
+        gap = math.sqrt((o0 * o0 + o1 * o1) + o2 * o2)  # np.linalg.norm's order
+        if not gap < reach:
+            continue
+        out_node[kept], out_tri[kept], out_d0[kept], out_gap[kept] = p, t, d0[k], gap
+        out_lam[kept, 0], out_lam[kept, 1], out_lam[kept, 2] = u, v, w
+        out_offset[kept, 0], out_offset[kept, 1], out_offset[kept, 2] = o0, o1, o2
+        out_plane_lam[kept, 0], out_plane_lam[kept, 1], out_plane_lam[kept, 2] = l0, l1, l2
+        kept += 1
+    return (out_node[:kept], out_tri[:kept], out_d0[:kept], out_gap[:kept], out_lam[:kept],
+            out_offset[:kept], out_plane_lam[:kept])

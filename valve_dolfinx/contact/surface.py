@@ -49,12 +49,10 @@ from valve_dolfinx.contact.exclusions import (
     seam_distances,
     triangle_halo,
 )
-from valve_dolfinx.contact.geometry import (
-    closest_point_on_triangles,
-    triangle_frames,
-)
+from valve_dolfinx.contact.geometry import triangle_frames
 from valve_dolfinx.contact.kernels import (
     group_index,
+    narrow_rows,
     near_pairs,
     presence_gradients,
     row_presence,
@@ -119,17 +117,18 @@ class _TriangleFrames:
     grad1: np.ndarray
     grad2: np.ndarray
     altitudes: np.ndarray  # (3, M): 1/|∇λ_j|, the altitude of the triangle at vertex j
+    gradients_by_triangle: np.ndarray  # (M, 3, 3): the gradients g_j, [triangle, j, axis]
 
     @classmethod
     def at(cls, xt: np.ndarray, triangles: np.ndarray) -> _TriangleFrames:
         a, b, c = (xt[:, triangles[:, j]] for j in range(3))
         normal, grad, altitudes = triangle_frames(a, b, c)
-        return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes)
+        return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes,
+                   gradients_by_triangle=np.ascontiguousarray(grad.transpose(2, 0, 1)))
 
     def gradients(self, tri: np.ndarray) -> np.ndarray:
         """``(K, 3, 3)`` barycentric gradients ``g_j`` (``[j, axis]``) of triangles ``tri``."""
-        g1, g2 = self.grad1[:, tri].T, self.grad2[:, tri].T
-        return np.stack([-g1 - g2, g1, g2], axis=1)
+        return self.gradients_by_triangle[tri]
 
 
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -585,29 +584,12 @@ class SurfaceContact:
         the barycentric coordinates ``(K, 3)`` of the closest point and the
         offset ``x_p - q`` ``(K, 3)``.
         """
-        lam_min = lam.min(axis=1)
-        n = frames.normal
-        h = self.params.reach
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
-        face = np.flatnonzero(in_band)
-        out = np.flatnonzero((lam_min < -INSIDE_TOLERANCE)
-                             & (np.hypot(beyond, d0) < h + _BOUND_MARGIN))
-        xo = xt.T
-        t = self.triangles[tri[out]]
-        q, bary = closest_point_on_triangles(xo[node[out]], xo[t[:, 0]], xo[t[:, 1]],
-                                             xo[t[:, 2]])
-        v = xo[node[out]] - q
-        gap = np.linalg.norm(v, axis=1)
-        near_edge = gap < h
-        out, bary, v, gap = out[near_edge], bary[near_edge], v[near_edge], gap[near_edge]
-        rows = np.concatenate([face, out])
-        return (node[rows], tri[rows], d0[rows],
-                np.concatenate([np.full(len(face), np.nan), gap]),
-                np.concatenate([lam[face], bary]),
-                np.concatenate([d0[face, None] * n[:, tri[face]].T, v]),
-                lam[rows])
+        return narrow_rows(node, tri, d0, lam, beyond, in_band, xt, self.triangles,
+                           frames.normal, self.params.reach,
+                           self.params.reach + _BOUND_MARGIN, INSIDE_TOLERANCE)
 
     def _row_bands(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """``(K, 3)`` fade bands of face rows: wide beyond another body's free edge."""
