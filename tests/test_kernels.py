@@ -15,6 +15,7 @@ from valve_dolfinx.contact.kernels import (
     group_index,
     narrow_rows,
     near_pairs,
+    nearest_inside,
     row_block_sums,
     sum_blocks,
 )
@@ -269,3 +270,26 @@ def test_narrow_rows_are_the_face_rows_then_the_edge_rows_within_reach():
     assert np.allclose(np.einsum("kj,kjx->kx", weights, corners), closest, atol=1e-12)
     assert np.allclose(got[5][len(face):], x[node[edge]] - np.array(closest), atol=1e-12)
     assert np.array_equal(got[6], lam[rows])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_nearest_inside_is_the_inside_flag_of_each_groups_nearest_pair(seed):
+    rng = np.random.default_rng(seed)
+    count = 400
+    group = rng.integers(0, 60, count)
+    # few distinct distances (ties), some unreachable (inf) and a few NaN
+    distance = rng.choice([0.1, 0.2, 0.3, np.inf, np.nan], count, p=[0.3, 0.3, 0.2, 0.15, 0.05])
+    inside = rng.random(count) < 0.5
+    got = nearest_inside(group, distance, inside)
+    # the definition: per group the smallest distance (NaN last), inside first among
+    # equals, then the first pair
+    for g in np.unique(group):
+        members = np.flatnonzero(group == g)
+        key = [(np.isnan(distance[i]), np.nan_to_num(distance[i], nan=0.0), not inside[i], i)
+               for i in members]
+        nearest = members[min(range(len(members)), key=key.__getitem__)]
+        assert (got[members] == inside[nearest]).all()
+    # and what the sort of the pairs gives
+    order = np.lexsort((~inside, distance, group))
+    first = order[np.unique(group[order], return_index=True)[1]]
+    assert np.array_equal(got, np.isin(group, group[first[inside[first]]]))

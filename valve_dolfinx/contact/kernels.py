@@ -19,7 +19,7 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import closest_point_weights, dot3
 
-__all__ = ["group_blocks", "group_index", "narrow_rows", "near_pairs", "pair_slots", "row_block_sums",
+__all__ = ["group_blocks", "group_index", "narrow_rows", "nearest_inside", "near_pairs", "pair_slots", "row_block_sums",
            "row_gradients", "row_presence", "nodal_forces", "plane_distances",
            "presence_gradients",
            "sum_blocks", "summed_already", "scalar_rows"]
@@ -710,3 +710,32 @@ def narrow_rows(node, tri, d0, lam, beyond, in_band, xt, triangles, normal, reac
         kept += 1
     return (out_node[:kept], out_tri[:kept], out_d0[:kept], out_gap[:kept], out_lam[:kept],
             out_offset[:kept], out_plane_lam[:kept])
+
+
+@numba.njit(cache=True)
+def nearest_inside(group, distance, inside):  # pragma: no cover
+    """Per pair, whether the nearest pair of its ``group`` (smallest ``distance``, NaN last;
+    of equal distances an ``inside`` one, then the first) is ``inside``: the order of
+    ``np.lexsort((~inside, distance, group))``, linear in the pairs and the largest label
+    instead of a sort."""
+    size = 0
+    for g in group:
+        size = max(size, g + 1)
+    best = np.full(size, -1, dtype=np.int64)
+    for i in range(len(group)):
+        b = best[group[i]]
+        if b < 0:
+            best[group[i]] = i
+            continue
+        d, e = distance[i], distance[b]
+        if d != d or e != e:  # NaN: after every number, equal to another NaN
+            nearer = e != e and d == d
+            tie = d != d and e != e
+        else:
+            nearer, tie = d < e, d == e
+        if nearer or (tie and inside[i] and not inside[b]):
+            best[group[i]] = i
+    out = np.empty(len(group), dtype=np.bool_)
+    for i in range(len(group)):
+        out[i] = inside[best[group[i]]]
+    return out

@@ -45,53 +45,66 @@ class SideMemory:
         Their sides (+1: the face the triangle's normal points to).
     num_triangles
         ``M``, the number of triangles of the surface.
+    node_start
+        ``keys[node_start[n]:node_start[n + 1]]`` are node ``n``'s pairs (nodes up to the
+        largest remembered one).
     """
 
     keys: np.ndarray
     sides: np.ndarray
     num_triangles: int
+    node_start: np.ndarray
 
     @classmethod
     def of(cls, node: np.ndarray, tri: np.ndarray, sides: np.ndarray,
            num_triangles: int) -> SideMemory:
         """The memory of the pairs ``(node, tri)`` (distinct) with ``sides``."""
-        keys = np.asarray(node, dtype=np.int64) * num_triangles + np.asarray(tri, dtype=np.int64)
+        node = np.asarray(node, dtype=np.int64)
+        keys = node * num_triangles + np.asarray(tri, dtype=np.int64)
         order = np.argsort(keys, kind="stable")
-        return cls(keys[order], np.asarray(sides)[order].astype(np.int8), int(num_triangles))
+        keys = keys[order]
+        bounds = np.arange(node.max(initial=-1) + 2, dtype=np.int64) * num_triangles
+        return cls(keys, np.asarray(sides)[order].astype(np.int8), int(num_triangles),
+                   np.searchsorted(keys, bounds))
 
     def lookup(self, node: np.ndarray, tri: np.ndarray, adjacent: np.ndarray) -> np.ndarray:
         """Sides of the pairs ``(node, tri)``: remembered, else the side the node has on the
         first remembered triangle of ``adjacent[tri]`` (the same body's triangles around
         it, :func:`~valve_dolfinx.contact.exclusions.adjacent_triangles`), else 0 (a new
         pair)."""
-        return _lookup(self.keys, self.sides, np.asarray(node, dtype=np.int64),
-                       np.asarray(tri, dtype=np.int64), np.asarray(adjacent, dtype=np.int64),
-                       self.num_triangles)
+        return _lookup(self.keys, self.sides, self.node_start,
+                       np.asarray(node, dtype=np.int64), np.asarray(tri, dtype=np.int64),
+                       np.asarray(adjacent, dtype=np.int64), self.num_triangles)
 
 
 @numba.njit(cache=True)
-def _remembered(keys, sides, key):  # pragma: no cover
-    """The side remembered for ``key`` (a binary search of the sorted ``keys``), 0 if none."""
-    lo, hi = 0, len(keys)
+def _remembered(keys, sides, lo, hi, key):  # pragma: no cover
+    """The side remembered for ``key`` (a binary search of the sorted ``keys[lo:hi]``), 0
+    if none."""
+    end = hi
     while lo < hi:
         mid = (lo + hi) // 2
         if keys[mid] < key:
             lo = mid + 1
         else:
             hi = mid
-    return sides[lo] if lo < len(keys) and keys[lo] == key else np.int8(0)
+    return sides[lo] if lo < end and keys[lo] == key else np.int8(0)
 
 
 @numba.njit(cache=True)
-def _lookup(keys, sides, node, tri, adjacent, num_triangles):  # pragma: no cover
+def _lookup(keys, sides, node_start, node, tri, adjacent, num_triangles):  # pragma: no cover
     out = np.zeros(len(node), dtype=np.int8)
     for i in range(len(node)):
-        side = _remembered(keys, sides, node[i] * num_triangles + tri[i])
+        n = node[i]
+        if n + 1 >= len(node_start):  # beyond the largest remembered node
+            continue
+        lo, hi = node_start[n], node_start[n + 1]  # the node's pairs
+        side = _remembered(keys, sides, lo, hi, n * num_triangles + tri[i])
         for j in range(adjacent.shape[1]):
             if side != 0:
                 break
             around = adjacent[tri[i], j]
             if around >= 0:
-                side = _remembered(keys, sides, node[i] * num_triangles + around)
+                side = _remembered(keys, sides, lo, hi, n * num_triangles + around)
         out[i] = side
     return out

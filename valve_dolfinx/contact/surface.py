@@ -54,6 +54,7 @@ from valve_dolfinx.contact.kernels import (
     group_index,
     narrow_rows,
     near_pairs,
+    nearest_inside,
     presence_gradients,
     row_presence,
 )
@@ -348,9 +349,7 @@ class SurfaceContact:
         # closest boundary point's otherwise (a face row in its band does not measure it)
         distance = np.where(inside, np.abs(d0), np.where(face, np.inf, gap))
         group = node * len(self.body_labels) + self.triangle_body[tri]
-        order = np.lexsort((~inside, distance, group))  # per group, the nearest pair first
-        first = order[np.unique(group[order], return_index=True)[1]]
-        over = np.isin(group, group[first[inside[first]]])
+        over = nearest_inside(group, distance, inside)
         side = np.where(over, self._remembered_side(node, tri, d0), present_side(d0))
         self.memory = SideMemory.of(node, tri, side, len(self.triangles))
         self._last_rows = None
