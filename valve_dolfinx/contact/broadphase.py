@@ -17,8 +17,8 @@ against the nodes with a uniform grid built from a counting sort and prefix sums
 
 The work is linear in the queried nodes, the grid cells (bounded by a multiple
 of the nodes and boxes), the box–column runs and the pairs; there is no Python
-loop over nodes or triangles, only over blocks of :data:`BLOCK_SIZE` boxes, which keeps the
-temporaries cache-sized.
+loop over nodes or triangles, only over blocks of :data:`BLOCK_SIZE` boxes,
+which keeps the temporaries cache-sized.
 """
 
 from __future__ import annotations
@@ -172,11 +172,15 @@ class CellGrid:
     def num_cells(self) -> int:
         return self.shape[0] * self.shape[1] * self.shape[2]
 
+    @property
+    def kernel_arguments(self) -> tuple:
+        """``(origin, cell, step, shape, axes)`` as the compiled loops take them."""
+        return (self.origin, self.cell, self.step, np.array(self.shape, dtype=np.int64),
+                np.array(self.axes, dtype=np.int64))
+
     def point_keys(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Keys of points ``(3, K)`` and a mask of those inside the grid (others match no box)."""
-        keys = _cell_keys(np.ascontiguousarray(p, dtype=float), self.origin, self.cell,
-                          self.step, np.array(self.shape, dtype=np.int64),
-                          np.array(self.axes, dtype=np.int64))
+        keys = _cell_keys(np.ascontiguousarray(p, dtype=float), *self.kernel_arguments)
         return keys, keys >= 0
 
 
@@ -297,13 +301,11 @@ class CellIndex:
             return
         max_cells = _CELLS_PER_ITEM * (len(nodes) + lo.shape[1]) + (1 << 16)
         self.grid = CellGrid.covering(lo, hi, max_cells)
-        grid = self.grid
         #: the nodes sorted by key; their coordinates by axis, which the box test reads
         #: run by run; ``first[k]``: position of the first node of cell ``k`` or later
         self.sorted_nodes, self.sorted_xt, self.first = _sorted_by_cell(
-            xt, np.asarray(nodes, dtype=np.int64), grid.origin, grid.cell, grid.step,
-            np.array(grid.shape, dtype=np.int64), np.array(grid.axes, dtype=np.int64),
-            grid.num_cells)
+            xt, np.asarray(nodes, dtype=np.int64), *self.grid.kernel_arguments,
+            self.grid.num_cells)
 
     def box_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(node, box)`` of indexed nodes inside the closed boxes ``[lo, hi]``, ``(3, K)``.
@@ -314,10 +316,8 @@ class CellIndex:
         if self.grid is None or len(self.sorted_nodes) == 0 or lo.shape[1] == 0:
             return empty, empty.copy()
         grid = self.grid
-        return _box_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi), grid.origin,
-                          grid.cell, grid.step, np.array(grid.shape, dtype=np.int64),
-                          np.array(grid.axes, dtype=np.int64), self.first, self.sorted_nodes,
-                          self.sorted_xt)
+        return _box_pairs(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
+                          *grid.kernel_arguments, self.first, self.sorted_nodes, self.sorted_xt)
 
     def blocks(self, lo: np.ndarray, hi: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """:meth:`box_pairs` for consecutive blocks of boxes; box ids are global.
