@@ -44,6 +44,7 @@ import time
 
 import numpy as np
 import pytest
+from scipy.ndimage import distance_transform_edt
 
 from valve_dolfinx.analysis import (
     analyse_coaptation,
@@ -53,6 +54,8 @@ from valve_dolfinx.analysis import (
     regurgitant_orifice_area,
     through_flow,
 )
+from valve_dolfinx.analysis.distance import within_distance
+from valve_dolfinx.analysis.sealing import crossed_distances
 from valve_dolfinx.contact.geometry import closest_point_on_triangles
 from valve_dolfinx.exceptions import MeshError, ParameterError
 from valve_dolfinx.geometry.outline import LeafletShape
@@ -195,6 +198,36 @@ def test_distance_to_surface_matches_brute_force():
     q, _ = closest_point_on_triangles(pp, tt[:, 0], tt[:, 1], tt[:, 2])
     brute = np.linalg.norm(pp - q, axis=1).reshape(len(pts), -1).min(axis=1)
     assert distance_to_surface(pts, verts, g["triangles"]) == pytest.approx(brute, abs=1e-12)
+
+
+
+def test_within_distance_is_the_exact_distance_test():
+    rng = np.random.default_rng(4)
+    g = _grid(np.linspace(0, 5, 11), np.linspace(0, 4, 9))
+    verts = np.column_stack([g["flat"], 0.3 * np.sin(g["flat"][:, 0])])
+    pts = rng.uniform([-1, -1, -1.5], [6, 5, 1.5], size=(3000, 3))
+    exact = distance_to_surface(pts, verts, g["triangles"])
+    for reach in (0.25, 0.6):
+        got = within_distance(pts, verts, g["triangles"], reach)
+        assert 100 < got.sum() < len(pts) - 100  # both answers occur
+        assert np.array_equal(got, exact <= reach)
+    # points exactly at the limit: straight above the vertices of a flat sheet
+    flat = np.column_stack([g["flat"], np.zeros(len(g["flat"]))])
+    on = flat + [0.0, 0.0, 0.25]
+    assert within_distance(on, flat, g["triangles"], 0.25).all()
+    assert not within_distance(on, flat, g["triangles"], 0.2499).any()
+
+
+def test_crossed_distances_are_the_distance_transform_up_to_the_radius():
+    rng = np.random.default_rng(6)
+    crossed = rng.random((30, 25, 20)) < 0.004
+    voxel, radius = 0.1, 0.355
+    reference = distance_transform_edt(~crossed, sampling=voxel)
+    got = crossed_distances(crossed, radius, voxel)
+    close = reference <= radius
+    assert 1000 < close.sum() < close.size - 1000
+    assert np.allclose(got[close], reference[close], rtol=0.0, atol=1e-15)
+    assert np.isinf(got[~close]).all()
 
 
 # --- coaptation height and area on two parallel sheets ----------------------------------------

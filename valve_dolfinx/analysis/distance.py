@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from valve_dolfinx.contact.broadphase import candidate_pairs
 from valve_dolfinx.contact.geometry import closest_point_on_triangles
 
-__all__ = ["distance_to_surface"]
+__all__ = ["distance_to_surface", "within_distance"]
 
 #: Nearest centroids examined first by the point–surface distance search.
 _FIRST_NEIGHBOURS = 16
@@ -64,3 +65,27 @@ def distance_to_surface(points: np.ndarray, vertices: np.ndarray,
         still = dc[:, -1] <= best[active] + reach
         active = active[still] if k < m else np.empty(0, int)
     return best
+
+
+def within_distance(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                    distance: float) -> np.ndarray:
+    """Whether each point ``(n, 3)`` lies within ``distance`` (closed) of a triangulated
+    surface: ``distance_to_surface(...) <= distance``, decided on fewer triangles.
+
+    Only a triangle whose bounding box, padded by ``distance``, holds the point can lie
+    that close; the contact's broad phase finds those pairs, and the exact point–triangle
+    distance (the one :func:`distance_to_surface` takes) decides.  The boxes are padded a
+    little further (1e-9 mm) so that no rounding of a box drops a triangle at the limit.
+    """
+    points = np.asarray(points, float).reshape(-1, 3)
+    vertices = np.asarray(vertices, float)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    inside = np.zeros(len(points), dtype=bool)
+    if len(points) == 0 or len(triangles) == 0:
+        return inside
+    x = np.concatenate([vertices, points])
+    node, tri = candidate_pairs(x, triangles, np.arange(len(vertices), len(x)),
+                                distance + 1e-9)
+    d = _pair_distances(x, vertices[triangles], node, tri)
+    inside[node[d <= distance] - len(vertices)] = True
+    return inside

@@ -22,10 +22,14 @@ voxel centres.  So gaps below the threshold always seal, gaps above
 between may do either: a through-channel that narrow can be reported as a
 dead end (it is still drawn on the orifice map, and logged).
 
-Cost: exact distances are computed only where the Euclidean distance
-transform of the voxels a sheet passes through cannot decide (its error is
-about one voxel), and the transform only over the box of the sheet widened by
-the distances that matter.
+Cost: exact distances are computed only where the Euclidean distance from the
+voxels a sheet passes through cannot decide (its error is about one voxel); that
+distance is needed only up to the largest one that matters, a few voxels, so it
+is taken by stamping a ball of those voxel offsets around each crossed voxel
+(the values of a Euclidean distance transform within the ball, none beyond),
+over the box of the sheet widened by the ball.  The exact test of a voxel
+centre looks only at the triangles whose boxes, padded by the distance, hold
+it (the contact's broad phase).
 """
 
 from __future__ import annotations
@@ -33,14 +37,15 @@ from __future__ import annotations
 import logging
 import math
 
+import numba
 import numpy as np
-from scipy.ndimage import distance_transform_edt, label
+from scipy.ndimage import label
 
-from valve_dolfinx.analysis.distance import distance_to_surface
+from valve_dolfinx.analysis.distance import within_distance
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.valve import ValveMesh
 
-__all__ = ["DEFAULT_VOXEL_MM", "MAX_VOXELS", "through_flow"]
+__all__ = ["DEFAULT_VOXEL_MM", "MAX_VOXELS", "crossed_distances", "through_flow"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +67,42 @@ def _sheet_samples(vertices: np.ndarray, triangles: np.ndarray, spacing: float) 
         lam = np.stack([k - i[keep] - j[keep], i[keep], j[keep]], axis=1) / k
         samples.append(np.einsum("sj,tjd->tsd", lam, p[divisions == k]).reshape(-1, 3))
     return np.concatenate(samples)
+
+
+def ball_offsets(radius: float, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """The integer voxel offsets ``(K, 3)`` within ``radius`` (mm) and their lengths (mm),
+    computed as :func:`scipy.ndimage.distance_transform_edt` computes a distance with
+    ``sampling=voxel``: √((Δi·v)² + (Δj·v)² + (Δk·v)²)."""
+    r = int(math.floor(radius / voxel)) + 1
+    offsets = np.stack(np.meshgrid(*[np.arange(-r, r + 1)] * 3, indexing="ij"),
+                       axis=-1).reshape(-1, 3)
+    scaled = offsets.astype(np.float64) * voxel
+    length = np.sqrt((scaled[:, 0] ** 2 + scaled[:, 1] ** 2) + scaled[:, 2] ** 2)
+    keep = length <= radius
+    return offsets[keep], length[keep]
+
+
+def crossed_distances(crossed: np.ndarray, radius: float, voxel: float) -> np.ndarray:
+    """Distance (mm) from each voxel of the grid ``crossed`` (bool, 3-D) to the centre of
+    the nearest ``crossed`` voxel, where it is at most ``radius``, else ``inf``: the
+    Euclidean distance transform of ``~crossed`` (``sampling=voxel``) up to ``radius``,
+    stamped around each crossed voxel instead of transformed over the whole grid."""
+    offsets, length = ball_offsets(radius, voxel)
+    out = np.full(crossed.shape, np.inf)
+    _stamp(np.argwhere(crossed), offsets, length, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _stamp(cells, offsets, length, out):  # pragma: no cover
+    """``out[c + o] = min(out[c + o], length[o])`` over the cells and offsets inside."""
+    n0, n1, n2 = out.shape
+    for c in range(len(cells)):
+        i, j, k = cells[c, 0], cells[c, 1], cells[c, 2]
+        for o in range(len(offsets)):
+            a, b, e = i + offsets[o, 0], j + offsets[o, 1], k + offsets[o, 2]
+            if 0 <= a < n0 and 0 <= b < n1 and 0 <= e < n2 and length[o] < out[a, b, e]:
+                out[a, b, e] = length[o]
 
 
 def through_flow(positions: np.ndarray, valve: ValveMesh, threshold: float, radius: float,
@@ -108,7 +149,7 @@ def through_flow(positions: np.ndarray, valve: ValveMesh, threshold: float, radi
                                                                  shape), strict=True))
         crossed = np.zeros([b.stop - b.start for b in box], dtype=bool)
         crossed[tuple((idx - low).T)] = True
-        approx = distance_transform_edt(~crossed, sampling=voxel)
+        approx = crossed_distances(crossed, reach + above_err, voxel)
         del crossed
         near = free[box]  # a view: blocking a voxel here blocks it in the grid
         undecided = near & (approx > reach - below_err) & (approx <= reach + above_err)
@@ -116,8 +157,8 @@ def through_flow(positions: np.ndarray, valve: ValveMesh, threshold: float, radi
         shell = np.argwhere(undecided) + low
         del approx, undecided
         centres = origin + (shell + 0.5) * voxel
-        free[tuple(shell.T)] = distance_to_surface(centres, positions[patch.nodes],
-                                                   patch.triangles) > reach
+        free[tuple(shell.T)] = ~within_distance(centres, positions[patch.nodes],
+                                                patch.triangles, reach)
         exact_count += len(shell)
     c = origin[0] + (np.arange(n) + 0.5) * voxel
     free &= (c[:, None] ** 2 + c[None, :] ** 2 < radius**2)[:, :, None]
