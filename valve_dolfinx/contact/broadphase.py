@@ -178,11 +178,6 @@ class CellGrid:
         return (self.origin, self.cell, self.step, np.array(self.shape, dtype=np.int64),
                 np.array(self.axes, dtype=np.int64))
 
-    def point_keys(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Keys of points ``(3, K)`` and a mask of those inside the grid (others match no box)."""
-        keys = _cell_keys(np.ascontiguousarray(p, dtype=float), *self.kernel_arguments)
-        return keys, keys >= 0
-
 
 @numba.njit(cache=True)
 def _cell_keys(pt, origin, cell, step, shape, axes):  # pragma: no cover
