@@ -9,6 +9,7 @@ S12 = ½·∂W/∂E12.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -83,7 +84,7 @@ def test_invalid_material_rejected():
     with pytest.raises(ParameterError, match="positive definite"):
         FungMaterial(c=1.0, A1=1, A2=1, A3=5, A4=1)
     with pytest.raises(ParameterError, match="thickness"):
-        NATIVE_LEAFLET.with_thickness(0.0)
+        replace(NATIVE_LEAFLET, thickness=0.0)
 
 
 # --- UFL stress on a homogeneous deformation --------------------------------------------

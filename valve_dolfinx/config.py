@@ -480,7 +480,7 @@ def _checked_value(key: str, value: Any, annotation: Any, source: str) -> Any:
 
 
 # --- writing --------------------------------------------------------------------------------
-def config_toml(config: CaseConfig | None = None, header: str = "") -> str:
+def config_toml(config: CaseConfig | None = None) -> str:
     """``config`` (default: the defaults) as TOML, every key with its unit and meaning.
 
     Settings without a value (``None``: "unset") are written as comments, so that
@@ -488,12 +488,12 @@ def config_toml(config: CaseConfig | None = None, header: str = "") -> str:
     """
     config = CaseConfig() if config is None else config
     data = config.to_dict()
-    lines = [f"# {line}".rstrip() for line in header.splitlines()] if header else [
+    lines = [
         "# valve-dolfinx case configuration: every setting with its unit and meaning.",
         "# Run it with `valve-dolfinx run --config FILE`; keys left out keep their defaults;",
         "# `--set section.key=value` overrides one key.",
+        "",
     ]
-    lines.append("")
     lines += [_toml_line("", k, v) for k, v in data.items() if k not in _SECTIONS]
     for name in _SECTIONS:
         lines += ["", f"[{name}]"]
@@ -530,9 +530,9 @@ def _toml_key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
 
 
-def write_config(path: str | Path, config: CaseConfig, header: str = "") -> Path:
+def write_config(path: str | Path, config: CaseConfig) -> Path:
     """Write ``config`` as commented TOML to ``path``, atomically (reloadable with --config)."""
-    text = config_toml(config, header)
+    text = config_toml(config)
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 

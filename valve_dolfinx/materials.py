@@ -46,7 +46,7 @@ docs/model.md, which documents the treatment, its parameters and sources.
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import ufl
@@ -129,12 +129,6 @@ class FungMaterial:
         damping to each tissue with it (SPEC §4: graft cases are stiff).
         """
         return self.thickness * self.c * float(np.linalg.eigvalsh(self.matrix).max())
-
-    def with_thickness(self, thickness: float) -> FungMaterial:
-        return replace(self, thickness=thickness)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
     @staticmethod
     def isotropic(c: float, a: float, b: float = 0.0, thickness: float = 0.5,

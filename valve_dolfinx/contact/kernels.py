@@ -17,10 +17,10 @@ import math
 import numba
 import numpy as np
 
-from valve_dolfinx.contact.geometry import closest_point_weights, dot3
+from valve_dolfinx.contact.geometry import closest_point_weights
 
 __all__ = ["group_blocks", "group_index", "narrow_rows", "nearest_inside", "near_pairs", "pair_slots", "row_block_sums",
-           "row_gradients", "row_presence", "nodal_forces", "plane_distances",
+           "row_gradients", "row_presence", "nodal_forces",
            "presence_gradients",
            "sum_blocks", "summed_already", "scalar_rows"]
 
@@ -564,20 +564,6 @@ def scalar_rows(rows, cols, blocks, scale, row_base, col_base):  # pragma: no co
         start = stop
     indptr[r] = position
     return indptr, columns, values, out_rows
-
-
-@numba.njit(cache=True)
-def plane_distances(node, tri, triangles, x, normals):  # pragma: no cover
-    """``(x[node] - x[triangles[tri, 0]])·normals[tri]`` per pair ``(K,)``, ``x`` and the
-    unit ``normals`` ``(·, 3)``: the signed distance of each node from its triangle's
-    plane, summed in the order of ``np.einsum("ij,ij->i")``."""
-    out = np.empty(len(node))
-    for k in range(len(node)):
-        p, t = node[k], tri[k]
-        a = triangles[t, 0]
-        out[k] = dot3(x[p, 0] - x[a, 0], x[p, 1] - x[a, 1], x[p, 2] - x[a, 2],
-                      normals[t, 0], normals[t, 1], normals[t, 2])
-    return out
 
 
 @numba.njit(cache=True)

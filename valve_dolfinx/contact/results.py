@@ -10,7 +10,6 @@ what its derivative needs -- and :meth:`ContactRows.result` turns them into the
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -22,7 +21,7 @@ from valve_dolfinx.contact.kernels import (
     row_block_sums,
     row_gradients,
 )
-from valve_dolfinx.exceptions import MeshError, ParameterError
+from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
 
@@ -68,25 +67,6 @@ class ContactResult:
     total_force: float
     pairs: np.ndarray
     max_crossing: float = 0.0
-
-    @classmethod
-    def combine(cls, results: Iterable[ContactResult]) -> ContactResult:
-        """Sum of results on the same mesh (several surfaces/planes, or disjoint node sets)."""
-        results = list(results)
-        if not results:
-            raise ParameterError("ContactResult.combine needs at least one result")
-        return cls(
-            forces=np.sum([r.forces for r in results], axis=0),
-            jac_rows=np.concatenate([r.jac_rows for r in results]),
-            jac_cols=np.concatenate([r.jac_cols for r in results]),
-            jac_blocks=np.concatenate([r.jac_blocks for r in results]),
-            n_active=sum(r.n_active for r in results),
-            max_penetration=max(r.max_penetration for r in results),
-            total_force=float(sum(r.total_force for r in results)),
-            pairs=np.concatenate([r.pairs for r in results]),
-            max_crossing=max(r.max_crossing for r in results),
-        )
-
 
 
 class StepClock:

@@ -19,9 +19,6 @@ import numpy as np
 from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.geometry.domain import MembraneDomain
 from valve_dolfinx.geometry.valve import (
-    ATTACHMENT,
-    FREE_EDGE,
-    LEAFLET_TAGS,
     ValveMesh,
     ValveParameters,
     build_valve,
@@ -49,8 +46,6 @@ class ValveDomain(MembraneDomain):
         The serial description (identical on every rank).
     cell_index
         Index into ``valve.cells`` of each local cell.
-    node_index
-        Index into ``valve.points`` of each local geometry node.
     reference
         DG0 ``(3, 2)`` field J0 = d(placement)/d(flat reference coordinates).
     fibre
@@ -59,7 +54,6 @@ class ValveDomain(MembraneDomain):
 
     valve: ValveMesh | None = None
     cell_index: np.ndarray | None = None
-    node_index: np.ndarray | None = None
 
     def fibre_3d(self) -> dolfinx.fem.Function:
         """Unit fibre vectors in 3-D (DG0), J0·a normalised: for ParaView and checks."""
@@ -115,7 +109,6 @@ def create_valve_domain(valve: ValveMesh | ValveParameters | None = None,
     tdim = mesh.topology.dim
     n_local = mesh.topology.index_map(tdim).size_local
     cell_index = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[:n_local]
-    node_index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
     local = np.arange(n_local, dtype=np.int32)
     cell_tags = dolfinx.mesh.meshtags(mesh, tdim, local, valve.cell_tags[cell_index])
     cell_tags.name = "leaflet"
@@ -131,16 +124,11 @@ def create_valve_domain(valve: ValveMesh | ValveParameters | None = None,
     J0 = reference_jacobians(valve.points, valve.cells, valve.flat)[cell_index]
     reference = cell_function(mesh, J0, "reference_jacobian")
     fibre = cell_function(mesh, valve.fibres[cell_index], "fibre_flat")
-    domain = ValveDomain(mesh, cell_tags, facet_tags, reference, fibre, valve, cell_index,
-                         node_index)
+    domain = ValveDomain(mesh, cell_tags, facet_tags, reference, fibre, valve, cell_index)
     if comm.rank == 0:
         log.info("distributed valve: %d cells, %d nodes on %d rank(s)", valve.num_cells,
                  valve.num_nodes, comm.size)
     return domain
-
-
-# re-exported tag constants for convenience
-TAGS = {"attachment": ATTACHMENT, "free_edge": FREE_EDGE, **LEAFLET_TAGS}
 
 
 def write_domain_xdmf(domain: ValveDomain, path) -> None:

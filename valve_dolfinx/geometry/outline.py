@@ -92,10 +92,6 @@ class LeafletShape:
         return math.pi / 6.0 * self.root_diameter * self.sx
 
     @property
-    def free_edge_length(self) -> float:
-        return 2.0 * self.half_width
-
-    @property
     def commissure_bottom(self) -> float:
         """Height of the commissure's lower end above the nadir (7.41 mm by default)."""
         return self.sy * self.root_diameter * math.sin(math.pi / 6) ** 2 / math.tan(
@@ -128,14 +124,6 @@ class LeafletShape:
         ds = np.sqrt(1.0 + self.lower_edge_slope(x) ** 2)
         s = cumulative_simpson(ds, x=x, initial=0.0)
         return x, s
-
-    def contains(self, x: np.ndarray, y: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-        """True where the flat point (x, y) lies in the closed outline."""
-        x = np.asarray(x, float)
-        y = np.asarray(y, float)
-        inside_x = np.abs(x) <= self.half_width * (1 + tol) + tol
-        return inside_x & (y >= self.lower_edge(np.clip(x, -self.half_width, self.half_width))
-                           - tol) & (y <= self.height + tol)
 
     def fibre_direction(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Unit circumferential collagen direction of a native leaflet at flat points.

@@ -202,9 +202,6 @@ class ValveMesh:
     def attachment_nodes(self) -> np.ndarray:
         return np.unique(self.edges[self.edge_tags == ATTACHMENT])
 
-    def free_edge_nodes(self) -> np.ndarray:
-        return np.unique(self.edges[self.edge_tags == FREE_EDGE])
-
     def leaflet(self, name: str) -> LeafletPatch:
         for patch in self.leaflets:
             if patch.name == name:

@@ -154,13 +154,6 @@ class MembraneModel:
         residual = self.residual() if residual is None else residual
         return ufl.derivative(residual, self.u, ufl.TrialFunction(self.V))
 
-    def lumped_area_form(self):
-        """Bilinear form of the lumped reference-area 'mass' ∫ u·v dA_ref (vertex quadrature)."""
-        du, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        dxv = ufl.Measure("dx", domain=self.domain.mesh,
-                          metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
-        return ufl.inner(du, v) * self.area_factor() * dxv
-
     # --- post-processing ----------------------------------------------------
     def stress(self, material: FungMaterial, u=None):
         """Second Piola–Kirchhoff stress (kPa) in the material axes, from ∂W/∂E."""

@@ -50,7 +50,7 @@ diastolic pressure p is
 
     E_p = R·dp/dR = E·t/R₀ − p   ⇒   E·t = R₀·(E_p + p)
         = 8.696 mm × (68.4 + 10.67) kPa = 687.5 kPa·mm,
-    E = 687.5 kPa·mm / 1.5 mm = 458 kPa   (:func:`wall_modulus_from_pressure_strain`).
+    E = 687.5 kPa·mm / 1.5 mm = 458 kPa.
 
 E_p (equivalently the distensibility, ΔA/(A·Δp) ≈ 2/E_p = 2.9·10⁻² kPa⁻¹) is a
 relative measure, independent of the vessel's size; transferring it from the
@@ -81,29 +81,15 @@ from scipy.optimize import brentq
 
 from valve_dolfinx.exceptions import SolverError, check_range
 
-__all__ = ["RootParameters", "RootState", "distend_root", "wall_modulus_from_pressure_strain",
-           "ASCENDING_AORTA_PRESSURE_STRAIN_MODULUS_KPA", "ASCENDING_AORTA_WALL_THICKNESS_MM"]
+__all__ = ["RootParameters", "RootState", "distend_root", "ASCENDING_AORTA_WALL_THICKNESS_MM"]
 
 log = logging.getLogger(__name__)
 
-#: Martin et al. 2013 (module docstring): in vivo pressure-strain modulus of the human
-#: ascending aorta, men aged 42.6 ± 5.2 years, kPa
-ASCENDING_AORTA_PRESSURE_STRAIN_MODULUS_KPA = 68.4
 #: Mensel et al. 2014 (module docstring): median MRI wall thickness of the ascending aorta,
 #: between the women's 1.46 mm and the men's 1.56 mm
 ASCENDING_AORTA_WALL_THICKNESS_MM = 1.5
 #: range accepted for a prescribed loaded root diameter, mm
 LOADED_DIAMETER_RANGE_MM = (10.0, 40.0)
-
-
-def wall_modulus_from_pressure_strain(pressure_strain_modulus: float, pressure: float,
-                                      zero_pressure_radius: float, thickness: float) -> float:
-    """Secant modulus E (kPa) of the linear thin tube with a given pressure-strain modulus.
-
-    The tube p·R = E·t·(R − R₀)/R₀ has, at pressure p, E_p = R·dp/dR = E·t/R₀ − p, so
-    E = R₀·(E_p + p)/t.  Pressures and moduli in kPa, lengths in mm.
-    """
-    return zero_pressure_radius * (pressure_strain_modulus + pressure) / thickness
 
 
 @dataclass(frozen=True)
@@ -136,9 +122,6 @@ class RootParameters:
             check_range("root.loaded_diameter", self.loaded_diameter, *LOADED_DIAMETER_RANGE_MM,
                         unit="mm", hint="the measured diameter of the pressurised root base; "
                         "None distends the root with the wall law")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass(frozen=True)

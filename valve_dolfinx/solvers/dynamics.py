@@ -298,7 +298,7 @@ class DampedDynamicsSolver:
             ts.setTimeStep(min(dt, self._step_dt * p.max_increment_mm / largest))
         self._accept_state()
         r.steps = ts.getStepNumber()
-        r.time, r.last_dt, r.last_increment_mm = t, dt, increment
+        r.time = t
         snes = ts.getSNES()
         r.newton_iterations += snes.getIterationNumber()
         entry = {"step": r.steps, "time": t, "dt": dt, "increment_mm": increment,
@@ -379,10 +379,10 @@ class DampedDynamicsSolver:
         self._copy_displacement()
         self.report.residual_mN = self.equilibrium_residual()
         self.report.wall_time_s = time.perf_counter() - self._t0
-        log.info("damped dynamics: %s; %d steps (%d rejected), %d Newton its, t = %.4g s, "
-                 "|R_static|_inf = %.3g mN, %.1f s",
+        log.info("damped dynamics: %s; %d steps (%d rejected, %d redone for their motion), "
+                 "%d Newton its, t = %.4g s, |R_static|_inf = %.3g mN, %.1f s",
                  "converged" if self.report.converged else "NOT converged",
-                 self.report.steps, self.report.rejected_steps,
+                 self.report.steps, self.report.rejected_steps, self.report.rejected_for_motion,
                  self.report.newton_iterations, self.report.time,
                  self.report.residual_mN, self.report.wall_time_s)
         self._ts = ts

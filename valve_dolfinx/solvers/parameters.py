@@ -8,7 +8,7 @@ configuration (:mod:`valve_dolfinx.config`), which loads and validates without D
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 from valve_dolfinx.exceptions import check_range
 
@@ -147,11 +147,6 @@ class PseudoTransientParameters:
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
                     unit="s")
 
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-
 
 @dataclass
 class DynamicsParameters:
@@ -227,6 +222,3 @@ class DynamicsParameters:
         check_range("error_tolerance_mm", self.error_tolerance_mm, 0.0, 10.0, low_open=True)
         check_range("stop_increment_mm", self.stop_increment_mm, 0.0, 1.0, low_open=True)
         check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True)
-
-    def to_dict(self) -> dict:
-        return asdict(self)

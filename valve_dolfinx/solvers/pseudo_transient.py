@@ -333,7 +333,7 @@ class PseudoTransientSolver:
         r.steps = ts.getStepNumber()
         r.time = ts.getTime()
         r.newton_iterations += ts.getSNES().getIterationNumber()
-        r.residual_mN, r.last_dt = r_inf, dt
+        r.residual_mN = r_inf
         entry = {"step": r.steps, "pseudo_time": r.time, "dt": dt,
                  "pressure_kpa": solved_pressure,
                  "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,

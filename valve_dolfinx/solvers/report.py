@@ -24,8 +24,6 @@ class SolveReport:
     time
         Time reached: pseudo-time (dimensionless) for the pseudo-transient
         continuation, simulated time (s) for the damped dynamics.
-    last_dt
-        Last time step (same unit as ``time``).
     residual_mN, residual_tolerance_mN
         ``‖R‖∞`` of the static residual at the final state (mN), and the tolerance
         convergence asks it to be below.
@@ -42,7 +40,6 @@ class SolveReport:
     newton_iterations: int = 0
     rejected_newton_iterations: int = 0
     time: float = 0.0
-    last_dt: float = float("nan")
     residual_mN: float = float("nan")
     residual_tolerance_mN: float = float("nan")
     wall_time_s: float = 0.0
@@ -61,10 +58,8 @@ class SolveReport:
 class DynamicsReport(SolveReport):
     """:class:`SolveReport` of the damped dynamics, with its step-motion control.
 
-    ``last_increment_mm`` is the watched nodes' displacement increment of the last
-    step (mm); ``rejected_for_motion`` counts steps retried because a node would have
-    moved further than ``max_increment_mm``.
+    ``rejected_for_motion`` counts steps retried because a node would have moved further
+    than ``max_increment_mm``.
     """
 
-    last_increment_mm: float = float("nan")
     rejected_for_motion: int = 0

@@ -73,13 +73,6 @@ class StudyCase:
     def is_normal(self) -> bool:
         return self.width_pct is None
 
-    @property
-    def flat_area_ratio(self) -> float:
-        """Flat graft area over the native leaflet's: the outline is scaled by (1+W)(1+H)."""
-        if self.is_normal:
-            return 1.0
-        return (1.0 + self.width_pct / 100.0) * (1.0 + self.height_pct / 100.0)
-
 
 def _split_values(values: Iterable[Any]) -> list[Any]:
     """Flatten ``["0,7", "14"]`` into ``["0", "7", "14"]`` (commas or spaces separate)."""

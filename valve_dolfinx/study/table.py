@@ -23,7 +23,7 @@ from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
 from valve_dolfinx.study.store import CASES_DIR, RECORD_FILE, RESULT_FILE, read_record
 
-__all__ = ["SPEC_COLUMNS", "STUDY_COLUMNS", "case_rows", "flatten", "write_tables",
+__all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables",
            "read_csv_rows"]
 
 log = logging.getLogger(__name__)
@@ -34,8 +34,6 @@ SPEC_COLUMNS = (
     "central_coaptation_height_mm", "coaptation_area_mm2", "regurgitant_orifice_area_mm2",
     "competent", "root_diameter_mm", "max_penetration_mm", "n_dofs", "n_ranks", "wall_time_s",
 )
-#: The study's own columns: which case, whether it finished or failed, and why not converged
-STUDY_COLUMNS = ("case", "status", "reason", "config_hash")
 
 
 def _sort_key(row: dict) -> tuple:
