@@ -1,0 +1,167 @@
+"""Where a closure's Newton iterations go: accepted steps, failed solves, and whether a failed
+solve could be ended sooner without changing the path.
+
+Runs each case (``--cases``; default W21/H27 and W21/H40 at the default mesh) once, in a
+single-process subprocess, through :func:`valve_dolfinx.case.run_case` (no figures or fields
+written), with PETSc's event log on and an SNES monitor that records the residual norms of
+every Newton solve.  A solve is *accepted* when the pseudo-time step it solved was accepted;
+a *failed* one is retried from the start of its step with half the Δτ.  Printed per case:
+
+* the solves and their Newton iterations, accepted and failed, and the cost of a factorised
+  Jacobian with everything counted (PETSc's MUMPS numeric and symbolic factorisations,
+  triangular solves, Jacobian and residual evaluations);
+* the iteration at which the accepted solves converged, the largest relative residual
+  r_k/r_0 of an accepted solve still running at iteration k, and the failed solves' median;
+* the stall test: cutting a solve once its residual has reached no new minimum for ``m``
+  iterations.  Since a failed solve's step is retried from its start, cutting only solves
+  that would have failed leaves the path bit for bit as it is; the table gives, for each
+  ``m``, the accepted solves such a cut would have ended (each one changes the path) and the
+  failed-solve iterations it would have saved.
+
+Run: ``.venv/bin/python benchmarks/newton_solves.py [--cases normal,W21/H27]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+from collections import Counter
+
+# benchmarks/cases.py, beside this script
+from cases import WorkerFailed, add_common_arguments, parse_arguments, parse_case, report, \
+    run_worker
+
+CASES = ("W21/H27", "W21/H40")
+#: PETSc events whose time is charged to a factorised Jacobian
+EVENTS = ("MatLUFactorNum", "MatLUFactorSym", "MatSolve", "SNESJacobianEval",
+          "SNESFunctionEval")
+STALLS = range(1, 13)
+
+
+def worker(case, mesh_size: float) -> dict:
+    """Run one case; every Newton solve's residual norms and whether its step was accepted,
+    and the PETSc events' counts and seconds."""
+    import logging
+
+    logging.basicConfig(level=logging.WARNING)
+    from valve_dolfinx._compat import MPI, PETSc
+    from valve_dolfinx.case import run_case
+    from valve_dolfinx.config import CaseConfig
+    from valve_dolfinx.geometry.valve import ValveParameters
+    from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
+
+    solves: list[dict] = []
+
+    def record(snes, its, fnorm):
+        if its == 0:
+            solves.append({"norms": [], "accepted": False})
+        solves[-1]["norms"].append(float(fnorm))
+
+    make_ts, post_step = PseudoTransientSolver._make_ts, PseudoTransientSolver._post_step
+
+    def make_ts_recorded(self):
+        ts = make_ts(self)
+        ts.getSNES().setMonitor(record)
+        return ts
+
+    def post_step_recorded(self, ts):
+        solves[-1]["accepted"] = True
+        return post_step(self, ts)
+
+    PseudoTransientSolver._make_ts = make_ts_recorded
+    PseudoTransientSolver._post_step = post_step_recorded
+    PETSc.Log.begin()
+    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
+    if case is not None:
+        config = config.with_graft(*case)
+    with tempfile.TemporaryDirectory(prefix="newton-solves-") as out:
+        result = run_case(config, out, comm=MPI.COMM_WORLD, figures=False,
+                          fields_output=False)
+    events = {}
+    for name in EVENTS:
+        info = PETSc.Log.Event(name).getPerfInfo()
+        events[name] = {"count": int(info["count"]), "seconds": float(info["time"])}
+    return {"solves": solves, "events": events, "converged": result.converged,
+            "figure_of_merit_mm": result.min_coaptation_height_mm}
+
+
+def stall_lengths(norms: list[float]) -> list[int]:
+    """After each iteration k ≥ 1: for how many iterations the residual has reached no new
+    minimum (0 when iterate k set one)."""
+    out, run, lowest = [], 0, norms[0]
+    for value in norms[1:]:
+        run = 0 if value < lowest else run + 1
+        lowest = min(lowest, value)
+        out.append(run)
+    return out
+
+
+def print_case(label: str, figures: dict) -> None:
+    solves = figures["solves"]
+    accepted = [s["norms"] for s in solves if s["accepted"]]
+    failed = [s["norms"] for s in solves if not s["accepted"]]
+    iterations = [sum(len(n) - 1 for n in group) for group in (accepted, failed)]
+    events = figures["events"]
+    factorisations = events["MatLUFactorNum"]["count"]
+    print(f"\n{label}: converged {figures['converged']}, figure of merit "
+          f"{figures['figure_of_merit_mm']:.3f} mm")
+    print(f"  Newton solves: {len(accepted)} accepted ({iterations[0]} iterations), "
+          f"{len(failed)} failed ({iterations[1]} iterations); {factorisations} "
+          f"factorisations")
+    total = sum(e["seconds"] for e in events.values())
+    for name, event in events.items():
+        print(f"  {name:<18} {event['count']:6d} calls {event['seconds']:8.2f} s "
+              f"{1e3 * event['seconds'] / max(factorisations, 1):7.2f} ms per factorisation")
+    print(f"  {'all of these':<18} {'':12} {total:8.2f} s "
+          f"{1e3 * total / max(factorisations, 1):7.2f} ms per factorisation")
+    converged_at = Counter(len(n) - 1 for n in accepted)
+    print("  accepted solves by iterations: "
+          + ", ".join(f"{k}: {converged_at[k]}" for k in sorted(converged_at)))
+    worst = [max((n[k] / n[0] for n in accepted if len(n) > k + 1), default=float("nan"))
+             for k in range(1, 10)]
+    print("  largest r_k/r_0 of an accepted solve still running, k = 1..9: "
+          + ", ".join(f"{w:.3g}" for w in worst))
+    typical = [statistics.median([n[k] / n[0] for n in failed if len(n) > k] or [math.nan])
+               for k in range(1, 10)]
+    print("  median r_k/r_0 of the failed solves, k = 1..9: "
+          + ", ".join(f"{t:.3g}" for t in typical))
+    print(f"  {'stall m':>8} {'accepted solves cut':>20} {'failed-solve iterations saved':>30}")
+    for m in STALLS:
+        cut = sum(any(s >= m for s in stall_lengths(n)[:-1]) for n in accepted)
+        saved = 0
+        for norms in failed:
+            first = next((k for k, s in enumerate(stall_lengths(norms), start=1) if s >= m),
+                         None)
+            if first is not None:
+                saved += len(norms) - 1 - first
+        print(f"  {m:>8} {cut:>20} {saved:>30}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_common_arguments(parser, [parse_case(c) for c in CASES])
+    args = parse_arguments(parser, argv)
+    if args.worker:
+        report(worker(args.cases[0], args.mesh_size))
+        return 0
+    measured = {}
+    for case in args.cases:
+        label = "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
+        try:
+            measured[label] = run_worker(__file__, label, args.mesh_size)
+        except WorkerFailed as error:
+            print(f"{label}: {error}", file=sys.stderr)
+            return 1
+        print_case(label, measured[label])
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
