@@ -32,8 +32,14 @@ import tempfile
 from collections import Counter
 
 # benchmarks/cases.py, beside this script
-from cases import WorkerFailed, add_common_arguments, parse_arguments, parse_case, report, \
-    run_worker
+from cases import (
+    WorkerFailed,
+    add_common_arguments,
+    parse_arguments,
+    parse_case,
+    report,
+    run_worker,
+)
 
 CASES = ("W21/H27", "W21/H40")
 #: PETSc events whose time is charged to a factorised Jacobian
