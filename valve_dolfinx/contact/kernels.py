@@ -19,10 +19,9 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import closest_point_weights
 
-__all__ = ["group_blocks", "group_index", "narrow_rows", "nearest_inside", "near_pairs", "pair_slots", "row_block_sums",
-           "row_gradients", "row_presence", "nodal_forces",
-           "presence_gradients",
-           "sum_blocks", "summed_already", "scalar_rows"]
+__all__ = ["group_blocks", "group_index", "narrow_rows", "nearest_inside", "near_pairs",
+           "nodal_forces", "pair_slots", "presence_gradients", "row_block_sums",
+           "row_gradients", "row_presence", "scalar_rows", "sum_blocks", "summed_already"]
 
 
 @numba.njit(cache=True)
