@@ -200,7 +200,6 @@ def test_distance_to_surface_matches_brute_force():
     assert distance_to_surface(pts, verts, g["triangles"]) == pytest.approx(brute, abs=1e-12)
 
 
-
 def test_within_distance_is_the_exact_distance_test():
     rng = np.random.default_rng(4)
     g = _grid(np.linspace(0, 5, 11), np.linspace(0, 4, 9))

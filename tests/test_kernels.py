@@ -21,6 +21,9 @@ from valve_dolfinx.contact.kernels import (
 )
 from valve_dolfinx.contact.linearisation import turning_load
 
+# the closest point from the definitions, tests/test_contact_geometry.py
+from test_contact_geometry import reference_closest
+
 
 def test_block_sums_per_pair_in_input_order_sorted_and_without_zero_sums():
     rng = np.random.default_rng(3)
@@ -202,23 +205,6 @@ def test_near_pairs_keeps_exactly_the_pairs_the_definitions_keep():
     assert np.array_equal(got[5], [k[5] for k in kept])
 
 
-def _closest_on_triangle(p, a, b, c):
-    """Closest point of triangle abc to p from the definitions: the plane projection if it
-    falls inside, else the nearest of the three sides' closest points (clamped projections
-    onto the segments)."""
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n)
-    q = p - ((p - a) @ n) * n
-    basis = np.stack([b - a, c - a], axis=1)
-    v, w = np.linalg.lstsq(basis, q - a, rcond=None)[0]
-    if v >= 0.0 and w >= 0.0 and v + w <= 1.0:
-        return q
-    sides = [(a, b), (b, c), (c, a)]
-    points = [s + np.clip((p - s) @ (e - s) / ((e - s) @ (e - s)), 0.0, 1.0) * (e - s)
-              for s, e in sides]
-    return min(points, key=lambda q: np.linalg.norm(p - q))
-
-
 def test_narrow_rows_are_the_face_rows_then_the_edge_rows_within_reach():
     rng = np.random.default_rng(11)
     num_tri, num_nodes = 30, 50
@@ -244,13 +230,10 @@ def test_narrow_rows_are_the_face_rows_then_the_edge_rows_within_reach():
     got = narrow_rows(node, tri, d0, lam, beyond, in_band, np.ascontiguousarray(x.T),
                       triangles, normal_by_axis, reach, reach + 1e-6, tolerance)
     face = np.flatnonzero(in_band)
-    edge, gaps, closest = [], [], []
-    for k in np.flatnonzero((lam.min(axis=1) < -tolerance) & (np.abs(d0) < reach + 1e-6)):
-        q = _closest_on_triangle(x[node[k]], a[k], b[k], c[k])
-        if np.linalg.norm(x[node[k]] - q) < reach:
-            edge.append(k)
-            gaps.append(np.linalg.norm(x[node[k]] - q))
-            closest.append(q)
+    outside = np.flatnonzero((lam.min(axis=1) < -tolerance) & (np.abs(d0) < reach + 1e-6))
+    q = reference_closest(x[node[outside]], a[outside], b[outside], c[outside])
+    gap = np.linalg.norm(x[node[outside]] - q, axis=1)
+    edge, gaps, closest = outside[gap < reach], gap[gap < reach], q[gap < reach]
     assert 20 < len(edge) and 20 < len(face)  # both kinds, and pairs of both kinds left out
     assert len(face) + len(edge) < len(node) // 2
     rows = np.concatenate([face, edge])
@@ -268,7 +251,7 @@ def test_narrow_rows_are_the_face_rows_then_the_edge_rows_within_reach():
     assert np.allclose(weights.sum(axis=1), 1.0, atol=1e-14) and (weights >= 0.0).all()
     corners = np.stack([a[edge], b[edge], c[edge]], axis=1)
     assert np.allclose(np.einsum("kj,kjx->kx", weights, corners), closest, atol=1e-12)
-    assert np.allclose(got[5][len(face):], x[node[edge]] - np.array(closest), atol=1e-12)
+    assert np.allclose(got[5][len(face):], x[node[edge]] - closest, atol=1e-12)
     assert np.array_equal(got[6], lam[rows])
 
 
