@@ -40,6 +40,20 @@ def parse_cases(text: str) -> list[Case]:
     return [parse_case(c) for c in text.split(",")]
 
 
+def case_label(case: Case) -> str:
+    """``normal`` or ``W<w>/H<h>`` (what :func:`parse_case` reads)."""
+    return "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
+
+
+def case_config(case: Case, mesh_size: float):
+    """The default configuration of ``case`` (None: the normal valve) at ``mesh_size``."""
+    from valve_dolfinx.config import CaseConfig
+    from valve_dolfinx.geometry.valve import ValveParameters
+
+    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
+    return config if case is None else config.with_graft(*case)
+
+
 def add_common_arguments(parser: argparse.ArgumentParser, default_cases: Sequence[Case]
                          ) -> None:
     """``--cases``, ``--mesh-size``, ``--json`` and the workers' hidden ``--worker``."""

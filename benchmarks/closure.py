@@ -36,6 +36,8 @@ import time
 from cases import (
     WorkerFailed,
     add_common_arguments,
+    case_config,
+    case_label,
     cell,
     parse_arguments,
     parse_case,
@@ -95,8 +97,6 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
     from valve_dolfinx import case as closure
     from valve_dolfinx import output
     from valve_dolfinx._compat import MPI, dolfinx
-    from valve_dolfinx.config import CaseConfig
-    from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.solvers.bending_hook import BendingHook
     from valve_dolfinx.solvers.contact_hook import ContactHook
     from valve_dolfinx.solvers.nodal import BlockPattern
@@ -130,9 +130,7 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
         return state
 
     closure.solve_case = keep_report
-    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
-    if case is not None:
-        config = config.with_graft(*case)
+    config = case_config(case, mesh_size)
     runs = []
     for _ in range(repeat):
         clock.seconds.clear()
@@ -153,10 +151,6 @@ def worker(case: tuple[float, float] | None, mesh_size: float, repeat: int,
                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
     cache.cleanup()
     return runs
-
-
-def case_label(case: tuple[float, float] | None) -> str:
-    return "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
 
 
 def run_in_subprocess(case, args) -> list[dict]:

@@ -14,18 +14,18 @@ Run: ``.venv/bin/python benchmarks/factorisation.py`` (``--case W21/H27``, ``--m
 
 from __future__ import annotations
 
+import argparse
 import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import argparse  # noqa: E402
-import statistics  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
+import statistics
+import tempfile
+import time
 
 # benchmarks/cases.py, beside this script
-from cases import parse_case  # noqa: E402
+from cases import SINGLE_THREAD, case_config, parse_arguments, parse_case
+
+# one BLAS thread, set before NumPy and PETSc load their libraries
+for _name, _value in SINGLE_THREAD.items():
+    os.environ.setdefault(_name, _value)
 
 #: (label, PETSc options of the factorisation)
 CHOICES = [
@@ -43,8 +43,6 @@ def last_jacobian(case, mesh_size: float):
     """A copy of the last Jacobian the pseudo-transient solver assembled in ``case``."""
     from valve_dolfinx import case as closure
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.config import CaseConfig
-    from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
     kept = {}
@@ -55,9 +53,7 @@ def last_jacobian(case, mesh_size: float):
         kept["J"] = J.copy()
 
     PseudoTransientSolver.ijacobian = keeping
-    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
-    if case is not None:
-        config = config.with_graft(*case)
+    config = case_config(case, mesh_size)
     with tempfile.TemporaryDirectory() as out:
         result = closure.run_case(config, out, comm=MPI.COMM_WORLD)
     PseudoTransientSolver.ijacobian = assemble
@@ -105,11 +101,8 @@ def main(argv=None) -> None:
                         help="'normal' (default) or W<w>/H<h>")
     parser.add_argument("--mesh-size", type=float, default=None, help="mesh size (mm)")
     parser.add_argument("--repeat", type=int, default=10, help="refactorisations timed")
-    args = parser.parse_args(argv)
-    from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
-
-    mesh_size = DEFAULT_MESH_SIZE if args.mesh_size is None else args.mesh_size
-    A, result = last_jacobian(args.case, mesh_size)
+    args = parse_arguments(parser, argv)
+    A, result = last_jacobian(args.case, args.mesh_size)
     info = A.getInfo()
     print(f"Jacobian of the loaded valve (converged: {result.converged}): "
           f"{A.getSize()[0]} unknowns, {info['nz_used']:.0f} stored entries, "

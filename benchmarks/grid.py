@@ -27,7 +27,15 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 # benchmarks/cases.py, beside this script
-from cases import WorkerFailed, add_common_arguments, cell, parse_arguments, report, run_worker
+from cases import (
+    WorkerFailed,
+    add_common_arguments,
+    case_config,
+    cell,
+    parse_arguments,
+    report,
+    run_worker,
+)
 
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
 
@@ -56,12 +64,8 @@ def worker(case, mesh_size: float, limit: float | None, out: str) -> dict:
 
     logging.basicConfig(level=logging.WARNING)
     from valve_dolfinx.case import run_case
-    from valve_dolfinx.config import CaseConfig
-    from valve_dolfinx.geometry.valve import ValveParameters
 
-    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
-    if case is not None:
-        config = config.with_graft(*case)
+    config = case_config(case, mesh_size)
     if limit is not None:
         config = replace(config, pseudo_transient=replace(config.pseudo_transient,
                                                           wall_time_limit_s=limit))

@@ -35,6 +35,8 @@ from collections import Counter
 from cases import (
     WorkerFailed,
     add_common_arguments,
+    case_config,
+    case_label,
     parse_arguments,
     parse_case,
     report,
@@ -56,8 +58,6 @@ def worker(case, mesh_size: float) -> dict:
     logging.basicConfig(level=logging.WARNING)
     from valve_dolfinx._compat import MPI, PETSc
     from valve_dolfinx.case import run_case
-    from valve_dolfinx.config import CaseConfig
-    from valve_dolfinx.geometry.valve import ValveParameters
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
     solves: list[dict] = []
@@ -81,9 +81,7 @@ def worker(case, mesh_size: float) -> dict:
     PseudoTransientSolver._make_ts = make_ts_recorded
     PseudoTransientSolver._post_step = post_step_recorded
     PETSc.Log.begin()
-    config = CaseConfig(geometry=ValveParameters(mesh_size=mesh_size))
-    if case is not None:
-        config = config.with_graft(*case)
+    config = case_config(case, mesh_size)
     with tempfile.TemporaryDirectory(prefix="newton-solves-") as out:
         result = run_case(config, out, comm=MPI.COMM_WORLD, figures=False,
                           fields_output=False)
@@ -156,7 +154,7 @@ def main(argv=None) -> int:
         return 0
     measured = {}
     for case in args.cases:
-        label = "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
+        label = case_label(case)
         try:
             measured[label] = run_worker(__file__, label, args.mesh_size)
         except WorkerFailed as error:
