@@ -151,8 +151,8 @@ class CaseConfig:
                     "100-1000 kPa in flexure")
         check_range("graft_bending_modulus_kpa", self.graft_bending_modulus_kpa, 0.0, 1e5,
                     unit="kPa", low_hint="0 switches the graft's bending off",
-                    high_hint="fixed pericardium's in-plane modulus is tens of MPa, and its "
-                    "flexural modulus is not above it")
+                    high_hint="that is beyond even the in-plane tensile modulus of fixed "
+                    "pericardium (tens of MPa)")
         check_range("commissure_taper_mm", self.commissure_taper_mm, 0.0, 10.0, unit="mm",
                     hint="0 gives the full contact thickness up to the commissures")
         if self.solver not in SOLVERS:
