@@ -225,6 +225,8 @@ def test_bad_configuration_names_the_parameter():
         CaseConfig(symmetric_reference=True).with_graft(21.0, 27.0)
     with pytest.raises(ParameterError, match="bending_modulus_kpa"):
         CaseConfig(bending_modulus_kpa=-1.0)
+    with pytest.raises(ParameterError, match="graft_bending_modulus_kpa.*tens of MPa"):
+        CaseConfig(graft_bending_modulus_kpa=2e5)
     with pytest.raises(ParameterError, match="solver"):
         CaseConfig(solver="relaxation")
 

@@ -71,8 +71,11 @@ COMMISSURE_TAPER_MM = 2.5
 #: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
 #: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
 FREE_EDGE_BAND = 1.0
-#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
+#: effective flexural modulus of the native leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
 BENDING_MODULUS_KPA = 200.0
+#: effective flexural modulus of the graft (kPa): the native leaflets' value, for want of a
+#: measurement on glutaraldehyde-fixed pericardium to cite (docs/model.md §3)
+GRAFT_BENDING_MODULUS_KPA = BENDING_MODULUS_KPA
 #: paths to the loaded equilibrium (CaseConfig.solver): pseudo-transient continuation (the
 #: default) and damped BDF2 dynamics (SPEC §4, the cross-check)
 SOLVERS = ("ptc", "bdf2")
@@ -100,11 +103,12 @@ class CaseConfig:
     through the valve axis at ±60° that its neighbours mirror it across (the
     contact law sees the distance to the mirror image, as between leaflets).
 
-    ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
+    ``bending_modulus_kpa`` gives the native leaflets their flexural rigidity
     ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
     gives the slack free-edge tip at the triple point a length scale instead of a fold
     at the scale of the mesh (docs/model.md §3; its effect on the figure of merit:
-    docs/numerics.md §7).
+    docs/numerics.md §7).  ``graft_bending_modulus_kpa`` is the graft's own, with the
+    graft's thickness: fixed pericardium carries compression by bending.
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
     pseudo-transient continuation with PETSc TS and SNES, contact and bending
     in the Newton system from the first step,
@@ -135,6 +139,7 @@ class CaseConfig:
     quadrature_degree: int = 1
     symmetric_reference: bool = False
     bending_modulus_kpa: float = BENDING_MODULUS_KPA
+    graft_bending_modulus_kpa: float = GRAFT_BENDING_MODULUS_KPA
 
     def __post_init__(self) -> None:
         check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
@@ -142,7 +147,12 @@ class CaseConfig:
         check_range("coaptation_threshold_mm", self.coaptation_threshold_mm, 0.0, 5.0,
                     low_open=True, unit="mm")
         check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
-                    hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
+                    hint="0 switches the native leaflets' bending off; they are of order "
+                    "100-1000 kPa in flexure")
+        check_range("graft_bending_modulus_kpa", self.graft_bending_modulus_kpa, 0.0, 1e5,
+                    unit="kPa", low_hint="0 switches the graft's bending off",
+                    high_hint="that is beyond even the in-plane tensile modulus of fixed "
+                    "pericardium (tens of MPa)")
         check_range("commissure_taper_mm", self.commissure_taper_mm, 0.0, 10.0, unit="mm",
                     hint="0 gives the full contact thickness up to the commissures")
         if self.solver not in SOLVERS:
@@ -206,8 +216,11 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
                               "for the linear triangles' constant strain)"),
         "symmetric_reference": ("", "true: one leaflet against the two ±60° symmetry "
                                 "planes (the normal valve's cheap reference)"),
-        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the leaflets, "
-                                "D = E_b·t³/12 (0: pure membrane)"),
+        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the native leaflets, "
+                                "D = E_b·t³/12 with their thickness (0: pure membrane)"),
+        "graft_bending_modulus_kpa": ("kPa", "flexural modulus E_b of the graft (fixed "
+                                      "pericardium), D = E_b·t³/12 with the graft's "
+                                      "thickness (0: pure membrane)"),
     },
     "geometry": {
         "root_diameter": ("mm", "root diameter the flat leaflets are sized on"),
