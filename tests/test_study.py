@@ -64,12 +64,13 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
             "parameters": config.to_dict(), "versions": {"stand_in": "1"}}
 
 
-def _main_with_stand_in(argv: list[str]) -> int:
+def cli_with(case_function, argv: list[str]) -> int:
+    """``valve-dolfinx argv`` computing every case with ``case_function``."""
     from valve_dolfinx import cli
     from valve_dolfinx.study import runner
 
     real = runner.run_closure_case
-    runner.run_closure_case = lambda config, out, comm, start=None, **_: stand_in_case(
+    runner.run_closure_case = lambda config, out, comm, start=None, **_: case_function(
         config, out, comm, start=start)
     try:
         return cli.main(argv)
@@ -77,18 +78,11 @@ def _main_with_stand_in(argv: list[str]) -> int:
         runner.run_closure_case = real
 
 
+def _main_with_stand_in(argv: list[str]) -> int:
+    return cli_with(stand_in_case, argv)
+
+
 # --- helpers ----------------------------------------------------------------------------------
-@pytest.fixture
-def quiet_cli():
-    """Undo what the CLI does to logging levels and SIGTERM in this process."""
-    saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}
-    handler = signal.getsignal(signal.SIGTERM)
-    yield
-    for name, level in saved.items():
-        logging.getLogger(name).setLevel(level)
-    signal.signal(signal.SIGTERM, handler)
-
-
 def _sweep_cmd(*args: str, mpi: int = 0) -> list[str]:
     cmd = [sys.executable, str(THIS), "sweep", *args]
     return [str(BIN / "mpirun"), "-n", str(mpi), *cmd] if mpi else cmd
@@ -107,7 +101,8 @@ def _runs(run_log: Path) -> list[str]:
         else []
 
 
-def _stable_csv(path: Path) -> list[dict]:
+def stable_csv(path: Path) -> list[dict]:
+    """``results.csv`` without the fields that differ between two runs of the same cases."""
     from valve_dolfinx.study.table import read_csv_rows
 
     return [{k: v for k, v in row.items() if k not in VOLATILE} for row in read_csv_rows(path)]
@@ -351,7 +346,7 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
     assert not list((out / "cases" / ".claims").iterdir())
     assert not list((out / "cases" / ".staging").iterdir())
     fresh = _reference_sweep(tmp_path / "fresh")
-    assert _stable_csv(out / "results.csv") == _stable_csv(fresh / "results.csv")
+    assert stable_csv(out / "results.csv") == stable_csv(fresh / "results.csv")
     assert (_stable_json(json.loads((out / "results.json").read_text()))
             == _stable_json(json.loads((fresh / "results.json").read_text())))
 
@@ -369,7 +364,7 @@ def test_serial_and_mpi_sweeps_agree(tmp_path):
         assert sorted(r[0] for r in runs) == ["W0_H0", "W7_H0", "normal"]
         assert len({r[1] for r in runs}) == (2 if k == 1 else 1)  # both groups took cases
         assert proc.stdout.count("case(s) computed") == 1  # rank 0 alone prints
-        assert _stable_csv(out / "results.csv") == _stable_csv(serial / "results.csv")
+        assert stable_csv(out / "results.csv") == stable_csv(serial / "results.csv")
         rows = json.loads((out / "results.json").read_text())
         assert {r["n_ranks"] for r in rows} == {k}
 
@@ -404,7 +399,7 @@ def test_case_index_runs_and_report_equal_one_sweep(tmp_path, capsys, caplog, qu
                                     "--case-index", str(i)]) == 0
     assert not (array / "results.csv").exists()  # the array's tasks leave the report
     assert _main_with_stand_in(["report", str(array)]) == 0
-    assert _stable_csv(array / "results.csv") == _stable_csv(whole / "results.csv")
+    assert stable_csv(array / "results.csv") == stable_csv(whole / "results.csv")
     assert (array / "sizing_map.png").is_file() and (array / "report.md").is_file()
     _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array), "--list"])
     assert capsys.readouterr().out.count("finished") == 3

@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import json
 import logging
-import signal
 import time
 from pathlib import Path
 
 import pytest
 
+# tests/test_study.py: the CLI with a case function of our own, and a study's table without
+# the fields that differ between runs
+from test_study import cli_with, stable_csv
+
 from valve_dolfinx._compat import MPI
 
-VOLATILE = ("wall_time_s", "n_ranks", "started_at", "finished_at", "elapsed_s", "pid", "host")
 GRID = ["--widths", "0", "7", "14", "--heights", "0", "13"]
 
 
@@ -86,27 +88,7 @@ def _runs(out: Path) -> list[str]:
 
 def _main(argv: list[str]) -> int:
     """The CLI with the stand-in case function."""
-    from valve_dolfinx import cli
-    from valve_dolfinx.study import runner
-
-    real = runner.run_closure_case
-    runner.run_closure_case = lambda config, out, comm, start=None, **_: stand_in_case(
-        config, out, comm, start=start)
-    try:
-        return cli.main(argv)
-    finally:
-        runner.run_closure_case = real
-
-
-@pytest.fixture
-def quiet_cli():
-    """Undo what the CLI does to logging levels and SIGTERM in this process."""
-    saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}
-    handler = signal.getsignal(signal.SIGTERM)
-    yield
-    for name, level in saved.items():
-        logging.getLogger(name).setLevel(level)
-    signal.signal(signal.SIGTERM, handler)
+    return cli_with(stand_in_case, argv)
 
 
 @pytest.fixture
@@ -130,12 +112,6 @@ def _settings(**kw):
     kw.setdefault("mesh_size_mm", 2.0)
     kw.setdefault("panel_cases", ())
     return StudySettings(**kw)
-
-
-def _stable_csv(path: Path) -> list[dict]:
-    from valve_dolfinx.study.table import read_csv_rows
-
-    return [{k: v for k, v in row.items() if k not in VOLATILE} for row in read_csv_rows(path)]
 
 
 # --- cases, names, rows and hashes ----------------------------------------------------------
@@ -397,15 +373,16 @@ def test_axes_from_the_study_table(tmp_path):
     names = [c.name for c in settings.cases()]
     assert "W7_H0__bending_modulus_kpa=200__root.loaded_diameter=none__path=2" in names
     assert settings == type(settings).from_dict(json.loads(json.dumps(settings.to_dict())))
-    path.write_text('pressure_mmhg = 90\n[study]\nvary = {pressure_mmhg = [80, 100]}\n')
-    with pytest.raises(ParameterError, match="vary pressure_mmhg: it is also set by the case"):
-        load_study_toml(path)
-    path.write_text('[study]\nvary = {pressure_mmhg = [80]}\nuncertain = {pressure_mmhg = [9]}\n')
-    with pytest.raises(ParameterError, match="both varied"):
-        load_study_toml(path)
-    path.write_text('[study]\nuncertain = {"root.loaded_diameter" = 50}\n')
-    with pytest.raises(ParameterError, match=r"uncertain root.loaded_diameter=50"):
-        load_study_toml(path)
+    for text, match in (
+            ("pressure_mmhg = 90\n[study]\nvary = {pressure_mmhg = [80, 100]}\n",
+             "vary pressure_mmhg: it is also set by the case"),
+            ("[study]\nvary = {pressure_mmhg = [80]}\nuncertain = {pressure_mmhg = [9]}\n",
+             "both varied"),
+            ('[study]\nuncertain = {"root.loaded_diameter" = 50}\n',
+             "uncertain root.loaded_diameter=50")):
+        path.write_text(text)
+        with pytest.raises(ParameterError, match=match):
+            load_study_toml(path)
 
 
 # --- parallel, job arrays and warm starts -----------------------------------------------------
@@ -434,8 +411,8 @@ def test_axes_and_warm_starts_give_the_serial_tables(tmp_path_factory, warm_path
         assert all(r["start_height_mm"] == 3.0 - 0.5 * (r["root.loaded_diameter"] - 20)
                    for r in rows if r["graft_width_pct"] is not None)
         run_study(settings, root / "serial", MPI.COMM_SELF, case_function=stand_in_case)
-        assert (_stable_csv(root / "world" / "results.csv")
-                == _stable_csv(root / "serial" / "results.csv"))
+        assert (stable_csv(root / "world" / "results.csv")
+                == stable_csv(root / "serial" / "results.csv"))
 
 
 def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, capsys, quiet_cli,
@@ -459,7 +436,7 @@ def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, cap
         assert _main(["sweep", *args, "--out", str(array), "--case-index", str(i)]) == 0
     assert sorted(_runs(array)) == sorted(_runs(whole))  # every case once
     assert _main(["report", str(array)]) == 0
-    assert _stable_csv(array / "results.csv") == _stable_csv(whole / "results.csv")
+    assert stable_csv(array / "results.csv") == stable_csv(whole / "results.csv")
     assert "W14/H0" in capsys.readouterr().out
 
 

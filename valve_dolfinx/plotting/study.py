@@ -211,7 +211,7 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     diameter; ``rows`` are :func:`valve_dolfinx.study.nomogram.nomogram_rows`.
 
     A diameter where no graft on the grid qualifies is shaded, with the best graft's
-    enlargements hollow and its shortfall as a negative margin."""
+    enlargements hollow and its margin (negative: its shortfall) in vermillion."""
     d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
     ok = np.array([bool(r["recommended"]) for r in rows], dtype=bool)
 
@@ -221,22 +221,23 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     fig = new_figure(7.5, 8.0)
     top, low, notes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [3, 2, 0.55]})
     low.sharex(top)
-    half = 0.5 * (min(np.diff(d)) if len(d) > 1 else 1.0)
+    step = min(np.diff(d)) if len(d) > 1 else 1.0
     for ax in (top, low):
         for x in d[~ok]:
-            ax.axvspan(x - half, x + half, color="0.88", lw=0)
+            ax.axvspan(x - step / 2, x + step / 2, color="0.88", lw=0)
         ax.grid(alpha=0.3)
-    series = (("graft_width_pct", "best_width_pct", "width W", "o", OKABE_ITO["blue"]),
-              ("graft_height_pct", "best_height_pct", "height H", "s", OKABE_ITO["orange"]))
+    series = (("graft_width_pct", "best_width_pct", "width W", "o", OKABE_ITO["blue"], -1),
+              ("graft_height_pct", "best_height_pct", "height H", "s", OKABE_ITO["orange"], 1))
     highest = 0.0
-    for key, best_key, label, marker, colour in series:
+    for key, best_key, label, marker, colour, side in series:
         y, best = column(key), column(best_key)
+        x = d + side * 0.04 * step  # W and H side by side where they are equal
         if ok.any():
-            top.plot(d[ok], y[ok], "-", marker=marker, color=colour, ms=8, lw=1.5,
+            top.plot(x[ok], y[ok], "-", marker=marker, color=colour, ms=8, lw=1.5,
                      label=f"recommended {label}")
         if (~ok).any():
-            top.plot(d[~ok], best[~ok], marker, mfc="white", mec=colour, mew=1.8, ms=8,
-                     ls="none", label=f"best {label}, short of the target (grey)")
+            top.plot(x[~ok], best[~ok], marker, mfc="white", mec=colour, mew=1.8, ms=8,
+                     ls="none", label=f"best {label} (grey: no graft qualifies)")
         highest = np.nanmax([highest, *y[ok], *best[~ok]])
     for r, x in zip(rows, d, strict=True):
         name = r["recommended"] or (f"best {r['best']}" if r["best"] else "")
@@ -249,23 +250,26 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     top.legend(fontsize=8, loc="upper left", ncol=2)
     top.tick_params(labelbottom=False)
     margin = np.where(ok, column("margin_mm"), -column("shortfall_mm"))
-    if ok.any():
-        low.bar(d[ok], margin[ok], width=half, color=OKABE_ITO["bluish_green"],
-                label="margin over the target in every member")
-    if (~ok).any():
-        low.bar(d[~ok], margin[~ok], width=half, color=OKABE_ITO["vermillion"],
-                label="no graft qualifies: the best one's shortfall")
+    for where, colour, label in (
+            (ok, OKABE_ITO["bluish_green"], "margin over the target in every member"),
+            (~ok, OKABE_ITO["vermillion"], "no graft qualifies: the best one's margin "
+             "(if positive, it fails to converge or seal)")):
+        if where.any():
+            low.bar(d[where], margin[where], width=step / 2, color=colour, label=label)
     for x, m in zip(d, margin, strict=True):
         if math.isfinite(m):
-            low.annotate(f"{m:+.2f}", (x, m), xytext=(0, 3 if m >= 0 else -3),
-                         textcoords="offset points", ha="center",
-                         va="bottom" if m >= 0 else "top", fontsize=8)
+            low.annotate(f"{m:+.2f}" if abs(m) >= 0.005 else f"{m:+.3f}", (x, m),
+                         xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
+                         ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)
-    low.margins(y=0.25)
+    finite = margin[np.isfinite(margin)]
+    lo, hi = min(0.0, *finite), max(0.0, *finite)
+    span = (hi - lo) or 0.1
+    low.set_ylim(lo - 0.2 * span, hi + 0.7 * span)  # room for the numbers and legend
     low.set_ylabel("margin (mm)")
     low.set_xlabel("loaded root diameter at 80 mmHg (mm)")
     low.set_xticks(d, [f"{x:g}" for x in d])
-    low.legend(fontsize=8, loc="best")
+    low.legend(fontsize=8, loc="upper left")
     notes.set_axis_off()
     notes.text(0.0, 1.0, footnote, fontsize=7, va="top", ha="left", wrap=True,
                transform=notes.transAxes)

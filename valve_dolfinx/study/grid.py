@@ -57,9 +57,9 @@ STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
 #: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
-#: what sets a key of the case settings other than the case settings themselves
 #: every solver stage's wall-clock limit (``wall_time_limit_s`` sets them all)
 _WALL_CLOCK_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
+#: how messages name the case settings as what sets a key
 _CASE_SETTINGS = "the case settings (--set or the configuration file)"
 
 

@@ -81,6 +81,7 @@ class CellSummary:
     crossing: list[str] = field(default_factory=list)
     incompetent: list[str] = field(default_factory=list)
     largest_orifice_mm2: float | None = None
+    longest_crossing_mm: float | None = None
     worst_height_mm: float | None = None
     worst_member: str | None = None
     spread_mm: float | None = None
@@ -127,6 +128,8 @@ def _summarise(width: float, height: float, rows: Mapping[str, Mapping | None],
             cell.largest_orifice_mm2 = max(orifice, cell.largest_orifice_mm2 or 0.0)
         if _crosses(row):
             cell.crossing.append(member)
+            crossing = _number(row, "leaflet_intersection_mm")
+            cell.longest_crossing_mm = max(crossing, cell.longest_crossing_mm or 0.0)
         if not row.get("competent"):
             cell.incompetent.append(member)
         target = targets.get(member)
@@ -193,6 +196,8 @@ class Recommendation:
     worst-case height, flat area, ``margin_mm``, the ``limiting_member`` and the spread of
     its heights over the members.  When none qualifies, ``best`` is the graft closest to
     qualifying, with its worst-case height and ``shortfall_mm`` (in ``limiting_member``).
+    ``shortfall_mm`` is negative when the best graft reaches the target in every member but
+    does not converge or seal in some.
     ``target_mm`` is the target when it is the same in every member (a given threshold,
     or a one-member study's normal valve), else None; ``targets_mm`` holds each member's.
     ``neighbours`` maps each grid neighbour of the chosen (or best) cell to the change of
@@ -328,14 +333,21 @@ def _best_text(rec: Recommendation, best: CellSummary | None) -> str:
         return (f"No target ({rec.target_source}{where}: the normal valve was not run or did "
                 f"not converge; give --target-coaptation). The best graft is **{best.label}** "
                 f"({_quality(best)}): {best.worst_height_mm:.2f} mm at worst.")
-    short = max(rec.shortfall_mm, 0.0)
-    d = _digits(short)
+    short = rec.shortfall_mm
+    d = _digits(abs(short))
+    limit = best.limiting_member
+    if short <= 0:  # high enough everywhere, but not sound
+        where = "" if n == 1 else " in every member"
+        return (f"No graft on the grid {'is robust' if n > 1 else 'qualifies'}: none "
+                f"converges, seals and reaches the target minimum coaptation height "
+                f"({rec.target_source}){' in every one of its members' if n > 1 else ''}. "
+                f"The best is **{best.label}** ({_quality(best)}); its height reaches the "
+                f"target{where} (margin {-short:.{d}f} mm).")
     if n == 1:
         return (f"No graft on the grid converges, seals and reaches the target minimum "
                 f"coaptation height {rec.target_mm:.{d}f} mm ({rec.target_source}). The best "
                 f"is **{best.label}** ({_quality(best)}) with {best.worst_height_mm:.{d}f} mm, "
                 f"{short:.{d}f} mm short.")
-    limit = best.limiting_member
     return (f"No graft on the grid is robust: none converges, seals and reaches the target "
             f"minimum coaptation height ({rec.target_source}) in every one of its {n} members. "
             f"The best is **{best.label}** ({_quality(best)}), {short:.{d}f} mm short in "

@@ -436,11 +436,12 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
         monitor.start()
     try:
         computed = _work(group, out, layout, todo, case_function, poll_s)
+        # every group is done: the monitor's last scan sees the other groups' last cases
+        computed = sorted(sum(comm.allgather(computed), []))
     finally:
         if monitor:
             monitor.stop()
         group.Free()
-    computed = sorted(sum(comm.allgather(computed), []))
     outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
     if comm.rank == 0:
         entry = {"started": started, "finished": _now(), "elapsed_s": outcome.elapsed_s,
