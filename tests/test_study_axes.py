@@ -472,6 +472,20 @@ def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli):
     assert "## Nomogram" in (out / "report.md").read_text()
 
 
+@pytest.mark.parametrize("diameters,expect", [
+    (["20", "5"], ["--root-diameters root.loaded_diameter=5", "root.loaded_diameter"]),
+    (["20", "none"], ["--root-diameters", "in mm"]),
+    (["20", "20.0"], ["--root-diameters root.loaded_diameter", "twice"]),
+])
+def test_nomogram_bad_diameters_stop_before_computing(tmp_path, caplog, quiet_cli, diameters,
+                                                       expect):
+    out = tmp_path / "nomogram"
+    assert _main(["nomogram", "--root-diameters", *diameters, "--out", str(out)]) == 2
+    err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(err) == 1 and all(text in err[0] for text in expect), err
+    assert not out.exists()
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_nomogram_on_real_closures(tmp_path, quiet_cli):

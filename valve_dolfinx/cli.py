@@ -317,11 +317,11 @@ def _cmd_nomogram(args: argparse.Namespace) -> int:
     from valve_dolfinx.study.axes import check_axis_values
     from valve_dolfinx.study.nomogram import NOMOGRAM_KEY
 
-    if args.vary:
-        args.parser.error("--vary: the nomogram's comparison axis is the root diameter "
-                          "(--root-diameters); give other settings as --uncertain or --set")
     diameters = check_axis_values("--root-diameters", NOMOGRAM_KEY,
                                   ",".join(args.root_diameters), {})
+    if None in diameters:
+        raise ParameterError("--root-diameters: give loaded root diameters in mm (10-40); "
+                             "'none', the root distended by its wall law, has no diameter")
     settings = _study_settings(args, {NOMOGRAM_KEY: diameters})
     if list(settings.vary) != [NOMOGRAM_KEY]:
         raise ParameterError(f"{args.config} [study] vary: the nomogram's comparison axis is the "
@@ -388,10 +388,6 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
-    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
-                   help="a comparison axis: a table, maps and a recommendation per value of the "
-                   "case setting KEY (as --set takes it), e.g. --vary bending_modulus_kpa=0,200 "
-                   "(repeatable: every combination)")
     p.add_argument("--uncertain", action="append", default=[], metavar="KEY=V1,V2",
                    help="an uncertainty axis: values of KEY that are not known, e.g. "
                    "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
@@ -531,6 +527,10 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=_cmd_run, parser=p)
 
     p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
+                   help="a comparison axis: a table, maps and a recommendation per value of the "
+                   "case setting KEY (as --set takes it), e.g. --vary bending_modulus_kpa=0,200 "
+                   "(repeatable: every combination)")
     _add_sweep_args(p, "results/graft_sweep", None)
     p.set_defaults(func=_cmd_sweep, parser=p)
 
@@ -539,7 +539,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--root-diameters", nargs="+", required=True, metavar="D",
                    help="loaded root diameters at 80 mmHg in mm (10-40), e.g. 18 19 20 21 22 23")
     _add_sweep_args(p, "results/nomogram", 2)
-    p.set_defaults(func=_cmd_nomogram, parser=p)
+    p.set_defaults(func=_cmd_nomogram, parser=p, vary=[])  # the diameters are the comparison
 
     p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report")
     p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`")
