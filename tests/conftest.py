@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import gc
+import logging
+import signal
 
 import pytest
 
@@ -20,3 +22,14 @@ def _collective_cleanup():
 @pytest.fixture
 def comm():
     return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def quiet_cli():
+    """Undo what the CLI does to logging levels and SIGTERM in this process."""
+    saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}
+    handler = signal.getsignal(signal.SIGTERM)
+    yield
+    for name, level in saved.items():
+        logging.getLogger(name).setLevel(level)
+    signal.signal(signal.SIGTERM, handler)

@@ -6,8 +6,11 @@ mesh    write the default valve meshes (normal and graft) for ParaView and reuse
 run     close one valve (normal, or with a graft) under 80 mmHg and write
         result.json, config.toml, ParaView fields and figures to --out
 sweep   the graft sizing study: the normal valve and every graft of a width x height
-        grid (resumable, spread over MPI ranks; --list / --case-index for job arrays)
-report  rebuild a study folder's tables, figures, recommendation and report.md
+        grid, over any --vary / --uncertain settings and --paths numerical paths
+        (resumable, spread over MPI ranks; --list / --case-index for job arrays)
+nomogram  a sweep over loaded root diameters: the recommended graft against the
+        diameter (nomogram.png, nomogram.csv)
+report  rebuild a study folder's tables, figures, recommendations and report.md
 config  print the case configuration as TOML, every setting with its unit and meaning
 
 Settings: the defaults < --config FILE < --set section.key=value < the named flags
@@ -221,9 +224,10 @@ def _cmd_config(args: argparse.Namespace) -> int:
     return 0
 
 
-def _study_settings(args: argparse.Namespace):
+def _study_settings(args: argparse.Namespace, compared: dict | None = None):
     """Study settings: defaults < --config (its [study] table and case settings) < --set
-    (case settings) < command-line flags."""
+    (case settings) < command-line flags; ``compared`` adds comparison axes (already
+    checked) for the nomogram."""
     from valve_dolfinx.config import apply_overrides, config_from_dict
     from valve_dolfinx.study.grid import StudySettings, load_study_toml, parse_percentages
 
@@ -235,12 +239,36 @@ def _study_settings(args: argparse.Namespace):
         settings = StudySettings(case=case)
     changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
                "target_coaptation_mm": args.target_coaptation,
-               "wall_time_limit_s": args.wall_time_limit}
+               "wall_time_limit_s": args.wall_time_limit, "paths": args.paths}
     if args.widths is not None:
         changes["widths_pct"] = parse_percentages("--widths", args.widths, "width")
     if args.heights is not None:
         changes["heights_pct"] = parse_percentages("--heights", args.heights, "height")
-    return settings.replace(**changes)
+    settings = settings.replace(**changes)  # the grid's and the paths' errors first
+    vary, uncertain = {**settings.vary, **(compared or {})}, dict(settings.uncertain)
+    _add_axes(args, settings.base_case(), vary, uncertain)
+    return settings.replace(vary=vary, uncertain=uncertain)
+
+
+def _add_axes(args: argparse.Namespace, base: dict, vary: dict, uncertain: dict) -> None:
+    """Add the --vary and --uncertain axes to ``vary`` and ``uncertain``, checked, each key
+    once (also against the configuration file's axes and --set)."""
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.axes import check_axis_values, parse_axis_option
+
+    fixed = {text.partition("=")[0].strip(): text for text in args.overrides}
+    for option, axes, texts in (("--vary", vary, args.vary),
+                                ("--uncertain", uncertain, args.uncertain)):
+        for text in texts:
+            key, values = parse_axis_option(option, text)
+            if key in vary or key in uncertain:
+                raise ParameterError(f"{option} {key}: {key} is already an axis (given twice, "
+                                     "or also in the [study] table or --root-diameters); give "
+                                     "each key once")
+            if key in fixed:
+                raise ParameterError(f"{option} {key}: --set {fixed[key]} fixes it too; drop "
+                                     "one of them")
+            axes[key] = check_axis_values(option, key, values, base)
 
 
 def _quiet_library(comm, verbose: bool, quiet: bool = False) -> None:
@@ -281,6 +309,27 @@ def _sweep_bar(comm, enabled: bool):
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     settings = _study_settings(args)  # a bad grid stops here, before DOLFINx is imported
+    return _run_sweep(args, settings)
+
+
+def _cmd_nomogram(args: argparse.Namespace) -> int:
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.axes import check_axis_values
+    from valve_dolfinx.study.nomogram import NOMOGRAM_KEY
+
+    diameters = check_axis_values("--root-diameters", NOMOGRAM_KEY,
+                                  ",".join(args.root_diameters), {})
+    if None in diameters:
+        raise ParameterError("--root-diameters: give loaded root diameters in mm (10-40); "
+                             "'none', the root distended by its wall law, has no diameter")
+    settings = _study_settings(args, {NOMOGRAM_KEY: diameters})
+    if list(settings.vary) != [NOMOGRAM_KEY]:
+        raise ParameterError(f"{args.config} [study] vary: the nomogram's comparison axis is the "
+                             "root diameter (--root-diameters); move the others to uncertain")
+    return _run_sweep(args, settings)
+
+
+def _run_sweep(args: argparse.Namespace, settings) -> int:
     import contextlib
 
     from valve_dolfinx._compat import MPI
@@ -291,11 +340,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.list:
         rows = study_status(settings, args.out)
         if comm.rank == 0:
-            print(f"{'index':>5}  {'case':<10} {'W %':>6} {'H %':>6}  status in {args.out}")
+            width = max([4, *(len(case.name) for case, _ in rows)])
+            print(f"{'index':>5}  {'case':<{width}} {'W %':>6} {'H %':>6}  status in {args.out}")
             for case, state in rows:
                 w = "" if case.is_normal else f"{case.width_pct:g}"
                 h = "" if case.is_normal else f"{case.height_pct:g}"
-                print(f"{case.index:>5}  {case.name:<10} {w:>6} {h:>6}  {state}")
+                print(f"{case.index:>5}  {case.name:<{width}} {w:>6} {h:>6}  {state}")
         return 0
     terminate_on_sigterm()
     indices = None if args.case_index is None else [args.case_index]
@@ -315,8 +365,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
         if outcome.report is not None:
-            print(outcome.report.recommendation.text)
+            print(outcome.report.text)
             print(f"report: {args.out / 'report.md'}")
+            if (args.out / "nomogram.png").is_file():
+                print(f"nomogram: {args.out / 'nomogram.png'}, {args.out / 'nomogram.csv'}")
     return 0
 
 
@@ -330,19 +382,27 @@ def _cmd_report(args: argparse.Namespace) -> int:
     report = build_report(args.dir, target_mm=target)
     print(f"{len(report.rows)} case(s)"
           + (f"; not run yet: {', '.join(report.missing)}" if report.missing else ""))
-    print(report.recommendation.text)
+    print(report.text)
     print(f"report: {args.dir / 'report.md'}")
     return 0
 
 
-def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
+    p.add_argument("--uncertain", action="append", default=[], metavar="KEY=V1,V2",
+                   help="an uncertainty axis: values of KEY that are not known, e.g. "
+                   "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
+                   "of them (repeatable)")
+    p.add_argument("--paths", type=int, default=paths, metavar="N",
+                   help="solve every graft along the first N numerical paths (1 conformal, 2 "
+                   "billowed, 3 billowed outwards; uncertainty; default "
+                   f"{paths if paths else 'the [study] table, else 1'})")
     p.add_argument("--widths", nargs="*", default=None, metavar="W",
                    help="graft width enlargements in per cent (default 0 7 14 21 27)")
     p.add_argument("--heights", nargs="*", default=None, metavar="H",
                    help="graft height enlargements in per cent (default 0 13 27 40)")
     p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
                    help="target triangle edge length in mm (default: the case default)")
-    p.add_argument("--out", type=Path, default=Path("results/graft_sweep"),
+    p.add_argument("--out", type=Path, default=Path(out),
                    help="study folder (default %(default)s)")
     p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
                    help="configuration file: a case configuration (`valve-dolfinx config`) "
@@ -467,8 +527,19 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=_cmd_run, parser=p)
 
     p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
-    _add_sweep_args(p)
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
+                   help="a comparison axis: a table, maps and a recommendation per value of the "
+                   "case setting KEY (as --set takes it), e.g. --vary bending_modulus_kpa=0,200 "
+                   "(repeatable: every combination)")
+    _add_sweep_args(p, "results/graft_sweep", None)
     p.set_defaults(func=_cmd_sweep, parser=p)
+
+    p = sub.add_parser("nomogram", help="the recommended graft against the loaded root "
+                       "diameter: a sweep over --root-diameters (nomogram.png, nomogram.csv)")
+    p.add_argument("--root-diameters", nargs="+", required=True, metavar="D",
+                   help="loaded root diameters at 80 mmHg in mm (10-40), e.g. 18 19 20 21 22 23")
+    _add_sweep_args(p, "results/nomogram", 2)
+    p.set_defaults(func=_cmd_nomogram, parser=p, vary=[])  # the diameters are the comparison
 
     p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report")
     p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`")

@@ -46,7 +46,11 @@ __all__ = [
     "load_config",
     "read_config_file",
     "apply_overrides",
+    "parse_value",
     "set_dotted",
+    "get_dotted",
+    "setting_keys",
+    "GRAFT_ONLY_SETTINGS",
     "config_from_dict",
     "config_toml",
     "write_config",
@@ -86,6 +90,12 @@ CONFIG_FILE = "config.toml"
 STUDY_TABLE = "study"
 #: settings that bound the run's wall-clock time, not its result (left out of settings_hash)
 _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
+
+#: settings that only a graft uses (dotted keys; a key that names a table covers all of it):
+#: the normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`),
+#: so normal valves that differ in graft settings alone are one case
+GRAFT_ONLY_SETTINGS = ("graft_material", "geometry.graft_fibre_angle_deg",
+                       "geometry.graft_placement", "geometry.billow_mm")
 
 #: the nested parameter sets of a CaseConfig, by field name
 _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
@@ -186,9 +196,19 @@ class CaseConfig:
         geometry = replace(self.geometry, graft_width_pct=width_pct, graft_height_pct=height_pct)
         return replace(self, geometry=geometry)
 
+    def normal_valve(self) -> CaseConfig:
+        """This configuration's normal valve: no graft, and every setting only a graft uses
+        (:data:`GRAFT_ONLY_SETTINGS`) at its default, which the normal valve's result does
+        not depend on."""
+        defaults = CaseConfig().to_dict()
+        data = self.with_graft(None, None).to_dict()
+        for key in GRAFT_ONLY_SETTINGS:
+            set_dotted(data, key, get_dotted(defaults, key))
+        return config_from_dict(data, source="normal valve")
+
 
 def case_name(geometry: ValveParameters) -> str:
-    """``normal`` or ``W<width>_H<height>``: the case's folder name in a study."""
+    """``normal`` or ``W<width>_H<height>``: a case's name in a study before its axis values."""
     if not geometry.has_graft:
         return "normal"
     return f"W{geometry.graft_width_pct:g}_H{geometry.graft_height_pct:g}"
@@ -387,13 +407,18 @@ def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:
         if not sep or not key:
             raise ParameterError(f"--set {text!r}: give section.key=value, e.g. "
                                  "--set pressure_mmhg=100 or --set geometry.mesh_size=1.6")
-        raw = raw.strip()
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw  # a bare word: a string
-        set_dotted(data, key, value)
+        set_dotted(data, key, parse_value(raw))
     return data
+
+
+def parse_value(text: str) -> Any:
+    """A setting's value as typed on the command line: a TOML value (``21``, ``true``,
+    ``"a b"``), or the text itself if it is not one (a bare word such as ``bdf2``)."""
+    text = text.strip()
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
 
 
 def set_dotted(data: dict, key: str, value: Any) -> None:
@@ -405,6 +430,28 @@ def set_dotted(data: dict, key: str, value: Any) -> None:
         if not isinstance(target, dict):
             raise ParameterError(f"{key}: {table!r} is a value, not a table")
     target[name] = value
+
+
+def get_dotted(data: Mapping[str, Any], key: str) -> Any:
+    """``data[a][b]`` for ``key = "a.b"``; KeyError if a table or the key is missing."""
+    value: Any = data
+    for name in key.split("."):
+        if not isinstance(value, Mapping) or name not in value:
+            raise KeyError(key)
+        value = value[name]
+    return value
+
+
+def setting_keys(data: Mapping[str, Any]) -> list[str]:
+    """The dotted keys of the settings in ``data`` (the :meth:`CaseConfig.to_dict` layout,
+    any subset): ``pressure_mmhg``, ``root.loaded_diameter``, ..."""
+    keys = []
+    for key, value in data.items():
+        if key in _SECTIONS and isinstance(value, Mapping):
+            keys += [f"{key}.{name}" for name in value]
+        else:
+            keys.append(key)
+    return keys
 
 
 def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> CaseConfig:

@@ -10,9 +10,10 @@ Layout of a study folder ``DIR``::
 
 A case is computed in a staging folder and renamed into ``cases/<name>`` when
 it is complete, so ``cases/<name>`` is either absent or whole: a sweep that is
-killed loses only the cases in flight.  ``case.json`` holds the hash of the
-case configuration that produced it (:func:`config_hash`); a rerun skips
-finished cases with an unchanged hash and recomputes the others.
+killed loses only the cases in flight.  ``case.json`` holds the identity of
+the case configuration that produced it
+(:func:`valve_dolfinx.study.layout.case_digest`, its ``config_hash``); a rerun
+skips finished cases with an unchanged hash and recomputes the others.
 
 Before a case is computed, its claim file is created with ``O_CREAT | O_EXCL``
 (atomic, also on NFS v3+), so two sweeps on the same folder -- two MPI rank
@@ -37,7 +38,6 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from valve_dolfinx.config import canonical_hash
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.io import write_json
 
@@ -48,7 +48,6 @@ __all__ = [
     "SETTINGS_FILE",
     "CaseClaim",
     "ClaimHeartbeat",
-    "config_hash",
     "case_dir",
     "read_record",
     "finished_record",
@@ -70,18 +69,6 @@ _TRASH = ".trash"
 STALE_AFTER_S = 600.0
 #: how often a running sweep refreshes its claims (s)
 HEARTBEAT_S = 60.0
-
-
-def config_hash(config: dict) -> str:
-    """SHA-256 of a case configuration (``CaseConfig.to_dict()``) as canonical JSON.
-
-    Keys are sorted and NaN/infinity written as null, so the hash depends on the
-    values only.  Unlike ``CaseConfig.settings_hash`` it includes the wall-clock
-    limits: a case that ran out of time is recomputed when the limit is raised.
-    Output settings (figures, ParaView fields, logging) are not part of
-    ``CaseConfig`` and do not enter it.
-    """
-    return canonical_hash(config)
 
 
 def case_dir(out: Path, name: str) -> Path:

@@ -1,10 +1,13 @@
 """The study table: one row per case, read from the case folders alone (SPEC §7 schema).
 
 A row is a case's ``result.json`` (whatever fields ``CaseResult`` has) with the
-study's bookkeeping (case name, status, reason, configuration hash).  The SPEC
-§7 columns come first, then the bookkeeping, then every other field of the
-result in its own order.  ``results.json`` keeps the nested fields (per-leaflet
-numbers, parameters, versions) as they are; ``results.csv`` flattens them into
+study's bookkeeping (case name, its axis values, status, reason, configuration
+hash).  The SPEC §7 columns come first, then the case name, one column per axis
+key (``root.loaded_diameter``, ...) and ``path`` (a list where the case serves
+several values, as the normal valve serves every path), then the rest of the
+bookkeeping, then every other field of the result in its own order.
+``results.json`` keeps the nested fields (per-leaflet numbers, parameters,
+versions) as they are; ``results.csv`` flattens them into
 dotted column names (``parameters.geometry.mesh_size``), so both hold the
 same numbers.
 """
@@ -16,6 +19,7 @@ import io
 import json
 import logging
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +27,7 @@ from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
 from valve_dolfinx.study.store import CASES_DIR, RECORD_FILE, RESULT_FILE, read_record
 
-__all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables",
+__all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables", "write_csv",
            "read_csv_rows"]
 
 log = logging.getLogger(__name__)
@@ -38,7 +42,8 @@ SPEC_COLUMNS = (
 
 def _sort_key(row: dict) -> tuple:
     w, h = row.get("graft_width_pct"), row.get("graft_height_pct")
-    return (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
+    size = (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
+    return (*size, row["case"])
 
 
 def _reason(record: dict, result: dict) -> str:
@@ -49,11 +54,13 @@ def _reason(record: dict, result: dict) -> str:
     return ""
 
 
-def case_rows(out: Path) -> list[dict]:
-    """Rows of every finished or failed case under ``out/cases`` (normal first, then W, H).
+def case_rows(out: Path, order: Sequence[str] | None = None) -> list[dict]:
+    """Rows of every finished or failed case under ``out/cases``.
 
-    A folder without ``case.json`` (not made by a sweep) or without ``result.json``
-    is skipped with a warning.
+    In the order of the case names ``order`` (a study's cases), then any other case
+    folder; without ``order``, the normal valve first, then by W and H.  A folder
+    without ``case.json`` (not made by a sweep) or without ``result.json`` is skipped
+    with a warning.
     """
     rows = []
     root = Path(out) / CASES_DIR
@@ -69,13 +76,19 @@ def case_rows(out: Path) -> list[dict]:
             log.warning("skipping %s: no %s or %s", folder, RECORD_FILE, RESULT_FILE)
             continue
         rows.append(_row(folder.name, record, result))
-    return sorted(rows, key=_sort_key)
+    rows.sort(key=_sort_key)
+    if order is not None:
+        place = {name: i for i, name in enumerate(order)}
+        rows.sort(key=lambda row: place.get(row["case"], len(place)))
+    return rows
 
 
 def _row(name: str, record: dict, result: dict) -> dict:
     row: dict[str, Any] = {key: result.get(key) for key in SPEC_COLUMNS}
-    row.update(case=name, status=record.get("status", "finished"),
-               reason=_reason(record, result), config_hash=record.get("config_hash"))
+    row["case"] = name
+    row.update(record.get("axes") or {})
+    row.update(status=record.get("status", "finished"), reason=_reason(record, result),
+               config_hash=record.get("config_hash"))
     for key, value in result.items():
         if key not in row:
             row[key] = value
@@ -109,18 +122,23 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
+def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str] | None = None) -> Path:
+    """Write flat ``rows`` as CSV, atomically (``columns``: every key in order of appearance)."""
+    if columns is None:
+        columns = list(dict.fromkeys(key for row in rows for key in row))
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_cell(row.get(key)) for key in columns])
+    return atomic_write(Path(path), lambda tmp: tmp.write_text(buffer.getvalue()))
+
+
 def write_tables(out: Path, rows: list[dict]) -> tuple[Path, Path]:
     """Write ``results.json`` (rows as they are) and ``results.csv`` (flattened), atomically."""
     out = Path(out)
     json_path = write_json(out / "results.json", rows)
-    flat = [flatten(row) for row in rows]
-    columns = list(dict.fromkeys(key for row in flat for key in row))
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    for row in flat:
-        writer.writerow([_cell(row.get(key)) for key in columns])
-    csv_path = atomic_write(out / "results.csv", lambda tmp: tmp.write_text(buffer.getvalue()))
+    csv_path = write_csv(out / "results.csv", [flatten(row) for row in rows])
     return csv_path, json_path
 
 
