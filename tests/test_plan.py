@@ -433,6 +433,9 @@ def test_a_plan_writes_its_answer_template_and_report(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["recommendation"]["graft"]["label"] == "W14/H13"
     assert summary["reach"]["can_seal"] is True
+    assert summary["run"]["cases"] == 3 and summary["run"]["converged"] == 3
+    assert summary["run"]["wall_time_s"] == pytest.approx(3 * 0.01)
+    assert summary["run"]["mesh_size_mm"] == 2.0
     dims = {t["graft"]: t for t in summary["templates"]}
     assert set(dims) == {"W14/H13", "W21/H27"}
     assert dims["W14/H13"]["cut_width_mm"] == pytest.approx(22.0 * 1.14 + 2.0, rel=1e-12)

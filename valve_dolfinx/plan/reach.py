@@ -112,17 +112,18 @@ class FreeEdgeReach:
 
     def sentence(self) -> str:
         """The verdict in one line, with the numbers behind it."""
+        pull = (f"pulled as far as {self.pressure_mmhg:g} mmHg can pull {{it}} "
+                f"(×{self.stretch:.3f}), {{what}} {self.reach_mm:.1f} mm")
         if self.can_seal:
-            return (f"The native free edges ({self.free_edge_mm:.1f} mm) can span a "
-                    f"{self.root_diameter_mm:.1f} mm root: stretched by the most "
-                    f"{self.pressure_mmhg:g} mmHg can give them they reach "
-                    f"{self.reach_mm:.1f} mm, and roots up to {self.largest_root_mm:.1f} mm.")
+            return (f"The native free edges ({self.free_edge_mm:.1f} mm) can span this "
+                    f"{self.root_diameter_mm:.1f} mm root: "
+                    + pull.format(it="them", what="they reach")
+                    + f"; they span roots up to {self.largest_root_mm:.1f} mm.")
         return (f"The native leaflets cannot seal this {self.root_diameter_mm:.1f} mm root "
                 f"whatever the graft: each free edge ({self.free_edge_mm:.1f} mm) must reach "
                 f"from its commissures to the centre, {self.root_diameter_mm:.1f} mm, and "
-                f"stretched by the most {self.pressure_mmhg:g} mmHg can give it (×"
-                f"{self.stretch:.3f}) it reaches {self.reach_mm:.1f} mm; these leaflets "
-                f"span roots up to {self.largest_root_mm:.1f} mm.")
+                + pull.format(it="it", what="it reaches only")
+                + f"; these leaflets span roots up to {self.largest_root_mm:.1f} mm.")
 
     def to_dict(self) -> dict:
         return {**asdict(self), "can_seal": self.can_seal}

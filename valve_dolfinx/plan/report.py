@@ -52,23 +52,22 @@ class PlanFigures:
 
 @dataclass(frozen=True)
 class RunInfo:
-    """What was run: package versions, the mesh, the cases and the wall time."""
+    """What was run: package versions, the mesh, the cases and their wall time (summed)."""
 
     versions: dict[str, str] = field(default_factory=dict)
     mesh_size_mm: float | None = None
     cases: int = 0
     converged: int = 0
     wall_time_s: float | None = None
-    n_ranks: int = 1
 
     def lines(self) -> list[str]:
         if not self.cases:
             out = ["No finite element case was run."]
         else:
-            mesh = f"{self.mesh_size_mm:g} mm mesh" if self.mesh_size_mm else "default mesh"
-            wall = (f", {self.wall_time_s:.0f} s wall time on {self.n_ranks} rank(s)"
+            mesh = f"a {self.mesh_size_mm:g} mm mesh" if self.mesh_size_mm else "the default mesh"
+            wall = (f", {self.wall_time_s:.0f} s of wall time summed over the cases"
                     if self.wall_time_s is not None else "")
-            out = [f"{self.cases} finite element cases ({self.converged} converged), "
+            out = [f"{self.cases} finite element cases ({self.converged} converged) on "
                    f"{mesh}{wall}."]
         versions = ", ".join(f"{k} {self.versions[k]}" for k in _VERSIONS if k in self.versions)
         if versions:

@@ -156,12 +156,12 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
                           closed_aortic=_existing(case / "closed_valve_aortic.png"),
                           closed_ventricular=_existing(case / "closed_valve_ventricular.png"),
                           closed_member=f"root {patient.root_diameter_mm:.1f} mm")
-    first = report.rows[0] if report.rows else {}
+    rows = report.rows
+    first = rows[0] if rows else {}
     run = RunInfo(versions=first.get("versions") or {},
                   mesh_size_mm=first.get("mesh_size_mm", settings.mesh_size_mm),
-                  cases=len(report.rows), converged=sum(bool(r.get("converged"))
-                                                       for r in report.rows),
-                  wall_time_s=outcome.elapsed_s, n_ranks=comm.size)
+                  cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
+                  wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
     return PlanStudy(recommendation, figures, run, out)
 
 
