@@ -19,6 +19,7 @@ Settings: the defaults < --config FILE < --set section.key=value < the named fla
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 from pathlib import Path
@@ -281,10 +282,25 @@ def _sweep_bar(comm, enabled: bool):
     return progress, close
 
 
+@contextlib.contextmanager
+def _case_progress(comm, enabled: bool):
+    """The tqdm bar of cases done (rank 0, when ``enabled``), the log lines routed above it;
+    yields the progress callback (None without a bar)."""
+    progress, close = _sweep_bar(comm, enabled)
+    try:
+        if progress is None:
+            yield None
+        else:
+            from tqdm.contrib.logging import logging_redirect_tqdm
+
+            with logging_redirect_tqdm(loggers=[logging.getLogger()]):
+                yield progress
+    finally:
+        close()
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     settings = _study_settings(args)  # a bad grid stops here, before DOLFINx is imported
-    import contextlib
-
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.study.runner import run_study, study_status, terminate_on_sigterm
 
@@ -301,18 +317,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         return 0
     terminate_on_sigterm()
     indices = None if args.case_index is None else [args.case_index]
-    progress, close = _sweep_bar(comm, not args.no_progress and indices is None)
-    redirect = contextlib.nullcontext()
-    if progress is not None:
-        from tqdm.contrib.logging import logging_redirect_tqdm
-
-        redirect = logging_redirect_tqdm(loggers=[logging.getLogger()])
-    try:
-        with redirect:
-            outcome = run_study(settings, args.out, comm, case_indices=indices,
-                                progress=progress, report=indices is None)
-    finally:
-        close()
+    with _case_progress(comm, not args.no_progress and indices is None) as progress:
+        outcome = run_study(settings, args.out, comm, case_indices=indices,
+                            progress=progress, report=indices is None)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
@@ -337,13 +344,23 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+def _add_grid_args(p: argparse.ArgumentParser) -> None:
+    """The graft grid, the cases' mesh and wall-clock limit, and the progress bar: the
+    options ``sweep`` and ``plan`` share."""
     p.add_argument("--widths", nargs="*", default=None, metavar="W",
                    help="graft width enlargements in per cent (default 0 7 14 21 27)")
     p.add_argument("--heights", nargs="*", default=None, metavar="H",
                    help="graft height enlargements in per cent (default 0 13 27 40)")
     p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
                    help="target triangle edge length in mm (default: the case default)")
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="wall-clock limit of each case (default: the case default)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="plain log lines, no progress bar (batch jobs)")
+
+
+def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+    _add_grid_args(p)
     p.add_argument("--out", type=Path, default=Path("results/graft_sweep"),
                    help="study folder (default %(default)s)")
     p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
@@ -358,14 +375,10 @@ def _add_sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's)")
-    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
-                   help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--list", action="store_true",
                    help="print the cases with their index and state, and exit")
     p.add_argument("--case-index", type=int, default=None, metavar="I",
                    help="run case I only (see --list; for job arrays), no report")
-    p.add_argument("--no-progress", action="store_true",
-                   help="plain log lines, no progress bar (batch jobs)")
 
 
 #: plan flags -> the PatientInput keys they set (plan.patient.FIELDS lists each key's flag)
@@ -395,8 +408,6 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
     templates = [GraftSize.parse(text) for text in args.template]
     plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
-    import contextlib
-
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.plan.runner import run_plan
     from valve_dolfinx.study.runner import terminate_on_sigterm
@@ -406,19 +417,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     logging.getLogger("valve_dolfinx.plan").setLevel(
         logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
     terminate_on_sigterm()
-    progress, close = _sweep_bar(comm, not args.no_progress)
-    redirect = contextlib.nullcontext()
-    if progress is not None:
-        from tqdm.contrib.logging import logging_redirect_tqdm
-
-        redirect = logging_redirect_tqdm(loggers=[logging.getLogger()])
-    try:
-        with redirect:
-            outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
-                               wall_time_limit_s=args.wall_time_limit, templates=templates,
-                               force=args.force, progress=progress)
-    finally:
-        close()
+    with _case_progress(comm, not args.no_progress) as progress:
+        outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
+                           wall_time_limit_s=args.wall_time_limit, templates=templates,
+                           force=args.force, progress=progress)
     if comm.rank == 0:
         print(outcome.recommendation.headline())
         print(f"plan: {args.out / 'plan.pdf'}, {args.out / 'plan.md'}")
@@ -443,10 +445,7 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
                    help="midline height of the excised leaflet in mm (default 12.41)")
     p.add_argument("--pressure", type=float, default=None, metavar="MMHG",
                    help="diastolic pressure in mmHg (default 80)")
-    p.add_argument("--widths", nargs="*", default=None, metavar="W",
-                   help="graft width enlargements in per cent (default 0 7 14 21 27)")
-    p.add_argument("--heights", nargs="*", default=None, metavar="H",
-                   help="graft height enlargements in per cent (default 0 13 27 40)")
+    _add_grid_args(p)
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's at the same root)")
@@ -456,14 +455,8 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
                    "report (no identifying data needed)")
     p.add_argument("--template", action="append", default=[], metavar="W/H",
                    help="also draw the template of this graft, e.g. 21/27 (repeatable)")
-    p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
-                   help="target triangle edge length in mm (default: the case default)")
-    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
-                   help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--force", action="store_true",
                    help="replace the plan of other inputs in --out")
-    p.add_argument("--no-progress", action="store_true",
-                   help="plain log lines, no progress bar (batch jobs)")
 
 
 _EXIT_STATUS = """exit status:
