@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import escape
@@ -236,8 +237,8 @@ def _legend(page: Drawing, x: float, y: float, template: GraftTemplate) -> float
 _STEPS = (
     "Print at 100 % ('actual size', not 'fit to page') and measure the 50 mm bar.",
     "Cut the template out along the solid line; the blue free edge has no margin.",
-    "Lay it on the pericardium with the green arrows along the chosen fibre direction,",
-    "    trace it and cut the graft along the traced line.",
+    "Lay it on the pericardium with the green arrows along the chosen fibre direction, "
+    "trace it and cut the graft along the traced line.",
     "Sew along the suture line: the dashed line, the margin's width inside the cut edge.",
 )
 
@@ -321,13 +322,11 @@ def template_drawing(template: GraftTemplate, patient_line: str = "") -> Drawing
     y = _legend(page, left, y - 34.0, template)
     page.text(left, y - 4.0, "How to use it", size_pt=11, bold=True)
     y -= 11.0
-    number = 0
-    for step in _STEPS:
-        if not step.startswith(" "):
-            number += 1
-        page.text(left, y, f"{number}. " + step.strip() if not step.startswith(" ")
-                  else "     " + step.strip(), size_pt=9)
-        y -= 5.5
+    for number, step in enumerate(_STEPS, start=1):
+        for k, line in enumerate(textwrap.wrap(step, 84)):
+            page.text(left + (0 if k == 0 else 5.0), y, f"{number}. {line}" if k == 0
+                      else line, size_pt=9)
+            y -= 5.5
     page.text(left, 15, f"valve_dolfinx {__version__} · plan {template.label} · template "
               f"{template.graft.label} · a model's prediction; the surgeon decides.",
               size_pt=7, colour=_GUIDE)
