@@ -257,7 +257,7 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
     if reach.can_seal:
         study = run_plan_study(patient, settings, out / STUDY_DIR, comm,
                                case_function=case_function, progress=progress)
-    else:
+    elif comm.rank == 0:
         log.warning("%s", reach.sentence())
     outcome = None
     if comm.rank == 0:
@@ -290,5 +290,5 @@ def _write_plan(out: Path, patient: PatientInput, reach: FreeEdgeReach,
         "reach": reach.to_dict(), "templates": [t.to_dict() for t in drawn],
         "run": run.to_dict(), "study": STUDY_DIR if study is not None else None})
     files = [md, pdf, summary, *(p for t in drawn for p in (t.svg, t.pdf, t.png))]
-    log.info("plan %s: %s", patient.label, recommendation.headline())
+    log.debug("plan %s: %s", patient.label, recommendation.headline())
     return PlanOutcome(out, recommendation, reach, drawn, files)
