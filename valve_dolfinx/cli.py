@@ -11,6 +11,8 @@ sweep   the graft sizing study: the normal valve and every graft of a width x he
 nomogram  a sweep over loaded root diameters: the recommended graft against the
         diameter (nomogram.png, nomogram.csv)
 report  rebuild a study folder's tables, figures, recommendations and report.md
+plan    one patient's repair from the measured root and leaflet: the recommended graft,
+        its template at true size (SVG, PDF) and a one-page report (plan.md, plan.pdf)
 config  print the case configuration as TOML, every setting with its unit and meaning
 
 Settings: the defaults < --config FILE < --set section.key=value < the named flags
@@ -20,6 +22,7 @@ Settings: the defaults < --config FILE < --set section.key=value < the named fla
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 from pathlib import Path
@@ -307,6 +310,23 @@ def _sweep_bar(comm, enabled: bool):
     return progress, close
 
 
+@contextlib.contextmanager
+def _case_progress(comm, enabled: bool):
+    """The tqdm bar of cases done (rank 0, when ``enabled``), the log lines routed above it;
+    yields the progress callback (None without a bar)."""
+    progress, close = _sweep_bar(comm, enabled)
+    try:
+        if progress is None:
+            yield None
+        else:
+            from tqdm.contrib.logging import logging_redirect_tqdm
+
+            with logging_redirect_tqdm(loggers=[logging.getLogger()]):
+                yield progress
+    finally:
+        close()
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     settings = _study_settings(args)  # a bad grid stops here, before DOLFINx is imported
     return _run_sweep(args, settings)
@@ -330,8 +350,6 @@ def _cmd_nomogram(args: argparse.Namespace) -> int:
 
 
 def _run_sweep(args: argparse.Namespace, settings) -> int:
-    import contextlib
-
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.study.runner import run_study, study_status, terminate_on_sigterm
 
@@ -349,18 +367,9 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
         return 0
     terminate_on_sigterm()
     indices = None if args.case_index is None else [args.case_index]
-    progress, close = _sweep_bar(comm, not args.no_progress and indices is None)
-    redirect = contextlib.nullcontext()
-    if progress is not None:
-        from tqdm.contrib.logging import logging_redirect_tqdm
-
-        redirect = logging_redirect_tqdm(loggers=[logging.getLogger()])
-    try:
-        with redirect:
-            outcome = run_study(settings, args.out, comm, case_indices=indices,
-                                progress=progress, report=indices is None)
-    finally:
-        close()
+    with _case_progress(comm, not args.no_progress and indices is None) as progress:
+        outcome = run_study(settings, args.out, comm, case_indices=indices,
+                            progress=progress, report=indices is None)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
@@ -387,7 +396,23 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_grid_args(p: argparse.ArgumentParser) -> None:
+    """The graft grid, the cases' mesh and wall-clock limit, and the progress bar: the
+    options ``sweep``, ``nomogram`` and ``plan`` share."""
+    p.add_argument("--widths", nargs="*", default=None, metavar="W",
+                   help="graft width enlargements in per cent (default 0 7 14 21 27)")
+    p.add_argument("--heights", nargs="*", default=None, metavar="H",
+                   help="graft height enlargements in per cent (default 0 13 27 40)")
+    p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
+                   help="target triangle edge length in mm (default: the case default)")
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="wall-clock limit of each case (default: the case default)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="plain log lines, no progress bar (batch jobs)")
+
+
 def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
+    _add_grid_args(p)
     p.add_argument("--uncertain", action="append", default=[], metavar="KEY=V1,V2",
                    help="an uncertainty axis: values of KEY that are not known, e.g. "
                    "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
@@ -396,12 +421,6 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
                    help="solve every graft along the first N numerical paths (1 conformal, 2 "
                    "billowed, 3 billowed outwards; uncertainty; default "
                    f"{paths if paths else 'the [study] table, else 1'})")
-    p.add_argument("--widths", nargs="*", default=None, metavar="W",
-                   help="graft width enlargements in per cent (default 0 7 14 21 27)")
-    p.add_argument("--heights", nargs="*", default=None, metavar="H",
-                   help="graft height enlargements in per cent (default 0 13 27 40)")
-    p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
-                   help="target triangle edge length in mm (default: the case default)")
     p.add_argument("--out", type=Path, default=Path(out),
                    help="study folder (default %(default)s)")
     p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
@@ -416,14 +435,88 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's)")
-    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
-                   help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--list", action="store_true",
                    help="print the cases with their index and state, and exit")
     p.add_argument("--case-index", type=int, default=None, metavar="I",
                    help="run case I only (see --list; for job arrays), no report")
-    p.add_argument("--no-progress", action="store_true",
-                   help="plain log lines, no progress bar (batch jobs)")
+
+
+#: plan flags -> the PatientInput keys they set (plan.patient.FIELDS lists each key's flag)
+_PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root_uncertainty_mm",
+                  "leaflet_free_edge": "leaflet_free_edge_mm",
+                  "leaflet_height": "leaflet_height_mm", "pressure": "pressure_mmhg",
+                  "widths": "graft_widths_pct", "heights": "graft_heights_pct",
+                  "target_coaptation": "target_coaptation_mm",
+                  "graft_fibre_angle": "graft_fibre_angle_deg", "label": "label"}
+
+
+def _patient(args: argparse.Namespace):
+    """The patient of ``plan``: PATIENT.toml with the flags over it, or the flags alone."""
+    from valve_dolfinx.plan.patient import patient_from_mapping, read_patient
+
+    flags = {key: getattr(args, dest) for dest, key in _PATIENT_FLAGS.items()
+             if getattr(args, dest) is not None}
+    if args.patient is not None:
+        return read_patient(args.patient, flags)
+    return patient_from_mapping(flags, source="command line")
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from valve_dolfinx.plan.recommendation import GraftSize
+    from valve_dolfinx.plan.runner import plan_study_settings
+
+    patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
+    templates = [GraftSize.parse(text) for text in args.template]
+    plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.plan.runner import run_plan
+    from valve_dolfinx.study.runner import terminate_on_sigterm
+
+    comm = MPI.COMM_WORLD
+    _quiet_library(comm, args.verbose, args.quiet)
+    logging.getLogger("valve_dolfinx.plan").setLevel(
+        logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
+    terminate_on_sigterm()
+    with _case_progress(comm, not args.no_progress) as progress:
+        outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
+                           wall_time_limit_s=args.wall_time_limit, templates=templates,
+                           force=args.force, progress=progress)
+    if comm.rank == 0:
+        print(outcome.recommendation.headline())
+        print(f"plan: {args.out / 'plan.pdf'}, {args.out / 'plan.md'}")
+        for template in outcome.templates:
+            print(f"template {template.graft.label}: {template.pdf} (print at 100 %)")
+    return 0
+
+
+def _add_plan_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("patient", nargs="?", type=Path, default=None, metavar="PATIENT.toml",
+                   help="the measured inputs (docs/plan.md lists the keys); the flags below "
+                   "override them, or give them all without a file")
+    p.add_argument("--out", type=Path, required=True, help="plan folder (created)")
+    p.add_argument("--root-diameter", type=float, default=None, metavar="D",
+                   help="loaded root diameter at the base in mm, on echo or CT (16-35)")
+    p.add_argument("--root-uncertainty", type=float, default=None, metavar="U",
+                   help="± uncertainty of the root diameter in mm (default 1)")
+    p.add_argument("--leaflet-free-edge", type=float, default=None, metavar="L",
+                   help="free edge of the excised non-coronary leaflet, measured flat, in mm "
+                   "(default: the SPEC §1 leaflet's 20.94 mm)")
+    p.add_argument("--leaflet-height", type=float, default=None, metavar="H",
+                   help="midline height of the excised leaflet in mm (default 12.41)")
+    p.add_argument("--pressure", type=float, default=None, metavar="MMHG",
+                   help="diastolic pressure in mmHg (default 80)")
+    _add_grid_args(p)
+    p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
+                   help="minimum coaptation height a graft must reach (default: the normal "
+                   "valve's at the same root)")
+    p.add_argument("--graft-fibre-angle", type=float, default=None, metavar="DEG",
+                   help="the graft's fibre direction from its free edge (default 0: parallel)")
+    p.add_argument("--label", default=None, help="plan name printed on the template and the "
+                   "report (no identifying data needed)")
+    p.add_argument("--template", action="append", default=[], metavar="W/H",
+                   help="also draw the template of this graft, e.g. 21/27 (repeatable)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the plan of other inputs in --out")
 
 
 _EXIT_STATUS = """exit status:
@@ -547,6 +640,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's, or the study's)")
     p.set_defaults(func=_cmd_report, parser=p)
+
+    p = sub.add_parser("plan", help="plan one patient's repair: the recommended graft from the "
+                       "measured root and leaflet, its template at true size, a one-page report")
+    _add_plan_args(p)
+    p.set_defaults(func=_cmd_plan, parser=p)
 
     p = sub.add_parser("config", help="print the case configuration as TOML (defaults, or "
                        "--config with --set applied), every key with its unit and meaning")
