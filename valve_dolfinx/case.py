@@ -134,10 +134,29 @@ class CaseState:
         return self.display or (self.domain.valve, self.positions)
 
 
+def _set_free_positions(model: MembraneModel, positions: np.ndarray,
+                        fixed_nodes: np.ndarray) -> None:
+    """Move every node but ``fixed_nodes`` to ``positions`` (N, 3, the valve's node order)."""
+    from valve_dolfinx.geometry.distributed import node_to_dof
+
+    mesh = model.domain.mesh
+    node_id = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
+    block = node_to_dof(model.V)
+    free = ~np.isin(node_id, fixed_nodes)
+    u = model.u.x.array.reshape(-1, 3)
+    u[block[free]] = positions[node_id[free]] - mesh.geometry.x[free]
+    model.u.x.scatter_forward()
+
+
 def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                progress: Callable[[dict], None] | None = None,
-               valve: ValveMesh | None = None) -> CaseState:
-    """Root step and closure solve (no output written)."""
+               valve: ValveMesh | None = None,
+               start: np.ndarray | None = None) -> CaseState:
+    """Root step and closure solve (no output written).
+
+    ``start``: ``(N, 3)`` positions of the valve's nodes to start the closure from (a warm
+    start, :mod:`valve_dolfinx.geometry.transfer`) instead of the unloaded placement; the
+    attachment stays at the distended root."""
     if valve is None and comm.rank == 0:
         valve = build_valve(config.geometry)
     if config.symmetric_reference and comm.rank == 0:
@@ -156,6 +175,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     # step 2: closure with the attachment held at the distended root
     bc = clamp_edges(model.V, domain.facet_tags, [ATTACHMENT], value=u0)
     model.u.x.array[:] = u0.x.array
+    if start is not None:
+        _set_free_positions(model, np.asarray(start, dtype=float), valve.attachment_nodes())
     watch = [int(p.nodes[p.midline_free_edge_node]) for p in valve.leaflets]
 
     def make_hook(coupling):
@@ -185,6 +206,11 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     if config.solver == "ptc":
         solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
                                        config.pseudo_transient, hooks=hooks, watch_nodes=watch)
+        if start is not None:  # contact sides and driving forces of the start
+            for hook in solver.hooks:
+                accept = getattr(hook, "accept_state", None)
+                if accept is not None:
+                    accept(model.u)
         report = solver.solve(progress=progress)
         state = model.u
     else:
