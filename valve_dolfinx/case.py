@@ -17,7 +17,7 @@ import logging
 import platform
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +26,10 @@ from valve_dolfinx._compat import MPI, dolfinx, package_versions
 from valve_dolfinx._version import __version__, git_commit
 from valve_dolfinx.config import CaseConfig, case_name
 from valve_dolfinx.contact import PlaneContact, SurfaceContact
+from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.distributed import ValveDomain, create_valve_domain
 from valve_dolfinx.geometry.symmetry import mirror_leaflet, single_leaflet, symmetry_planes
+from valve_dolfinx.geometry.transfer import ValveState, transfer_positions
 from valve_dolfinx.geometry.valve import ATTACHMENT, ValveMesh, build_valve
 from valve_dolfinx.mechanics.bending import bending_stiffness_matrix, flexural_rigidity
 from valve_dolfinx.mechanics.boundary_conditions import clamp_edges
@@ -148,15 +150,44 @@ def _set_free_positions(model: MembraneModel, positions: np.ndarray,
     model.u.x.scatter_forward()
 
 
+def coarse_start(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ValveState | None:
+    """The equilibrium of the case on the coarse mesh (``pseudo_transient.coarse_mesh_mm``),
+    to start the case's own mesh from; None when the case's mesh is not finer, or the
+    coarse closure did not converge (the case then starts from the unloaded valve)."""
+    size = config.pseudo_transient.coarse_mesh_mm
+    if config.solver != "ptc" or size <= config.geometry.mesh_size:
+        return None
+    coarse = replace(config, geometry=replace(config.geometry, mesh_size=size))
+    state = solve_case(coarse, comm)
+    report = state.report
+    log.info("coarse closure on the %g mm mesh: %s (%d + %d Newton iterations, %.1f s)",
+             size, "converged" if report.converged else "NOT converged: " + report.reason,
+             report.newton_iterations, report.rejected_newton_iterations, report.wall_time_s)
+    if not report.converged:
+        return None
+    # the valve as solved (the symmetric reference's single leaflet, not its mirror images)
+    return ValveState(state.domain.valve, state.positions,
+                      f"the equilibrium on the {size:g} mm mesh",
+                      report.newton_iterations + report.rejected_newton_iterations,
+                      report.wall_time_s)
+
+
 def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                progress: Callable[[dict], None] | None = None,
                valve: ValveMesh | None = None,
-               start: np.ndarray | None = None) -> CaseState:
+               start: ValveState | None = None) -> CaseState:
     """Root step and closure solve (no output written).
 
-    ``start``: ``(N, 3)`` positions of the valve's nodes to start the closure from (a warm
-    start, :mod:`valve_dolfinx.geometry.transfer`) instead of the unloaded placement; the
-    attachment stays at the distended root."""
+    The closure starts from ``start``, a loaded valve whose shape is carried onto this
+    case's mesh (:func:`~valve_dolfinx.geometry.transfer.transfer_positions`: another mesh
+    of the same valve, or the normal valve for a graft valve); without one, from the
+    case's equilibrium on a coarse mesh (:func:`coarse_start`), and failing that from the
+    unloaded valve.  The attachment is held at the distended root either way."""
+    if start is None:
+        start = coarse_start(config, comm)
+    if start is not None and config.solver != "ptc":
+        raise ParameterError("a closure that starts from a loaded valve needs solver = 'ptc' "
+                             "(the BDF2 cross-check starts from the unloaded valve)")
     if valve is None and comm.rank == 0:
         valve = build_valve(config.geometry)
     if config.symmetric_reference and comm.rank == 0:
@@ -176,7 +207,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     bc = clamp_edges(model.V, domain.facet_tags, [ATTACHMENT], value=u0)
     model.u.x.array[:] = u0.x.array
     if start is not None:
-        _set_free_positions(model, np.asarray(start, dtype=float), valve.attachment_nodes())
+        _set_free_positions(model, transfer_positions(start.valve, start.positions, valve),
+                            valve.attachment_nodes())
     watch = [int(p.nodes[p.midline_free_edge_node]) for p in valve.leaflets]
 
     def make_hook(coupling):
@@ -212,6 +244,7 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                 if accept is not None:
                     accept(model.u)
         report = solver.solve(progress=progress)
+        report.start = _start_record(start)
         state = model.u
     else:
         stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
@@ -224,6 +257,14 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     forces = hook.contact_forces(state)
     display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
     return CaseState(domain, model, root, positions, forces, report, display=display)
+
+
+def _start_record(start: ValveState | None) -> dict:
+    """Where a closure started, for the result: the state and what reaching it cost."""
+    if start is None:
+        return {"from": "the unloaded valve"}
+    return {"from": start.origin, "newton_iterations": start.newton_iterations,
+            "wall_time_s": start.wall_time_s}
 
 
 def leaflet_crossing_mm(state: CaseState) -> float:
@@ -257,8 +298,10 @@ def analyse_case(state: CaseState, config: CaseConfig):
 def run_case(config: CaseConfig, out_dir: str | Path | None = None,
              comm: MPI.Comm = MPI.COMM_WORLD, progress: Callable[[dict], None] | None = None,
              figures: bool = True, fields_output: bool = True,
-             valve: ValveMesh | None = None) -> CaseResult:
+             valve: ValveMesh | None = None, start: ValveState | None = None) -> CaseResult:
     """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
+
+    ``start``: a loaded valve to start the closure from (see :func:`solve_case`).
 
     ``valve``: the valve mesh to close (rank 0's is used), e.g. one read with
     :func:`~valve_dolfinx.geometry.valve.load_valve_mesh`; by default it is built from
@@ -273,7 +316,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
 
     t0 = time.perf_counter()
     g = config.geometry
-    state = solve_case(config, comm, progress, valve=valve)
+    state = solve_case(config, comm, progress, valve=valve, start=start)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
     report = state.report
@@ -307,6 +350,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         rejected_newton_iterations=report.rejected_newton_iterations,
         residual_tolerance_mN=report.residual_tolerance_mN,
         equilibrium_residual_mN=report.residual_mN,
+        start=report.start,
         leaflets={name: lc.to_dict() for name, lc in coaptation.leaflets.items()},
         parameters={**config.to_dict(), "root_state": state.root.to_dict(),
                     "python": platform.python_version()},

@@ -418,8 +418,9 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
                    "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
                    "of them (repeatable)")
     p.add_argument("--paths", type=int, default=paths, metavar="N",
-                   help="solve every graft along the first N numerical paths (1 conformal, 2 "
-                   "billowed, 3 billowed outwards; uncertainty; default "
+                   help="solve every graft along the first N numerical paths (1: from the "
+                   "closed normal valve, 2: from the open valve, billowed, 3: from the open "
+                   "valve, conformal; an uncertainty axis; default "
                    f"{paths if paths else 'the [study] table, else 1'})")
     p.add_argument("--out", type=Path, default=Path(out),
                    help="study folder (default %(default)s)")

@@ -58,6 +58,9 @@ class CaseResult:
     rejected_newton_iterations: int = 0
     residual_tolerance_mN: float = float("nan")
     equilibrium_residual_mN: float = float("nan")
+    #: where the closure started: ``from`` (the unloaded valve, the equilibrium on a
+    #: coarse mesh, or another case's loaded state) and what a coarse start cost
+    start: dict = field(default_factory=dict)
     leaflets: dict = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
     versions: dict = field(default_factory=dict)

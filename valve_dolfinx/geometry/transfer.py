@@ -15,13 +15,27 @@ a coarse mesh gives the fine mesh of the same valve its start.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh
 
-__all__ = ["native_frame", "transfer_positions"]
+__all__ = ["ValveState", "native_frame", "transfer_positions"]
+
+
+class ValveState(NamedTuple):
+    """A loaded valve to start a closure from: its mesh, its nodes' positions ``(N, 3)``,
+    where it comes from (for the record), and the Newton iterations and wall-clock time
+    that reaching it cost (0 where another case paid for it)."""
+
+    valve: ValveMesh
+    positions: np.ndarray
+    origin: str
+    newton_iterations: int = 0
+    wall_time_s: float = 0.0
 
 
 def native_frame(patch: LeafletPatch) -> np.ndarray:

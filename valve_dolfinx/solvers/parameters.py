@@ -90,6 +90,11 @@ class PseudoTransientParameters:
         accepted pseudo-time step, and a case converges only once it is at the target
         (0, the default: the target from the first step).  Where the loaded valve
         has more than one equilibrium the path selects one (docs/numerics.md, §2).
+    coarse_mesh_mm
+        A case on a finer mesh first comes to rest on a mesh of this size (mm), and its own
+        mesh starts from that equilibrium (:func:`valve_dolfinx.case.coarse_start`): the
+        long approach of the open leaflets to closure costs a fraction there.  0: every
+        case starts from the unloaded valve.
     petsc_options
         Extra PETSc options (without prefix) for the TS/SNES/KSP.
     """
@@ -113,9 +118,13 @@ class PseudoTransientParameters:
     max_steps: int = 4000
     wall_time_limit_s: float = 900.0
     pressure_ramp_steps: int = 0
+    coarse_mesh_mm: float = 2.0
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        check_range("coarse_mesh_mm", self.coarse_mesh_mm, 0.0, 2.5, unit="mm",
+                    hint="2 mm is the default; 0 starts every case from the unloaded valve; "
+                    "the mesh must resolve the 5 mm commissures with two edges")
         check_range("residual_tolerance", self.residual_tolerance, 0.0, 10.0, low_open=True,
                     unit="mN", hint="nodal pressure forces are ~1-10 mN; 1e-3 mN is the default")
         check_range("pressure_ramp_steps", self.pressure_ramp_steps, 0, 1e6, unit="",

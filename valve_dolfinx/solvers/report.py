@@ -31,6 +31,9 @@ class SolveReport:
         Wall-clock time of the solve (s).
     timings
         Wall-clock time (s) per part of the solve, where the solver measures it.
+    start
+        Where the solve started (``from``) and, for a start another solve reached first,
+        that solve's Newton iterations and wall-clock time.
     """
 
     converged: bool = False
@@ -44,6 +47,7 @@ class SolveReport:
     residual_tolerance_mN: float = float("nan")
     wall_time_s: float = 0.0
     timings: dict = field(default_factory=dict)
+    start: dict = field(default_factory=dict)
     history: list[dict] = field(default_factory=list)
 
     def count_rejections(self, ts) -> None:

@@ -9,8 +9,9 @@ study with ``paths = N`` solves every graft along the first ``N`` paths of
 A path is data: the case settings it overrides (dotted keys, as ``--set``
 takes them) and where its solve starts.  Every path is cheap and reproducible:
 the same path gives the same case on any number of ranks.  The first path is
-the case settings as given; the others place the slack graft differently
-before the pressure is applied.  The normal valve has no graft, so it is the
+a warm start from the closed normal valve; the others close the graft valve from
+the open, unloaded valve with the slack graft placed in two ways.  The normal valve has no
+graft, so it is the
 same case on every path (its configuration does not change, see
 :meth:`valve_dolfinx.config.CaseConfig.normal_valve`) and is solved once per
 member of the other axes.
@@ -66,13 +67,17 @@ class StudyPath:
 
 #: The paths, in the order ``--paths N`` takes them
 PATHS: tuple[StudyPath, ...] = (
-    StudyPath(1, "conformal", "the slack graft is first laid onto the native leaflet's "
-              "wrapped surface (the case settings as given)"),
-    StudyPath(2, "billowed", "the slack graft is first bulged 2 mm towards the valve axis",
+    StudyPath(1, "from the closed valve", "every graft starts from the loaded normal valve "
+              "of the same member: the native leaflets where they came to rest, the graft "
+              "laid over the closed native leaflet it replaces", start=START_FROM_NORMAL),
+    StudyPath(2, "from the open valve", "the slack graft is first bulged 2 mm towards the "
+              "valve axis on the unloaded valve and closes with the native leaflets from "
+              "there (coarse mesh first, then the case's own)",
               {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0}),
-    StudyPath(3, "billowed outwards", "the slack graft is first bulged 2 mm away from the "
-              "valve axis, towards the sinus",
-              {"geometry.graft_placement": "billowed", "geometry.billow_mm": -2.0}),
+    StudyPath(3, "from the open valve, conformal", "the slack graft is first laid onto the "
+              "native leaflet's wrapped surface on the unloaded valve and closes from there "
+              "(coarse mesh first; what `valve-dolfinx run` does)",
+              {"geometry.graft_placement": "conformal"}),
 )
 
 

@@ -114,19 +114,28 @@ def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, start: Path | Non
                      figures: bool = True, fields_output: bool = True) -> dict:
     """The study's case: :func:`valve_dolfinx.case.run_case` into ``out_dir``.
 
-    Raises
-    ------
-    NotImplementedError
-        For a warm start (``start`` given): ``run_case`` starts from the unloaded valve,
-        and no numerical path of :data:`valve_dolfinx.study.paths.PATHS` asks for one.
+    ``start``: the finished case folder whose loaded state the closure starts from (a
+    numerical path's warm start); a source that did not converge is no start, and the
+    case then takes the path of a case without one (:func:`valve_dolfinx.case.solve_case`).
     """
     from valve_dolfinx.case import run_case
 
-    if start is not None:
-        raise NotImplementedError(f"a start from the loaded state in {start} is not wired "
-                                  "into run_case; every path starts from the unloaded valve")
-    return run_case(config, out_dir, comm=comm, figures=figures,
-                    fields_output=fields_output).to_dict()
+    return run_case(config, out_dir, comm=comm, figures=figures, fields_output=fields_output,
+                    start=_loaded_start(start)).to_dict()
+
+
+def _loaded_start(folder: Path | None):
+    """The loaded valve of a finished case folder as a closure's start, or None."""
+    from valve_dolfinx.geometry.transfer import ValveState
+    from valve_dolfinx.result import load_case
+
+    if folder is None:
+        return None
+    source = load_case(folder)
+    if not source.result.converged:
+        log.info("%s did not converge: not a start", folder.name)
+        return None
+    return ValveState(source.valve, source.positions, f"the loaded state of {folder.name}")
 
 
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
@@ -368,7 +377,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
               case_indices: Sequence[int] | None = None,
               case_function: CaseFunction | None = None,
               progress: ProgressCallback | None = None, report: bool = True,
-              figures: bool = True, fields_output: bool = True,
+              figures: bool = False, fields_output: bool = True,
               poll_s: float = 1.0) -> SweepOutcome:
     """Run the cases of a study (all, or ``case_indices``) into ``out`` and build its report.
 
@@ -395,7 +404,9 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     report
         Rebuild tables, figures and report.md at the end (rank 0).
     figures, fields_output
-        Passed to ``run_case``: the PNG figures and the ParaView fields of every case.
+        Passed to ``run_case``: the PNG figures (off by default: the report draws the
+        panels of the chosen cases from their folders, and a case's own figures would
+        cost several seconds each) and the ParaView fields of every case.
 
     Returns
     -------
