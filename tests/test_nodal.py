@@ -116,7 +116,7 @@ def test_block_pattern_grows_the_pattern_insertion_would_make():
     band = [(i, j) for i in range(n) for j in range(max(i - 1, 0), min(i + 2, n))]
     rounds = [(rng.integers(0, n, 25), rng.integers(0, n, 25), rng.normal(size=(25, 3, 3)))
               for _ in range(3)]
-    taken = set(band).union(*({*zip(r.tolist(), c.tolist())} for r, c, _ in rounds))
+    taken = set(band).union(*({*zip(r.tolist(), c.tolist(), strict=True)} for r, c, _ in rounds))
     unannounced = next((i, j) for i in range(n) for j in range(n) if (i, j) not in taken)
 
     def run(pattern: BlockPattern | None):

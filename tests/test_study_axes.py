@@ -91,17 +91,58 @@ def _main(argv: list[str]) -> int:
     return cli_with(stand_in_case, argv)
 
 
+#: Paths the stand-in tells apart by the graft's placement (its :func:`path_number`): the
+#: machinery's tests run on these, whatever the package's own paths are
+PLACEMENT_PATHS = (
+    ("conformal", {}),
+    ("billowed", {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0}),
+    ("billowed outwards", {"geometry.graft_placement": "billowed", "geometry.billow_mm": -2.0}),
+)
+
+
+@pytest.fixture(autouse=True)
+def placement_paths(monkeypatch):
+    """The study's paths for these tests: :data:`PLACEMENT_PATHS`, none with a start."""
+    from valve_dolfinx.study import paths
+
+    defined = tuple(paths.StudyPath(i + 1, name, f"the graft placed {name}", overrides)
+                    for i, (name, overrides) in enumerate(PLACEMENT_PATHS))
+    monkeypatch.setattr(paths, "PATHS", defined)
+    return defined
+
+
 @pytest.fixture
-def warm_paths(monkeypatch):
-    """Paths whose grafts start from the normal valve of their member (the runner's warm
-    start), otherwise the package's."""
+def warm_paths(monkeypatch, placement_paths):
+    """:data:`PLACEMENT_PATHS` whose grafts start from the normal valve of their member
+    (the runner's warm start)."""
     from dataclasses import replace
 
     from valve_dolfinx.study import paths
 
-    warm = tuple(replace(p, start=paths.START_FROM_NORMAL) for p in paths.PATHS)
+    warm = tuple(replace(p, start=paths.START_FROM_NORMAL) for p in placement_paths)
     monkeypatch.setattr(paths, "PATHS", warm)
     return warm
+
+
+def test_the_package_paths_start_from_the_closed_and_the_open_valve():
+    """Path 1 starts every graft from the closed normal valve; the others from the open
+    valve, with the graft placed as their settings say (valid case settings, one path each)."""
+    import importlib
+
+    from valve_dolfinx.config import CaseConfig, config_from_dict, set_dotted
+    from valve_dolfinx.study import paths
+
+    defined = importlib.reload(paths).PATHS  # the package's, not this module's fixture's
+    assert [p.number for p in defined] == list(range(1, len(defined) + 1))
+    assert defined[0].start == paths.START_FROM_NORMAL and not defined[0].overrides
+    assert all(p.start is None for p in defined[1:])
+    configs = []
+    for path in defined:
+        data = CaseConfig().with_graft(21, 27).to_dict()
+        for key, value in path.overrides.items():
+            set_dotted(data, key, value)
+        configs.append((path.start, config_from_dict(data).settings_hash()))
+    assert len(set(configs)) == len(defined)  # no two paths are the same case
 
 
 def _settings(**kw):

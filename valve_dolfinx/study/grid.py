@@ -238,14 +238,15 @@ class StudySettings:
         if self.wall_time_limit_s is not None:
             fixed.update(dict.fromkeys(_WALL_CLOCK_KEYS, "--wall-time-limit "
                                        "(study.wall_time_limit)"))
+        by_paths = {}  # paths set the same keys to different values
         for path in study_paths(self.paths):
             for key in path.overrides:
                 if key in fixed:
                     raise ParameterError(f"paths = {self.paths}: {path.label} sets {key}, "
                                          f"which {fixed[key]} sets too; drop it there, or "
                                          "use --paths 1")
-                fixed[key] = f"the numerical {path.label} (paths = {self.paths})"
-        return fixed
+                by_paths.setdefault(key, f"the numerical {path.label} (paths = {self.paths})")
+        return {**fixed, **by_paths}
 
     # --- the cases ---------------------------------------------------------------------
     @property

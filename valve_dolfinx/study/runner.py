@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING, Protocol
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.io import write_json
-from valve_dolfinx.study.grid import StudySettings
+from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
 from valve_dolfinx.study.layout import StudyCase, StudyLayout
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
 from valve_dolfinx.study.store import (
@@ -404,9 +404,9 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     report
         Rebuild tables, figures and report.md at the end (rank 0).
     figures, fields_output
-        Passed to ``run_case``: the PNG figures (off by default: the report draws the
-        panels of the chosen cases from their folders, and a case's own figures would
-        cost several seconds each) and the ParaView fields of every case.
+        Passed to ``run_case``: the PNG figures of every case (by default only the normal
+        valve and the panel cases draw theirs, which the report's panels show: a case's
+        figures cost seconds) and the ParaView fields of every case.
 
     Returns
     -------
@@ -426,8 +426,13 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     cases = layout.select(case_indices)
     todo = _with_sources(layout, cases)
     if case_function is None:
+        from valve_dolfinx.config import case_name
+
+        panels = {NORMAL_CASE, *settings.panel_cases}  # the report draws these cases' panels
+
         def case_function(config, folder, group, *, start):
-            return run_closure_case(config, folder, group, start=start, figures=figures,
+            drawn = figures or case_name(config.geometry) in panels
+            return run_closure_case(config, folder, group, start=start, figures=drawn,
                                     fields_output=fields_output)
     error = None
     if comm.rank == 0:
