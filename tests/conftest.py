@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import logging
 
 import pytest
 
@@ -20,3 +21,13 @@ def _collective_cleanup():
 @pytest.fixture
 def comm():
     return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def restore_logging():
+    """Undo the levels the sweep command sets in this process."""
+    names = ("valve_dolfinx", "valve_dolfinx.study")
+    saved = {n: logging.getLogger(n).level for n in names}
+    yield
+    for name, level in saved.items():
+        logging.getLogger(name).setLevel(level)

@@ -2,9 +2,9 @@
 
 * :func:`plot_coaptation_vs_width`: minimum native coaptation height against graft
   width, one curve per graft height, the normal valve as a reference line;
-  unconverged or incompetent cases hollow.
+  cases that are not competent hollow.
 * :func:`plot_sizing_map`: the W × H grid as a heat map of the same figure, with
-  the regurgitant orifice area written where it is not 0.
+  the reason written where a case is not competent (``competence_reason``).
 * :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
   two axial cuts, coaptation region on the flat outline), assembled from the
   pictures ``run`` wrote into the case folder.
@@ -73,11 +73,12 @@ def plot_coaptation_vs_width(rows: list[dict], path: Path | None = None, *,
         style = "-" if _sound(normal) else ":"
         ax.axhline(_num(normal[FIGURE]), color="k", ls=style, lw=1.2,
                    label=f"normal valve {_num(normal[FIGURE]):.2f} mm"
-                   + ("" if _sound(normal) else " (not converged/sealed)"))
+                   + ("" if _sound(normal) else " (not competent)"))
     if target_mm is not None:
         ax.axhline(target_mm, color=_TARGET_COLOUR, ls="--", lw=1.2,
                    label=f"target {target_mm:.2f} mm")
-    ax.plot([], [], "o", mfc="white", mec="0.3", label="not converged or leaking")
+    ax.plot([], [], "o", mfc="white", mec="0.3",
+            label="not competent (leaks, leaflets cross or not converged)")
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("minimum native coaptation height (mm)")
     widths = sorted({r["graft_width_pct"] for r in grafts})
@@ -92,7 +93,8 @@ def plot_coaptation_vs_width(rows: list[dict], path: Path | None = None, *,
 def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
                     recommended: str | None = None, best: str | None = None,
                     title: str = ""):
-    """The W × H grid coloured by minimum coaptation height; leaks and failures marked.
+    """The W × H grid coloured by minimum coaptation height; cells that are not competent
+    hatched with the reason, failed and damaged cases marked.
 
     The ``recommended`` cell is framed; when there is none, the ``best`` one is, labelled
     as short of the target."""
@@ -124,7 +126,7 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
                       vmin=limits[0], vmax=limits[1])
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("minimum coaptation height (mm)")
-    note = "vermillion hatched: leaks (regurgitant orifice area > 0)"
+    note = "vermillion hatched: not competent (the cell says why)"
     if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
         bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
         note += f"; black line on the colour bar: normal valve {_num(normal[FIGURE]):.2f} mm"
@@ -133,15 +135,16 @@ def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
     for (i, j), r in by_cell.items():
         value = grid[i, j]
         lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
-        roa = _num(r.get("regurgitant_orifice_area_mm2"))
-        if math.isfinite(roa) and roa > 0:
-            lines.append(f"ROA {roa:.2g} mm²")
-        if not r.get("converged"):
-            lines.append("not converged")
+        status = r.get("status", "finished")
+        incompetent = status == "finished" and not r.get("competent")
+        if status != "finished":  # failed, or damaged files
+            lines.append(status)
+        elif incompetent:  # why, as result.json says: leaks, crossing, not converged
+            lines += (r.get("competence_reason") or "not competent").split("; ")
         colour = "white" if math.isfinite(value) and value < middle else "black"
         ax.text(j, i, "\n".join(lines), ha="center", va="center", fontsize=8, color=colour,
-                fontweight="bold" if math.isfinite(roa) and roa > 0 else "normal")
-        if math.isfinite(roa) and roa > 0:
+                fontweight="bold" if incompetent else "normal")
+        if incompetent:
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
                                    lw=2.5, hatch="//", alpha=0.8))
         label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"

@@ -57,6 +57,15 @@ def _sound(row: dict) -> bool:
         _value(row))
 
 
+def _quality(row: dict) -> str:
+    """``converged and competent``, or why a case is not sound (its competence reason)."""
+    if _sound(row):
+        return "converged and competent"
+    if row.get("competence_reason"):
+        return f"not competent: {row['competence_reason']}"
+    return "not converged" if not row.get("converged") else "not competent"
+
+
 @dataclass
 class Recommendation:
     """Outcome of :func:`recommend` (all heights in mm).
@@ -141,7 +150,8 @@ def recommend(rows: list[dict], target_mm: float | None = None,
     elif normal is not None and normal.get("converged") and math.isfinite(_value(normal)):
         rec = Recommendation(_value(normal), "the normal valve's minimum coaptation height")
     else:
-        why = "was not run" if normal is None else "did not converge"
+        why = ("was not run" if normal is None else "did not converge"
+               if normal.get("status", "finished") == "finished" else f"is {normal['status']}")
         rec = Recommendation(None, f"none: the normal valve {why}; give --target-coaptation")
 
     qualifying = []
@@ -174,22 +184,22 @@ def recommend(rows: list[dict], target_mm: float | None = None,
         else:
             rec.best, rec.best_height_mm = _label(centre), _value(centre)
             rec.best_is_sound = _sound(centre)
-            quality = ("converged and sealed" if rec.best_is_sound else
-                       "converged but leaking" if centre.get("converged") else "not converged")
+            quality = _quality(centre)
             if rec.target_mm is None:
                 lines.append(f"No target ({rec.target_source}). The best graft is "
                              f"**{rec.best}** ({quality}): {rec.best_height_mm:.2f} mm.")
             else:
                 rec.shortfall_mm = rec.target_mm - rec.best_height_mm
                 # a shortfall that rounds to 0.00 mm is shown to the digit where it shows
-                digits = 2 if rec.shortfall_mm >= 0.005 else max(
-                    3, 1 - math.floor(math.log10(max(rec.shortfall_mm, 1e-12))))
+                digits = 2 if not 0.0 < rec.shortfall_mm < 0.005 else max(
+                    3, 1 - math.floor(math.log10(rec.shortfall_mm)))
+                short = (f"{rec.shortfall_mm:.{digits}f} mm short" if rec.shortfall_mm > 0.0
+                         else "which reaches the target, but the case does not qualify")
                 lines.append(
                     f"No graft on the grid converges, seals and reaches the target minimum "
                     f"coaptation height {rec.target_mm:.{digits}f} mm ({rec.target_source}). "
                     f"The best is **{rec.best}** ({quality}) with "
-                    f"{rec.best_height_mm:.{digits}f} mm, "
-                    f"{max(rec.shortfall_mm, 0.0):.{digits}f} mm short.")
+                    f"{rec.best_height_mm:.{digits}f} mm, {short}.")
     if rec.target_mm is not None:
         rec.resolution_mm = float(resolution_mm)
         near = [r for r in grafts if _sound(r) and r is not centre

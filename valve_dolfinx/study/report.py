@@ -23,6 +23,7 @@ from valve_dolfinx.plotting.study import (
     plot_coaptation_vs_width,
     plot_sizing_map,
 )
+from valve_dolfinx.result import competence_text
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
 from valve_dolfinx.study.recommend import Recommendation, recommend
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
@@ -38,13 +39,30 @@ SWEEP_LOG = "sweeps.jsonl"
 
 @dataclass
 class StudyReport:
-    """What :func:`build_report` wrote and found."""
+    """What :func:`build_report` wrote and found.
+
+    ``missing`` are the cases of the study's grid with no folder yet; ``incomplete``
+    lists them with the cases that failed or whose files are damaged (the report's table
+    says why): a study without them all, or without any case, is not complete.
+    """
 
     out: Path
     rows: list[dict]
     recommendation: Recommendation
     missing: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
+
+    @property
+    def unfinished(self) -> dict[str, list[str]]:
+        """The cases that hold no result, by why: ``failed``, ``damaged``, ``not run yet``."""
+        groups = {status: [r["case"] for r in self.rows if r.get("status") == status]
+                  for status in ("failed", "damaged")}
+        groups["not run yet"] = list(self.missing)
+        return {why: names for why, names in groups.items() if names}
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.rows) and not self.unfinished
 
 
 def read_settings(out: Path) -> StudySettings | None:
@@ -79,6 +97,13 @@ def _fmt(value, digits: int = 2) -> str:
     return str(value)
 
 
+def _competence(row: dict) -> str:
+    """``yes``, or ``no (leaks 0.40 mm²)`` with the case's reason; ``–`` without a result."""
+    if row.get("competent") is None:
+        return "–"
+    return "yes" if row["competent"] else competence_text(row).replace("not competent", "no")
+
+
 def _table(rows: list[dict]) -> list[str]:
     head = ("case", "W %", "H %", "converged", "competent", "min h (mm)", "central h (mm)",
             "area (mm²)", "ROA (mm²)", "root d (mm)", "wall (s)", "reason")
@@ -88,7 +113,7 @@ def _table(rows: list[dict]) -> list[str]:
         if len(reason) > 90:
             reason = reason[:87] + "..."
         cells = (r["case"], _fmt(r.get("graft_width_pct"), 0), _fmt(r.get("graft_height_pct"), 0),
-                 _fmt(r.get("converged")), _fmt(r.get("competent")),
+                 _fmt(r.get("converged")), _competence(r),
                  _fmt(r.get("min_coaptation_height_mm")),
                  _fmt(r.get("central_coaptation_height_mm")), _fmt(r.get("coaptation_area_mm2"), 1),
                  _fmt(r.get("regurgitant_orifice_area_mm2"), 3), _fmt(r.get("root_diameter_mm")),
@@ -98,8 +123,8 @@ def _table(rows: list[dict]) -> list[str]:
 
 
 def _write_markdown(out: Path, rows: list[dict], rec: Recommendation,
-                    settings: StudySettings | None, missing: list[str], panels: list[Path],
-                    ) -> Path:
+                    settings: StudySettings | None, unfinished: dict[str, list[str]],
+                    panels: list[Path]) -> Path:
     first = rows[0] if rows else {}
     params = first.get("parameters") or {}
     mesh = first.get("mesh_size_mm", (params.get("geometry") or {}).get("mesh_size"))
@@ -120,7 +145,7 @@ def _write_markdown(out: Path, rows: list[dict], rec: Recommendation,
              + ("; and the normal valve" if settings is None or settings.include_normal else ""),
              f"- mesh: target edge length {_fmt(mesh)} mm",
              f"- cases: {len(rows)} in the table, {converged} converged"
-             + (f"; not run yet: {', '.join(missing)}" if missing else ""),
+             + "".join(f"; {why}: {', '.join(names)}" for why, names in unfinished.items()),
              f"- compute time: {compute:.0f} rank·s summed over the cases"]
     for run in _sweeps(out)[-3:]:
         lines.append(f"- sweep run {run.get('started', '?')}: {run.get('n_ranks')} ranks, "
@@ -160,10 +185,12 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         have = {r["case"] for r in rows}
         missing = [c.name for c in settings.cases() if c.name not in have]
     rec = recommend(rows, target_mm)
-    files = list(write_tables(out, rows))
+    report = StudyReport(out, rows, rec, missing)
+    files = report.files
+    files += write_tables(out, rows)
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None, "recommendation": rec.to_dict(),
-        "cases": len(rows), "missing": missing}))
+        "cases": len(rows), "missing": missing, "unfinished": report.unfinished}))
     plot_coaptation_vs_width(rows, out / "coaptation_vs_width.png", target_mm=target_mm)
     plot_sizing_map(rows, out / "sizing_map.png", recommended=rec.recommended, best=rec.best)
     files += [out / "coaptation_vs_width.png", out / "sizing_map.png"]
@@ -174,11 +201,11 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         if plot_case_panel(out / CASES_DIR / name, panel, title=_panel_title(name)) is not None:
             panels.append(panel)
     files += panels
-    files.append(_write_markdown(out, rows, rec, settings, missing, panels))
+    files.append(_write_markdown(out, rows, rec, settings, report.unfinished, panels))
     log.debug("report: %d cases, %s -> %s", len(rows), rec.recommended or
              (f"none qualifies (best {rec.best})" if rec.best else "no recommendation"),
              out / "report.md")
-    return StudyReport(out, rows, rec, missing, files)
+    return report
 
 
 def _panel_title(name: str) -> str:

@@ -1,9 +1,11 @@
 """The study table: one row per case, read from the case folders alone (SPEC §7 schema).
 
 A row is a case's ``result.json`` (whatever fields ``CaseResult`` has) with the
-study's bookkeeping (case name, status, reason, configuration hash).  The SPEC
-§7 columns come first, then the bookkeeping, then every other field of the
-result in its own order.  ``results.json`` keeps the nested fields (per-leaflet
+study's bookkeeping (case name, status, reason, settings hash).  The SPEC §7
+columns come first, then the bookkeeping, then every other field of the
+result in its own order.  A case folder whose files are damaged
+(:func:`~valve_dolfinx.result.check_case`) is a row with status ``damaged`` and the
+reason, its result fields empty.  ``results.json`` keeps the nested fields (per-leaflet
 numbers, parameters, versions) as they are; ``results.csv`` flattens them into
 dotted column names (``parameters.geometry.mesh_size``), so both hold the
 same numbers.
@@ -16,12 +18,13 @@ import io
 import json
 import logging
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
-from valve_dolfinx.study.store import CASES_DIR, RECORD_FILE, RESULT_FILE, read_record
+from valve_dolfinx.study.store import CASES_DIR, check_study_case
 
 __all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables",
            "read_csv_rows"]
@@ -41,6 +44,10 @@ def _sort_key(row: dict) -> tuple:
     return (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
 
 
+#: a graft case's folder name
+_GRAFT_NAME = re.compile(r"W(\d+(?:\.\d+)?)_H(\d+(?:\.\d+)?)")
+
+
 def _reason(record: dict, result: dict) -> str:
     if record.get("status") == "failed":
         return str(record.get("reason") or result.get("error") or "failed")
@@ -50,32 +57,49 @@ def _reason(record: dict, result: dict) -> str:
 
 
 def case_rows(out: Path) -> list[dict]:
-    """Rows of every finished or failed case under ``out/cases`` (normal first, then W, H).
+    """Rows of every case folder under ``out/cases`` (normal first, then W, H).
 
-    A folder without ``case.json`` (not made by a sweep) or without ``result.json``
-    is skipped with a warning.
+    A case whose files are missing, unreadable or disagree is a row with status
+    ``damaged`` and the reason; a folder whose name is no case's is skipped with a warning.
     """
     rows = []
     root = Path(out) / CASES_DIR
     for folder in sorted(root.iterdir()) if root.is_dir() else []:
         if folder.name.startswith(".") or not folder.is_dir():
             continue
-        record = read_record(folder)
-        try:
-            result = json.loads((folder / RESULT_FILE).read_text())
-        except (OSError, json.JSONDecodeError):
-            result = None
-        if record is None or result is None:
-            log.warning("skipping %s: no %s or %s", folder, RECORD_FILE, RESULT_FILE)
+        size = _graft_size(folder.name)
+        if size is False:
+            log.warning("skipping %s: not a case folder of a study", folder)
             continue
-        rows.append(_row(folder.name, record, result))
+        check = check_study_case(out, folder.name)
+        if check.finished:
+            rows.append(_row(folder.name, check.record, check.result))
+            continue
+        reason = check.reason or "no result.json or case.json"
+        log.warning("%s: %s", folder, reason)
+        rows.append(_damaged_row(folder.name, size, reason))
     return sorted(rows, key=_sort_key)
+
+
+def _graft_size(name: str) -> tuple[float | None, float | None] | bool:
+    """(W, H) of a case folder's name, (None, None) for the normal valve, False for others."""
+    if name == NORMAL_CASE:
+        return None, None
+    match = _GRAFT_NAME.fullmatch(name)
+    return (float(match[1]), float(match[2])) if match else False
+
+
+def _damaged_row(name: str, size: tuple, reason: str) -> dict:
+    row: dict[str, Any] = dict.fromkeys(SPEC_COLUMNS)
+    row["graft_width_pct"], row["graft_height_pct"] = size
+    row.update(case=name, status="damaged", reason=reason, settings_hash=None)
+    return row
 
 
 def _row(name: str, record: dict, result: dict) -> dict:
     row: dict[str, Any] = {key: result.get(key) for key in SPEC_COLUMNS}
     row.update(case=name, status=record.get("status", "finished"),
-               reason=_reason(record, result), config_hash=record.get("config_hash"))
+               reason=_reason(record, result), settings_hash=record.get("settings_hash"))
     for key, value in result.items():
         if key not in row:
             row[key] = value
