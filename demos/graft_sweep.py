@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None):
         print(f"{len(outcome.computed)} cases computed in {outcome.elapsed_s:.0f} s; "
               f"{sum(bool(r['converged']) for r in report.rows)} of {len(report.rows)} "
               "converged")
-        print(report.recommendation.text)
+        print(report.text)
         print(f"report: {args.out / 'report.md'}")
     return outcome
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import signal
 
 import pytest
 
@@ -24,10 +25,11 @@ def comm():
 
 
 @pytest.fixture
-def restore_logging():
-    """Undo the levels the sweep command sets in this process."""
-    names = ("valve_dolfinx", "valve_dolfinx.study")
-    saved = {n: logging.getLogger(n).level for n in names}
+def quiet_cli():
+    """Undo what the CLI does to logging levels and SIGTERM in this process."""
+    saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}
+    handler = signal.getsignal(signal.SIGTERM)
     yield
     for name, level in saved.items():
         logging.getLogger(name).setLevel(level)
+    signal.signal(signal.SIGTERM, handler)

@@ -252,7 +252,7 @@ def _must_not_build(monkeypatch) -> None:
 @pytest.mark.parametrize("command", [["run", "--mesh-size", "2.0"], ["mesh"],
                                      ["sweep", "--widths", "0", "--heights", "0"]])
 def test_out_below_a_file_is_the_same_error_in_every_command(tmp_path, caplog, monkeypatch,
-                                                             restore_logging, command):
+                                                             quiet_cli, command):
     """--out below a file: status 7 and one line naming the file, before any mesh is built,
     in run, mesh and sweep alike; --out that is a file: the same status."""
     from valve_dolfinx.cli import main

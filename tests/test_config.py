@@ -176,7 +176,7 @@ def test_import_is_light_and_the_api_is_complete():
 
     assert proc.stdout.strip() == valve_dolfinx.__version__
     assert {"build_valve", "CaseConfig", "load_config", "run_case", "run_sweep",
-            "load_case"} <= set(valve_dolfinx.__all__)
+            "load_case", "PatientInput", "read_patient", "run_plan"} <= set(valve_dolfinx.__all__)
 
 
 def test_cli_version(capsys):

@@ -20,6 +20,7 @@ from valve_dolfinx.contact import (
     plane_projection,
 )
 from valve_dolfinx.contact.broadphase import _cell_keys
+from valve_dolfinx.contact.geometry import triangle_frames
 
 
 def random_triangles(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ...]:
@@ -120,6 +121,27 @@ def test_barycentric_gradients_give_the_plane_projection():
 
 
 # -- broad phase ---------------------------------------------------------------------------
+
+
+def test_triangle_frames_are_the_unit_normal_the_dual_edge_basis_and_the_altitudes():
+    rng = np.random.default_rng(8)
+    a, b, c = (rng.normal(size=(3, 25)) for _ in range(3))
+    normal, grad, altitudes = triangle_frames(a, b, c)
+    for t in range(25):
+        e1, e2 = b[:, t] - a[:, t], c[:, t] - a[:, t]
+        n = np.cross(e1, e2)
+        assert np.allclose(normal[:, t], n / np.linalg.norm(n), atol=1e-14)
+        g = grad[:, :, t]
+        # g_j·e_k = δ_jk (j, k = 1, 2), g_j ⊥ n, g_0 = -g_1 - g_2
+        assert np.allclose([[g[1] @ e1, g[1] @ e2], [g[2] @ e1, g[2] @ e2]], np.eye(2),
+                           atol=1e-10)
+        assert np.allclose(g @ n, 0.0, atol=1e-10)
+        assert np.allclose(g[0], -g[1] - g[2], atol=1e-14)
+        # altitude at vertex j: twice the area over the opposite edge's length
+        area2 = np.linalg.norm(n)
+        opposite = [c[:, t] - b[:, t], e2, e1]
+        assert np.allclose(altitudes[:, t], area2 / np.linalg.norm(opposite, axis=1),
+                           rtol=1e-10)
 
 
 def brute_force_pairs(x, triangles, nodes, pad, prism=False):

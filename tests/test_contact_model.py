@@ -21,8 +21,9 @@ from valve_dolfinx.contact import (
     SurfaceContact,
     vertex_adjacency,
 )
+from valve_dolfinx.contact.narrowphase import TriangleFrames
 from valve_dolfinx.contact.results import StepClock
-from valve_dolfinx.contact.surface import FACE_BAND, _TriangleFrames
+from valve_dolfinx.contact.surface import FACE_BAND
 from valve_dolfinx.exceptions import MeshError, ParameterError
 
 K, H = 10.0, 0.1
@@ -785,10 +786,10 @@ def test_search_finds_every_pair_of_the_fade_bands_corners_and_all():
     triangles = np.array([[0, 1, 2]])
     contact = SurfaceContact(triangles, len(x), ContactParameters(), boundary_band=1.0)
     xt = np.ascontiguousarray(x.T)
-    frames = _TriangleFrames.at(xt, triangles)
+    frames = TriangleFrames.at(xt, triangles)
     nodes = np.arange(3, len(x))
-    found = contact._narrow(xt, frames, *contact._search(xt, frames, nodes, StepClock()))
-    every = contact._narrow(xt, frames, *contact._near(
+    found = contact._narrow(xt, frames, contact._search(xt, frames, nodes, StepClock()))
+    every = contact._narrow(xt, frames, contact._near(
         xt, frames, nodes, np.zeros(len(nodes), dtype=np.int64), contact.search_distance))
     face_corner = np.isnan(every[3]) & (np.sum(every[6] < 0.0, axis=1) == 2)
     assert face_corner.sum() > 50                   # face rows beyond a corner are in the test

@@ -18,7 +18,7 @@ from scipy.optimize import brentq
 from valve_dolfinx.config import VALVE_CONTACT as VALVE
 from valve_dolfinx.contact import SurfaceContact
 from valve_dolfinx.contact.exclusions import adjacent_triangles
-from valve_dolfinx.contact.sides import SideMemory
+from valve_dolfinx.contact.sides import SideMemory, nearest_inside
 
 #: a 4 mm square of body 0 (normals +z), and a node of body 1
 SQUARE = 4.0 * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
@@ -241,3 +241,27 @@ def test_seam_distances_are_the_distances_to_the_shared_edges():
     assert distances[10, 1] == np.inf                       # its own body
     # strip nodes: distance to the segment x = 0, 0 <= y <= 1 (the seam nodes: 0)
     np.testing.assert_allclose(distances[:10, 1], STRIP_X[:, 0])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_nearest_inside_is_the_inside_flag_of_each_groups_nearest_pair(seed):
+    rng = np.random.default_rng(seed)
+    count = 400
+    group = rng.integers(0, 60, count)
+    # few distinct distances (ties), some unreachable (inf) and a few NaN
+    distance = rng.choice([0.1, 0.2, 0.3, np.inf, np.nan], count, p=[0.3, 0.3, 0.2, 0.15, 0.05])
+    inside = rng.random(count) < 0.5
+    got = nearest_inside(group, distance, inside)
+    # the definition: per group the smallest distance (NaN last), inside first among
+    # equals, then the first pair
+    for g in np.unique(group):
+        members = np.flatnonzero(group == g)
+        key = [(np.isnan(distance[i]), np.nan_to_num(distance[i], nan=0.0), not inside[i], i)
+               for i in members]
+        nearest = members[min(range(len(members)), key=key.__getitem__)]
+        assert (got[members] == inside[nearest]).all()
+    # and what the sort of the pairs gives
+    order = np.lexsort((~inside, distance, group))
+    first = order[np.unique(group[order], return_index=True)[1]]
+    assert np.array_equal(got, np.isin(group, group[first[inside[first]]]))
+

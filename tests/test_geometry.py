@@ -274,6 +274,30 @@ def test_graft_dimensions_and_attachment(w, h):
     assert np.all(np.isfinite(valve.points))
 
 
+@pytest.mark.parametrize("free_edge,height", [(22.0, 13.0), (18.0, 16.0), (30.0, 11.0)])
+def test_measured_leaflet_is_the_default_outline_scaled(free_edge, height):
+    """A measured leaflet (L, H) is the SPEC §1 outline scaled by (L/L0, H/H0): its lower
+    edge is y(x) = ky·y0(x/kx), with y0 the SPEC's curve on the 20 mm cylinder."""
+    kx, ky = free_edge / FREE_EDGE_MM, height / HEIGHT_MM
+    measured = LeafletShape.measured(free_edge, height)
+    assert measured.free_edge_length == pytest.approx(free_edge, rel=1e-13)
+    assert measured.height == pytest.approx(height, rel=1e-13)
+    assert measured.root_diameter == pytest.approx(3 * free_edge / math.pi, rel=1e-13)
+    x = np.linspace(-measured.half_width, measured.half_width, 101)
+    spec_curve = D * np.sin(x / kx / D) ** 2 / math.tan(math.radians(34.0))
+    assert np.allclose(measured.lower_edge(x), ky * spec_curve, rtol=0, atol=1e-12)
+    assert measured.commissure_bottom == pytest.approx(ky * RISE_MM, rel=1e-13)
+    assert measured.commissure_height == pytest.approx(5.0 * ky, rel=1e-13)
+
+
+def test_measured_default_leaflet_is_the_default_outline_exactly():
+    default = LeafletShape()
+    assert LeafletShape.measured(default.free_edge_length, default.height) == default
+    # a uniformly scaled leaflet keeps the attachment angle exactly
+    assert LeafletShape.measured(1.1 * default.free_edge_length,
+                                 1.1 * default.height).gamma_deg == 34.0
+
+
 def test_graft_placement_is_slack(graft_valve):
     valve = graft_valve
     from valve_dolfinx.geometry.valve import reference_jacobians

@@ -165,7 +165,7 @@ def test_error_in_a_callback_is_an_error_not_an_unconverged_case(tmp_path, caplo
     assert len(calls) == 5 and not (out / "result.json").exists()
 
 
-def test_error_in_a_callback_fails_the_study_case(tmp_path, monkeypatch, restore_logging):
+def test_error_in_a_callback_fails_the_study_case(tmp_path, monkeypatch, quiet_cli):
     """In a sweep the case is recorded as failed with the exception as its reason (not as a
     finished, unconverged case), and the sweep ends with status 9."""
     from valve_dolfinx.cli import main

@@ -9,6 +9,8 @@ The public API::
     case = vd.load_case("results/case")                  # result, configuration, surface
     valve = vd.build_valve(vd.CaseConfig().geometry)     # the unloaded valve mesh
     vd.run_sweep(settings, "results/graft_sweep")        # a sizing study (StudySettings)
+    patient = vd.read_patient("PATIENT.toml")            # or vd.PatientInput(root_diameter_mm=22)
+    vd.run_plan(patient, "results/plan")                 # one patient's plan, template, report
 
 Importing the package is light: each name is imported on first use, so
 ``import valve_dolfinx`` loads neither DOLFINx nor the plotting libraries, and
@@ -32,6 +34,9 @@ __all__ = [
     "run_case",
     "run_sweep",
     "load_case",
+    "PatientInput",
+    "read_patient",
+    "run_plan",
 ]
 
 #: public name -> (module, attribute), imported on first use
@@ -44,6 +49,9 @@ _LAZY = {
     "run_case": ("valve_dolfinx.case", "run_case"),
     "StudySettings": ("valve_dolfinx.study.grid", "StudySettings"),
     "run_sweep": ("valve_dolfinx.study.runner", "run_study"),
+    "PatientInput": ("valve_dolfinx.plan.patient", "PatientInput"),
+    "read_patient": ("valve_dolfinx.plan.patient", "read_patient"),
+    "run_plan": ("valve_dolfinx.plan.runner", "run_plan"),
 }
 
 

@@ -43,8 +43,8 @@ from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 from valve_dolfinx.solvers.report import SolveReport
 
-__all__ = ["CaseState", "closure_model", "solve_case", "analyse_case", "leaflet_crossing_mm",
-           "run_case"]
+__all__ = ["CaseState", "closure_model", "leaflet_rigidity", "leaflet_bending_matrix",
+           "solve_case", "analyse_case", "leaflet_crossing_mm", "run_case"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
@@ -89,14 +89,28 @@ def _leaflet_energy_on_cylinder(model: MembraneModel, wrap_radius: float
     return evaluate
 
 
-def leaflet_bending_matrix(valve: ValveMesh, model: MembraneModel, modulus_kpa: float):
-    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.mechanics.bending`),
-    D = E_b·t³/12 with the thickness of each node's tissue; no curvature is measured on
-    the boundary."""
+def leaflet_rigidity(config: CaseConfig, is_graft: bool) -> float:
+    """Flexural rigidity D = E_b·t³/12 (mN·mm) of a leaflet's tissue: the graft's
+    ``graft_bending_modulus_kpa`` and thickness, or the native leaflets'
+    ``bending_modulus_kpa`` and thickness."""
+    if is_graft:
+        return flexural_rigidity(config.graft_bending_modulus_kpa,
+                                 config.graft_material.thickness)
+    return flexural_rigidity(config.bending_modulus_kpa, config.native_material.thickness)
+
+
+def leaflet_bending_matrix(valve: ValveMesh, config: CaseConfig):
+    """Bending stiffness K of the leaflets (:mod:`valve_dolfinx.mechanics.bending`), each
+    node with the rigidity of its leaflet's tissue (:func:`leaflet_rigidity`).
+
+    No curvature is measured on the boundary (free edges and attachment), which holds the
+    commissure nodes a leaflet shares with its neighbours: every node that carries a
+    curvature lies inside one leaflet and is bent by that leaflet's triangles alone, so K
+    is the sum of the leaflets' own matrices, with no term across a seam between tissues.
+    """
     node_rigidity = np.zeros(valve.num_nodes)
-    for tag, material in model.materials.items():
-        cells = valve.cells[valve.cell_tags == tag]
-        node_rigidity[cells.ravel()] = flexural_rigidity(modulus_kpa, material.thickness)
+    for patch in valve.leaflets:
+        node_rigidity[patch.nodes] = leaflet_rigidity(config, patch.is_graft)
     return bending_stiffness_matrix(valve.cells, valve.flat, valve.num_nodes,
                                     np.unique(valve.edges), node_rigidity)
 
@@ -186,8 +200,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                            fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
 
     hooks = [make_hook]
-    if config.bending_modulus_kpa > 0:
-        K = leaflet_bending_matrix(valve, model, config.bending_modulus_kpa)
+    if any(leaflet_rigidity(config, patch.is_graft) > 0 for patch in valve.leaflets):
+        K = leaflet_bending_matrix(valve, config)
         hooks.append(lambda coupling: BendingHook(coupling, K))
     if config.solver == "ptc":
         solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
@@ -252,7 +266,7 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
 
     Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
     hash), ``config.toml`` (the configuration that ran, reloadable with
-    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.xdmf``/``.h5``
+    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.vtu``
     (displacement, stress, strain, contact force) and the PNG figures.
     """
     from valve_dolfinx import output

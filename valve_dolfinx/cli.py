@@ -6,8 +6,13 @@ mesh    write the default valve meshes (normal and graft) for ParaView and reuse
 run     close one valve (normal, or with a graft) under 80 mmHg and write
         result.json, config.toml, ParaView fields and figures to --out
 sweep   the graft sizing study: the normal valve and every graft of a width x height
-        grid (resumable, spread over MPI ranks; --list / --case-index for job arrays)
-report  rebuild a study folder's tables, figures, recommendation and report.md
+        grid, over any --vary / --uncertain settings and --paths numerical paths
+        (resumable, spread over MPI ranks; --list / --case-index for job arrays)
+nomogram  a sweep over loaded root diameters: the recommended graft against the
+        diameter (nomogram.png, nomogram.csv)
+report  rebuild a study folder's tables, figures, recommendations and report.md
+plan    one patient's repair from the measured root and leaflet: the recommended graft,
+        its template at true size (SVG, PDF) and a one-page report (plan.md, plan.pdf)
 config  print the case configuration as TOML, every setting with its unit and meaning
 
 Settings: the defaults < --config FILE < --set section.key=value < the named flags
@@ -17,6 +22,7 @@ Settings: the defaults < --config FILE < --set section.key=value < the named fla
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -224,9 +230,10 @@ def _cmd_config(args: argparse.Namespace) -> int:
     return 0
 
 
-def _study_settings(args: argparse.Namespace):
+def _study_settings(args: argparse.Namespace, compared: dict | None = None):
     """Study settings: defaults < --config (its [study] table and case settings) < --set
-    (case settings) < command-line flags."""
+    (case settings) < command-line flags; ``compared`` adds comparison axes (already
+    checked) for the nomogram."""
     from valve_dolfinx.config import apply_overrides, config_from_dict
     from valve_dolfinx.study.grid import StudySettings, load_study_toml, parse_percentages
 
@@ -238,12 +245,36 @@ def _study_settings(args: argparse.Namespace):
         settings = StudySettings(case=case)
     changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
                "target_coaptation_mm": args.target_coaptation,
-               "wall_time_limit_s": args.wall_time_limit}
+               "wall_time_limit_s": args.wall_time_limit, "paths": args.paths}
     if args.widths is not None:
         changes["widths_pct"] = parse_percentages("--widths", args.widths, "width")
     if args.heights is not None:
         changes["heights_pct"] = parse_percentages("--heights", args.heights, "height")
-    return settings.replace(**changes)
+    settings = settings.replace(**changes)  # the grid's and the paths' errors first
+    vary, uncertain = {**settings.vary, **(compared or {})}, dict(settings.uncertain)
+    _add_axes(args, settings.base_case(), vary, uncertain)
+    return settings.replace(vary=vary, uncertain=uncertain)
+
+
+def _add_axes(args: argparse.Namespace, base: dict, vary: dict, uncertain: dict) -> None:
+    """Add the --vary and --uncertain axes to ``vary`` and ``uncertain``, checked, each key
+    once (also against the configuration file's axes and --set)."""
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.axes import check_axis_values, parse_axis_option
+
+    fixed = {text.partition("=")[0].strip(): text for text in args.overrides}
+    for option, axes, texts in (("--vary", vary, args.vary),
+                                ("--uncertain", uncertain, args.uncertain)):
+        for text in texts:
+            key, values = parse_axis_option(option, text)
+            if key in vary or key in uncertain:
+                raise ParameterError(f"{option} {key}: {key} is already an axis (given twice, "
+                                     "or also in the [study] table or --root-diameters); give "
+                                     "each key once")
+            if key in fixed:
+                raise ParameterError(f"{option} {key}: --set {fixed[key]} fixes it too; drop "
+                                     "one of them")
+            axes[key] = check_axis_values(option, key, values, base)
 
 
 def _quiet_library(comm, verbose: bool, quiet: bool = False) -> None:
@@ -282,10 +313,46 @@ def _sweep_bar(comm, enabled: bool):
     return progress, close
 
 
+@contextlib.contextmanager
+def _case_progress(comm, enabled: bool):
+    """The tqdm bar of cases done (rank 0, when ``enabled`` and stderr is a terminal), the
+    log lines routed above it; yields the progress callback (None without a bar)."""
+    progress, close = _sweep_bar(comm, enabled and sys.stderr.isatty())
+    try:
+        if progress is None:
+            yield None
+        else:
+            from tqdm.contrib.logging import logging_redirect_tqdm
+
+            with logging_redirect_tqdm(loggers=[logging.getLogger()]):
+                yield progress
+    finally:
+        close()
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     settings = _study_settings(args)  # a bad grid stops here, before DOLFINx is imported
-    import contextlib
+    return _run_sweep(args, settings)
 
+
+def _cmd_nomogram(args: argparse.Namespace) -> int:
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.axes import check_axis_values
+    from valve_dolfinx.study.nomogram import NOMOGRAM_KEY
+
+    diameters = check_axis_values("--root-diameters", NOMOGRAM_KEY,
+                                  ",".join(args.root_diameters), {})
+    if None in diameters:
+        raise ParameterError("--root-diameters: give loaded root diameters in mm (10-40); "
+                             "'none', the root distended by its wall law, has no diameter")
+    settings = _study_settings(args, {NOMOGRAM_KEY: diameters})
+    if list(settings.vary) != [NOMOGRAM_KEY]:
+        raise ParameterError(f"{args.config} [study] vary: the nomogram's comparison axis is the "
+                             "root diameter (--root-diameters); move the others to uncertain")
+    return _run_sweep(args, settings)
+
+
+def _run_sweep(args: argparse.Namespace, settings) -> int:
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.study.runner import run_study, study_status
 
@@ -294,32 +361,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.list:
         rows = study_status(settings, args.out)
         if comm.rank == 0:
-            print(f"{'index':>5}  {'case':<10} {'W %':>6} {'H %':>6}  status in {args.out}")
+            width = max([4, *(len(case.name) for case, _ in rows)])
+            print(f"{'index':>5}  {'case':<{width}} {'W %':>6} {'H %':>6}  status in {args.out}")
             for case, state in rows:
                 w = "" if case.is_normal else f"{case.width_pct:g}"
                 h = "" if case.is_normal else f"{case.height_pct:g}"
-                print(f"{case.index:>5}  {case.name:<10} {w:>6} {h:>6}  {state}")
+                print(f"{case.index:>5}  {case.name:<{width}} {w:>6} {h:>6}  {state}")
         return 0
     indices = None if args.case_index is None else [args.case_index]
-    progress, close = _sweep_bar(comm, not args.no_progress and indices is None
-                                 and sys.stderr.isatty())
-    redirect = contextlib.nullcontext()
-    if progress is not None:
-        from tqdm.contrib.logging import logging_redirect_tqdm
-
-        redirect = logging_redirect_tqdm(loggers=[logging.getLogger()])
-    try:
-        with redirect:
-            outcome = run_study(settings, args.out, comm, case_indices=indices,
-                                progress=progress, report=indices is None)
-    finally:
-        close()
+    with _case_progress(comm, not args.no_progress and indices is None) as progress:
+        outcome = run_study(settings, args.out, comm, case_indices=indices,
+                            progress=progress, report=indices is None)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
         if outcome.report is not None:
-            print(outcome.report.recommendation.text)
+            print(outcome.report.text)
             print(f"report: {args.out / 'report.md'}")
+            if (args.out / "nomogram.png").is_file():
+                print(f"nomogram: {args.out / 'nomogram.png'}, {args.out / 'nomogram.csv'}")
     if outcome.failed:
         raise StudyIncompleteError(f"{len(outcome.failed)} case(s) failed: "
                                    f"{', '.join(outcome.failed)}; the report gives each reason "
@@ -337,7 +397,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     report = build_report(args.dir, target_mm=target)
     print(f"{len(report.rows)} case(s)" + "".join(
         f"; {why}: {', '.join(names)}" for why, names in report.unfinished.items()))
-    print(report.recommendation.text)
+    print(report.text)
     print(f"report: {args.dir / 'report.md'}")
     if not report.complete:
         held = sum(len(names) for names in report.unfinished.values())
@@ -348,14 +408,32 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+def _add_grid_args(p: argparse.ArgumentParser) -> None:
+    """The graft grid, the cases' mesh and wall-clock limit, and the progress bar: the
+    options ``sweep``, ``nomogram`` and ``plan`` share."""
     p.add_argument("--widths", nargs="*", default=None, metavar="W",
                    help="graft width enlargements in per cent (default 0 7 14 21 27)")
     p.add_argument("--heights", nargs="*", default=None, metavar="H",
                    help="graft height enlargements in per cent (default 0 13 27 40)")
     p.add_argument("--mesh-size", type=float, default=None, metavar="MM",
                    help="target triangle edge length in mm (default: the case default)")
-    p.add_argument("--out", type=Path, default=Path("results/graft_sweep"),
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="wall-clock limit of each case (default: the case default)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="plain log lines, no progress bar (batch jobs)")
+
+
+def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
+    _add_grid_args(p)
+    p.add_argument("--uncertain", action="append", default=[], metavar="KEY=V1,V2",
+                   help="an uncertainty axis: values of KEY that are not known, e.g. "
+                   "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
+                   "of them (repeatable)")
+    p.add_argument("--paths", type=int, default=paths, metavar="N",
+                   help="solve every graft along the first N numerical paths (1 conformal, 2 "
+                   "billowed, 3 billowed outwards; uncertainty; default "
+                   f"{paths if paths else 'the [study] table, else 1'})")
+    p.add_argument("--out", type=Path, default=Path(out),
                    help="study folder (default %(default)s)")
     p.add_argument("--config", type=Path, default=None, metavar="STUDY.TOML",
                    help="configuration file: a case configuration (`valve-dolfinx config`) "
@@ -369,14 +447,86 @@ def _add_sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's)")
-    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
-                   help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--list", action="store_true",
                    help="print the cases with their index and state, and exit")
     p.add_argument("--case-index", type=int, default=None, metavar="I",
                    help="run case I only (see --list; for job arrays), no report")
-    p.add_argument("--no-progress", action="store_true",
-                   help="plain log lines, no progress bar (batch jobs)")
+
+
+#: plan flags -> the PatientInput keys they set (plan.patient.FIELDS lists each key's flag)
+_PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root_uncertainty_mm",
+                  "leaflet_free_edge": "leaflet_free_edge_mm",
+                  "leaflet_height": "leaflet_height_mm", "pressure": "pressure_mmhg",
+                  "widths": "graft_widths_pct", "heights": "graft_heights_pct",
+                  "target_coaptation": "target_coaptation_mm",
+                  "graft_fibre_angle": "graft_fibre_angle_deg", "label": "label"}
+
+
+def _patient(args: argparse.Namespace):
+    """The patient of ``plan``: PATIENT.toml with the flags over it, or the flags alone."""
+    from valve_dolfinx.plan.patient import patient_from_mapping, read_patient
+
+    flags = {key: getattr(args, dest) for dest, key in _PATIENT_FLAGS.items()
+             if getattr(args, dest) is not None}
+    if args.patient is not None:
+        return read_patient(args.patient, flags)
+    return patient_from_mapping(flags, source="command line")
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from valve_dolfinx.plan.recommendation import GraftSize
+    from valve_dolfinx.plan.runner import plan_study_settings
+
+    patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
+    templates = [GraftSize.parse(text) for text in args.template]
+    plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.plan.runner import run_plan
+
+    comm = MPI.COMM_WORLD
+    _quiet_library(comm, args.verbose, args.quiet)
+    logging.getLogger("valve_dolfinx.plan").setLevel(
+        logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
+    with _case_progress(comm, not args.no_progress) as progress:
+        outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
+                           wall_time_limit_s=args.wall_time_limit, templates=templates,
+                           force=args.force, progress=progress)
+    if comm.rank == 0:
+        print(outcome.recommendation.headline())
+        print(f"plan: {args.out / 'plan.pdf'}, {args.out / 'plan.md'}")
+        for template in outcome.templates:
+            print(f"template {template.graft.label}: {template.pdf} (print at 100 %)")
+    return 0
+
+
+def _add_plan_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("patient", nargs="?", type=Path, default=None, metavar="PATIENT.toml",
+                   help="the measured inputs (docs/plan.md lists the keys); the flags below "
+                   "override them, or give them all without a file")
+    p.add_argument("--out", type=Path, required=True, help="plan folder (created)")
+    p.add_argument("--root-diameter", type=float, default=None, metavar="D",
+                   help="loaded root diameter at the base in mm, on echo or CT (16-35)")
+    p.add_argument("--root-uncertainty", type=float, default=None, metavar="U",
+                   help="± uncertainty of the root diameter in mm (default 1)")
+    p.add_argument("--leaflet-free-edge", type=float, default=None, metavar="L",
+                   help="free edge of the excised non-coronary leaflet, measured flat, in mm "
+                   "(default: the SPEC §1 leaflet's 20.94 mm)")
+    p.add_argument("--leaflet-height", type=float, default=None, metavar="H",
+                   help="midline height of the excised leaflet in mm (default 12.41)")
+    p.add_argument("--pressure", type=float, default=None, metavar="MMHG",
+                   help="diastolic pressure in mmHg (default 80)")
+    _add_grid_args(p)
+    p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
+                   help="minimum coaptation height a graft must reach (default: the normal "
+                   "valve's at the same root)")
+    p.add_argument("--graft-fibre-angle", type=float, default=None, metavar="DEG",
+                   help="the graft's fibre direction from its free edge (default 0: parallel)")
+    p.add_argument("--label", default=None, help="plan name printed on the template and the "
+                   "report (no identifying data needed)")
+    p.add_argument("--template", action="append", default=[], metavar="W/H",
+                   help="also draw the template of this graft, e.g. 21/27 (repeatable)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the plan of other inputs in --out")
 
 
 _EXIT_STATUS = """exit status:
@@ -486,8 +636,19 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=_cmd_run, parser=p)
 
     p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
-    _add_sweep_args(p)
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
+                   help="a comparison axis: a table, maps and a recommendation per value of the "
+                   "case setting KEY (as --set takes it), e.g. --vary bending_modulus_kpa=0,200 "
+                   "(repeatable: every combination)")
+    _add_sweep_args(p, "results/graft_sweep", None)
     p.set_defaults(func=_cmd_sweep, parser=p)
+
+    p = sub.add_parser("nomogram", help="the recommended graft against the loaded root "
+                       "diameter: a sweep over --root-diameters (nomogram.png, nomogram.csv)")
+    p.add_argument("--root-diameters", nargs="+", required=True, metavar="D",
+                   help="loaded root diameters at 80 mmHg in mm (10-40), e.g. 18 19 20 21 22 23")
+    _add_sweep_args(p, "results/nomogram", 2)
+    p.set_defaults(func=_cmd_nomogram, parser=p, vary=[])  # the diameters are the comparison
 
     p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report")
     p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`")
@@ -495,6 +656,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's, or the study's)")
     p.set_defaults(func=_cmd_report, parser=p)
+
+    p = sub.add_parser("plan", help="plan one patient's repair: the recommended graft from the "
+                       "measured root and leaflet, its template at true size, a one-page report")
+    _add_plan_args(p)
+    p.set_defaults(func=_cmd_plan, parser=p)
 
     p = sub.add_parser("config", help="print the case configuration as TOML (defaults, or "
                        "--config with --set applied), every key with its unit and meaning")

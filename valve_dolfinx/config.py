@@ -46,7 +46,11 @@ __all__ = [
     "load_config",
     "read_config_file",
     "apply_overrides",
+    "parse_value",
     "set_dotted",
+    "get_dotted",
+    "setting_keys",
+    "GRAFT_ONLY_SETTINGS",
     "config_from_dict",
     "config_toml",
     "write_config",
@@ -72,8 +76,11 @@ COMMISSURE_TAPER_MM = 2.5
 #: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
 #: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
 FREE_EDGE_BAND = 1.0
-#: effective flexural modulus of the leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
+#: effective flexural modulus of the native leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
 BENDING_MODULUS_KPA = 200.0
+#: effective flexural modulus of the graft (kPa): the native leaflets' value, for want of a
+#: measurement on glutaraldehyde-fixed pericardium to cite (docs/model.md §3)
+GRAFT_BENDING_MODULUS_KPA = BENDING_MODULUS_KPA
 #: paths to the loaded equilibrium (CaseConfig.solver): pseudo-transient continuation (the
 #: default) and damped BDF2 dynamics (SPEC §4, the cross-check)
 SOLVERS = ("ptc", "bdf2")
@@ -84,6 +91,12 @@ CONFIG_FILE = "config.toml"
 STUDY_TABLE = "study"
 #: settings that bound the run's wall-clock time, not its result (left out of settings_hash)
 _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
+
+#: settings that only a graft uses (dotted keys; a key that names a table covers all of it):
+#: the normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`),
+#: so normal valves that differ in graft settings alone are one case
+GRAFT_ONLY_SETTINGS = ("graft_material", "geometry.graft_fibre_angle_deg",
+                       "geometry.graft_placement", "geometry.billow_mm")
 
 #: the nested parameter sets of a CaseConfig, by field name
 _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
@@ -101,11 +114,12 @@ class CaseConfig:
     through the valve axis at ±60° that its neighbours mirror it across (the
     contact law sees the distance to the mirror image, as between leaflets).
 
-    ``bending_modulus_kpa`` gives the leaflets their flexural rigidity
+    ``bending_modulus_kpa`` gives the native leaflets their flexural rigidity
     ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
     gives the slack free-edge tip at the triple point a length scale instead of a fold
     at the scale of the mesh (docs/model.md §3; its effect on the figure of merit:
-    docs/numerics.md §7).
+    docs/numerics.md §7).  ``graft_bending_modulus_kpa`` is the graft's own, with the
+    graft's thickness: fixed pericardium carries compression by bending.
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
     pseudo-transient continuation with PETSc TS and SNES, contact and bending
     in the Newton system from the first step,
@@ -136,6 +150,7 @@ class CaseConfig:
     quadrature_degree: int = 1
     symmetric_reference: bool = False
     bending_modulus_kpa: float = BENDING_MODULUS_KPA
+    graft_bending_modulus_kpa: float = GRAFT_BENDING_MODULUS_KPA
 
     def __post_init__(self) -> None:
         check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
@@ -143,7 +158,12 @@ class CaseConfig:
         check_range("coaptation_threshold_mm", self.coaptation_threshold_mm, 0.0, 5.0,
                     low_open=True, unit="mm")
         check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
-                    hint="0 switches bending off; leaflets are of order 100 kPa in flexure")
+                    hint="0 switches the native leaflets' bending off; they are of order "
+                    "100-1000 kPa in flexure")
+        check_range("graft_bending_modulus_kpa", self.graft_bending_modulus_kpa, 0.0, 1e5,
+                    unit="kPa", low_hint="0 switches the graft's bending off",
+                    high_hint="that is beyond even the in-plane tensile modulus of fixed "
+                    "pericardium (tens of MPa)")
         check_range("commissure_taper_mm", self.commissure_taper_mm, 0.0, 10.0, unit="mm",
                     hint="0 gives the full contact thickness up to the commissures")
         if self.solver not in SOLVERS:
@@ -177,9 +197,19 @@ class CaseConfig:
         geometry = replace(self.geometry, graft_width_pct=width_pct, graft_height_pct=height_pct)
         return replace(self, geometry=geometry)
 
+    def normal_valve(self) -> CaseConfig:
+        """This configuration's normal valve: no graft, and every setting only a graft uses
+        (:data:`GRAFT_ONLY_SETTINGS`) at its default, which the normal valve's result does
+        not depend on."""
+        defaults = CaseConfig().to_dict()
+        data = self.with_graft(None, None).to_dict()
+        for key in GRAFT_ONLY_SETTINGS:
+            set_dotted(data, key, get_dotted(defaults, key))
+        return config_from_dict(data, source="normal valve")
+
 
 def case_name(geometry: ValveParameters) -> str:
-    """``normal`` or ``W<width>_H<height>``: the case's folder name in a study."""
+    """``normal`` or ``W<width>_H<height>``: a case's name in a study before its axis values."""
     if not geometry.has_graft:
         return "normal"
     return f"W{geometry.graft_width_pct:g}_H{geometry.graft_height_pct:g}"
@@ -207,8 +237,11 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
                               "for the linear triangles' constant strain)"),
         "symmetric_reference": ("", "true: one leaflet against the two ±60° symmetry "
                                 "planes (the normal valve's cheap reference)"),
-        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the leaflets, "
-                                "D = E_b·t³/12 (0: pure membrane)"),
+        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the native leaflets, "
+                                "D = E_b·t³/12 with their thickness (0: pure membrane)"),
+        "graft_bending_modulus_kpa": ("kPa", "flexural modulus E_b of the graft (fixed "
+                                      "pericardium), D = E_b·t³/12 with the graft's "
+                                      "thickness (0: pure membrane)"),
     },
     "geometry": {
         "root_diameter": ("mm", "root diameter the flat leaflets are sized on"),
@@ -375,13 +408,18 @@ def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:
         if not sep or not key:
             raise ParameterError(f"--set {text!r}: give section.key=value, e.g. "
                                  "--set pressure_mmhg=100 or --set geometry.mesh_size=1.6")
-        raw = raw.strip()
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw  # a bare word: a string
-        set_dotted(data, key, value)
+        set_dotted(data, key, parse_value(raw))
     return data
+
+
+def parse_value(text: str) -> Any:
+    """A setting's value as typed on the command line: a TOML value (``21``, ``true``,
+    ``"a b"``), or the text itself if it is not one (a bare word such as ``bdf2``)."""
+    text = text.strip()
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
 
 
 def set_dotted(data: dict, key: str, value: Any) -> None:
@@ -393,6 +431,28 @@ def set_dotted(data: dict, key: str, value: Any) -> None:
         if not isinstance(target, dict):
             raise ParameterError(f"{key}: {table!r} is a value, not a table")
     target[name] = value
+
+
+def get_dotted(data: Mapping[str, Any], key: str) -> Any:
+    """``data[a][b]`` for ``key = "a.b"``; KeyError if a table or the key is missing."""
+    value: Any = data
+    for name in key.split("."):
+        if not isinstance(value, Mapping) or name not in value:
+            raise KeyError(key)
+        value = value[name]
+    return value
+
+
+def setting_keys(data: Mapping[str, Any]) -> list[str]:
+    """The dotted keys of the settings in ``data`` (the :meth:`CaseConfig.to_dict` layout,
+    any subset): ``pressure_mmhg``, ``root.loaded_diameter``, ..."""
+    keys = []
+    for key, value in data.items():
+        if key in _SECTIONS and isinstance(value, Mapping):
+            keys += [f"{key}.{name}" for name in value]
+        else:
+            keys.append(key)
+    return keys
 
 
 def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> CaseConfig:

@@ -30,7 +30,8 @@ from valve_dolfinx.config import (
 from valve_dolfinx.exceptions import InputFileError, MeshError, ValveError
 
 __all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "CaseResult", "CaseCheck",
-           "LoadedCase", "check_case", "competence", "competence_text", "load_case"]
+           "LoadedCase", "check_case", "competence", "competence_text", "leaflets_cross",
+           "load_case"]
 
 #: a case folder's result (written last: its presence means the case finished)
 RESULT_FILE = "result.json"
@@ -64,9 +65,15 @@ def competence(converged: bool, orifice_mm2: float, crossing_mm: float,
         reasons.append("no orifice area")
     elif orifice_mm2 > 0.0:
         reasons.append(f"leaks {_area(orifice_mm2)} mm²")
-    if math.isfinite(crossing_mm) and crossing_mm >= element_mm:
+    if leaflets_cross(crossing_mm, element_mm):
         reasons.append(f"leaflets cross {crossing_mm:.2f} mm")
     return not reasons, "; ".join(reasons)
+
+
+def leaflets_cross(crossing_mm: float, element_mm: float) -> bool:
+    """Whether two leaflets pass through each other: their loaded surfaces cross along a
+    line at least one element long (False when either length is unknown)."""
+    return math.isfinite(crossing_mm) and crossing_mm >= element_mm
 
 
 def competence_text(result: CaseResult | Mapping) -> str:
@@ -171,7 +178,7 @@ class _Damaged(Exception):
 
 
 def check_case(folder: str | Path, config: CaseConfig | None = None, *,
-               record: bool = False) -> CaseCheck:
+               record: bool = False, digest: str | None = None) -> CaseCheck:
     """Whether ``folder`` holds a finished case, whole, and whether it is ``config``'s.
 
     This is the resume check of ``valve-dolfinx run`` (a folder that already holds this
@@ -183,23 +190,26 @@ def check_case(folder: str | Path, config: CaseConfig | None = None, *,
     and ``config.toml`` loads with the result's settings (a study's case: those of them
     its record lists).  Without ``config`` a whole case is ``"finished"``.
 
-    The settings are compared by :meth:`CaseConfig.settings_hash` (physics and numerics):
-    a case that converged is this case whatever wall-clock limit it ran under; one that
-    did not is computed again under another limit.
+    The case is ``config``'s when its identity is ``digest`` (a study's ``case.json``
+    holds it as ``config_hash``: :func:`valve_dolfinx.study.layout.case_digest`), by
+    default when its settings hash is :meth:`CaseConfig.settings_hash` (physics and
+    numerics).  A case that converged is this case whatever wall-clock limit it ran under;
+    one that did not is computed again under another limit.
     """
     folder = Path(folder)
     if not (folder / RESULT_FILE).exists() and not (record and (folder / RECORD_FILE).exists()):
         return CaseCheck("empty")
     try:
         result = _read_json(folder / RESULT_FILE)
-        digest = _result_settings(result)
-        rec = _read_record(folder, result, digest) if record else None
-        _check_outputs(folder, result, digest, rec)
+        settings = _result_settings(result)
+        rec = _read_record(folder, result, settings) if record else None
+        _check_outputs(folder, result, settings, rec)
     except _Damaged as err:
         return CaseCheck("damaged", str(err))
     if config is None:
         return CaseCheck("finished", result=result, record=rec)
-    if digest != config.settings_hash():
+    identity = settings if rec is None else rec.get("config_hash")
+    if identity != (digest or config.settings_hash()):
         return CaseCheck("other", "a case with other settings", result, rec)
     if not result.get("converged") and not _same_limits(result, config):
         return CaseCheck("outdated", "not converged under another wall-clock limit", result,
@@ -232,11 +242,14 @@ def _result_settings(result: dict) -> str:
     raise _Damaged(f"{RESULT_FILE} has neither settings_hash nor parameters")
 
 
-def _read_record(folder: Path, result: dict, digest: str) -> dict:
+def _read_record(folder: Path, result: dict, settings: str) -> dict:
     rec = _read_json(folder / RECORD_FILE)
-    for key, value in (("settings_hash", digest), ("converged", bool(result["converged"])),
-                       ("graft_width_pct", result.get("graft_width_pct")),
-                       ("graft_height_pct", result.get("graft_height_pct"))):
+    agree = [("converged", bool(result["converged"])),
+             ("graft_width_pct", result.get("graft_width_pct")),
+             ("graft_height_pct", result.get("graft_height_pct"))]
+    if rec.get("start_from") is None:  # a warm start's identity includes its start's
+        agree.append(("config_hash", settings))
+    for key, value in agree:
         if rec.get(key) != value:
             raise _Damaged(f"{RECORD_FILE} and {RESULT_FILE} disagree on {key} "
                            f"({rec.get(key)!r} and {value!r})")
@@ -249,7 +262,7 @@ def _read_record(folder: Path, result: dict, digest: str) -> dict:
     return rec
 
 
-def _check_outputs(folder: Path, result: dict, digest: str, rec: dict | None) -> None:
+def _check_outputs(folder: Path, result: dict, settings: str, rec: dict | None) -> None:
     """loaded_state.npz and config.toml of a case that did not fail (see check_case)."""
     if result.get("error") or (rec is not None and rec.get("status") == "failed"):
         return
@@ -265,7 +278,7 @@ def _check_outputs(folder: Path, result: dict, digest: str, rec: dict | None) ->
             written = load_config(folder / CONFIG_FILE)
         except (ValveError, OSError) as err:
             raise _Damaged(f"{CONFIG_FILE} cannot be loaded ({err})") from None
-        if written.settings_hash() != digest:
+        if written.settings_hash() != settings:
             raise _Damaged(f"{CONFIG_FILE} holds other settings than {RESULT_FILE}")
 
 

@@ -1,4 +1,5 @@
-r"""Geometric part of the contact Jacobian: the turning contact direction and sliding reactions.
+r"""Linearisation of the contact forces: how each row's force magnitude, its direction and
+its reactions change with the positions.
 
 A node ``p`` in contact with triangle ``(a, b, c)`` receives ``φ n`` and the
 triangle's vertex ``j`` the reaction ``-λ_j φ n`` (``φ`` the force magnitude
@@ -13,9 +14,10 @@ barycentric coordinates of the contact point).  With ``B = [1, -λ_a, -λ_b,
       + B_r\, φ\, \frac{\partial n}{\partial x_m}
       + φ\, n \otimes \frac{\partial B_r}{\partial x_m}.
 
-The first term (the distance ``d`` changing, ``∂d/∂x_m = B_m n`` exactly) is
-built in :meth:`valve_dolfinx.contact.results.ContactRows.result`.  This module
-adds the other two:
+The first term is the magnitude changing: the distance ``d`` (``∂d/∂x_m = B_m n``
+exactly), the presence, the blending weights and the driving force
+(:func:`row_gradients`; the driving force's turning with ``n`` is :func:`turning_load`).
+The other two are geometric (:func:`direction_derivatives`):
 
 * **the direction turns.**  Face contact: ``n = s N/|N|``, ``N = e₁ × e₂``
   (``e₁ = b - a``, ``e₂ = c - a``), so ``∂n/∂x_k = s (I - n nᵀ) K_k / |N|``
@@ -31,12 +33,12 @@ adds the other two:
   ``dλ_v = -dλ_u = [t·(dx_p - λ_u dx_u - λ_v dx_v) + (gap/ℓ) n·(dx_v - dx_u)]/ℓ``.
   Vertex: no sliding.
 
-All terms are exact first derivatives (checked against finite differences in
-``tests/test_contact_model.py``).  They are written as loops over the contacts, compiled
-by Numba like those of :mod:`~valve_dolfinx.contact.kernels`: a contact's terms are a few
-dozen 3-vectors, and as NumPy expressions over all contacts most of their cost would be
-temporaries.
-The dependence of the driving force on the positions is not here: the hook
+The blocks are made of these terms and summed per node pair in
+:mod:`~valve_dolfinx.contact.blocks`.  All terms are exact first derivatives (checked
+against finite differences in ``tests/test_contact_model.py``).  They are loops over the
+contacts compiled by Numba: a contact's terms are a few dozen 3-vectors, and as NumPy
+expressions over all contacts most of their cost would be temporaries.
+The dependence of the external force itself on the positions is not here: the hook
 freezes it within a step (see :mod:`valve_dolfinx.solvers.contact_hook`).
 """
 
@@ -49,7 +51,7 @@ import numpy as np
 
 from valve_dolfinx.contact.geometry import dot3
 
-__all__ = ["direction_derivatives", "turning_load"]
+__all__ = ["direction_derivatives", "row_gradients", "turning_load"]
 
 #: Barycentric coordinates below this count as zero when telling an edge contact
 #: (two vertices carry the contact point) from a vertex contact (one does).
@@ -225,3 +227,59 @@ def turning_load(dn: np.ndarray, load: np.ndarray, slope: np.ndarray) -> np.ndar
     _turning_load(np.ascontiguousarray(dn), np.ascontiguousarray(load, dtype=np.float64),
                   np.ascontiguousarray(slope, dtype=np.float64), out)
     return out
+
+
+@numba.njit(cache=True)
+def row_gradients(B, normal, grad_logp, p, dfdd, grad_f, turning, w, G, f, c, blended, depth,
+                  scale, multi):  # pragma: no cover
+    r"""Per row and node ``m`` of ``[node, support]``, the gradients its blocks are made of
+    (:meth:`~valve_dolfinx.contact.results.ContactRows.with_jacobian`), each ``(A, m, 3)``:
+
+    * ``own``: ``w G ∇f + w f c ∇p``, with blending ``+ G f w(1-w) ∇L``, and on a row
+      of a group of several (``multi``) ``+ (G f w² ∇L - w f c ∇p)`` (the ``i = k``
+      term of the group sum taken out),
+    * ``∇d = B ⊗ n``, ``w ∇L`` and ``c ∇p`` (the group coupling's factors),
+
+    with ``∇p = p ∇log p``, ``∇f = f' ∇d`` (``+ grad_f`` if ``turning``) and
+    ``∇L = ∇log p (1 + p·depth) - (p/scale) ∇d``.
+
+    The row's force magnitude is ``s = w G f``: ``w`` its blending weight (``blended``:
+    rows blended into one contact), ``G`` its group's presence and ``c = ∂G/∂p`` (from the
+    row's presence ``p`` and its gradient ``grad_logp`` ``(A, m, 3)``), ``f`` the law's
+    force, ``dfdd`` its slope in ``d`` and ``grad_f`` ``(A, m, 3)`` the rest of its gradient
+    (the driving force turning, :func:`turning_load`; read if ``turning``);
+    ``B = [1, -λ]`` ``(A, m)`` and ``normal`` ``(A, 3)`` give ``∇d``;
+    ``depth = (h - d)/scale`` with the blend distance ``scale``.
+    """
+    count, m = B.shape
+    own = np.empty((count, m, 3))
+    grad_d = np.empty((count, m, 3))
+    U = np.zeros((count, m, 3))
+    V = np.empty((count, m, 3))
+    for i in range(count):
+        wG = w[i] * G[i]
+        wfc = (w[i] * f[i]) * c[i]
+        Gfw = (G[i] * f[i]) * w[i]
+        spread = Gfw * (1.0 - w[i])
+        self_term = Gfw * w[i]
+        lift = 1.0 + p[i] * depth[i]
+        pull = p[i] / scale
+        for r in range(m):
+            for s in range(3):
+                gd = B[i, r] * normal[i, s]
+                gl = grad_logp[i, r, s]
+                gp = p[i] * gl
+                gf = dfdd[i] * gd
+                if turning:
+                    gf = gf + grad_f[i, r, s]
+                value = wG * gf + wfc * gp
+                if blended:
+                    gL = gl * lift - pull * gd
+                    value = value + spread * gL
+                    if multi[i]:
+                        value = value + (self_term * gL - wfc * gp)
+                    U[i, r, s] = w[i] * gL
+                own[i, r, s] = value
+                grad_d[i, r, s] = gd
+                V[i, r, s] = c[i] * gp
+    return own, grad_d, U, V

@@ -12,18 +12,15 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 
-from valve_dolfinx.contact.kernels import (
-    group_blocks,
-    group_index,
-    nodal_forces,
-    row_block_sums,
-    row_gradients,
-)
+from valve_dolfinx.contact.blocks import NodeBlocks, group_blocks, row_block_sums
+from valve_dolfinx.contact.linearisation import row_gradients
 from valve_dolfinx.exceptions import MeshError
 
-__all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions"]
+__all__ = ["ContactResult", "ContactRows", "StepClock", "check_nodes", "check_positions",
+           "group_index", "nodal_forces"]
 
 
 @dataclass
@@ -113,6 +110,48 @@ def check_nodes(nodes: np.ndarray | None, num_nodes: int) -> np.ndarray:
     return nodes
 
 
+@numba.njit(cache=True)
+def group_index(group):  # pragma: no cover
+    """``(inverse, counts)`` of non-negative labels, as ``np.unique(group, return_inverse=True,
+    return_counts=True)`` gives them: each label's rank among the distinct labels, and how
+    often each distinct label occurs.  Linear in the labels and their largest value (a dense
+    table; the labels here are ``node · bodies + body``) instead of a sort."""
+    size = 0
+    for g in group:
+        size = max(size, g + 1)
+    rank = np.zeros(size, dtype=np.int64)
+    for g in group:
+        rank[g] = 1
+    distinct = 0
+    for g in range(size):
+        if rank[g]:
+            rank[g] = distinct
+            distinct += 1
+    inverse = np.empty(len(group), dtype=np.int64)
+    counts = np.zeros(distinct, dtype=np.int64)
+    for i in range(len(group)):
+        inverse[i] = rank[group[i]]
+        counts[inverse[i]] += 1
+    return inverse, counts
+
+
+@numba.njit(cache=True)
+def nodal_forces(node, support, weights, normal, magnitude, num_nodes):  # pragma: no cover
+    """``(N, 3)`` nodal forces of the rows: ``φ n`` on the node and ``-λ_j φ n`` on the
+    triangle's vertex ``j`` (``φ`` = ``magnitude``), summed per node in the rows' order
+    (as ``np.bincount`` sums)."""
+    out = np.zeros((num_nodes, 3))
+    m = support.shape[1] + 1
+    for s in range(3):
+        for i in range(len(node)):
+            push = magnitude[i] * normal[i, s]
+            for r in range(m):
+                if r == 0:
+                    out[node[i], s] += 1.0 * push
+                else:
+                    out[support[i, r - 1], s] += -weights[i, r - 1] * push
+    return out
+
 
 @dataclass(frozen=True)
 class ContactRows:
@@ -192,10 +231,10 @@ class ContactRows:
         p = np.ones(count) if self.presence is None else self.presence
         G, _ = self._group_presence()
         magnitude = w * G * self.f
-        forces = nodal_forces(self.node, np.ascontiguousarray(self.support),
-                              np.ascontiguousarray(self.weights, dtype=np.float64),
-                              np.ascontiguousarray(self.normal, dtype=np.float64), magnitude,
-                              num_nodes)
+        forces = nodal_forces(node=self.node, support=np.ascontiguousarray(self.support),
+                              weights=np.ascontiguousarray(self.weights, dtype=np.float64),
+                              normal=np.ascontiguousarray(self.normal, dtype=np.float64),
+                              magnitude=magnitude, num_nodes=num_nodes)
         return self._diagnostics(forces, magnitude, p, np.empty(0, dtype=np.int64),
                                  np.empty(0, dtype=np.int64), np.empty((0, 3, 3)))
 
@@ -219,9 +258,10 @@ class ContactRows:
         ``B_r n ⊗ ∂s/∂x_m``, plus the turning of ``n`` and the sliding of ``λ``
         (:mod:`~valve_dolfinx.contact.linearisation`, in ``geometric``).  The
         couplings between the rows of a group are summed per group over the
-        distinct nodes it touches (:func:`~valve_dolfinx.contact.kernels.group_blocks`),
+        distinct nodes it touches (:func:`~valve_dolfinx.contact.blocks.group_blocks`),
         not pair by pair, and all blocks summed per (row, col) node pair as they are
-        computed (:func:`~valve_dolfinx.contact.kernels.row_block_sums`).
+        computed (:func:`~valve_dolfinx.contact.blocks.row_block_sums`), from the gradients
+        of :func:`~valve_dolfinx.contact.linearisation.row_gradients`.
         """
         count = len(self.node)
         w = np.ones(count) if self.blend is None else self.blend
@@ -244,16 +284,19 @@ class ContactRows:
         depth = (self.blend_cutoff - self.d) / self.blend_scale if self.blend is not None \
             else np.zeros(count)
         own, Bn, wgrad_L, cgrad_p = row_gradients(
-            B, np.ascontiguousarray(self.normal),
-            zeros if self.grad_log_presence is None else self.grad_log_presence, p,
-            np.ascontiguousarray(self.dfdd), zeros if self.grad_f is None else self.grad_f,
-            self.grad_f is not None, w, G, f, c, self.blend is not None, depth,
-            self.blend_scale, in_multi)
+            B=B, normal=np.ascontiguousarray(self.normal),
+            grad_logp=zeros if self.grad_log_presence is None else self.grad_log_presence,
+            p=p, dfdd=np.ascontiguousarray(self.dfdd),
+            grad_f=zeros if self.grad_f is None else self.grad_f,
+            turning=self.grad_f is not None, w=w, G=G, f=f, c=c,
+            blended=self.blend is not None, depth=depth, scale=self.blend_scale,
+            multi=in_multi)
         m = ids.shape[1]
-        outer = (np.empty(0, dtype=np.int64),) * 2 + (np.empty((0, 3, 3)),)
+        coupling = NodeBlocks.empty()
         if len(multi):
-            outer = group_blocks(inverse[multi], ids[multi], Bn[multi], -(G * f * w)[multi],
-                                 (w * f)[multi], wgrad_L[multi], cgrad_p[multi], num_nodes)
+            coupling = group_blocks(group=inverse[multi], ids=ids[multi], Bn=Bn[multi],
+                                    alpha=-(G * f * w)[multi], beta=(w * f)[multi],
+                                    U=wgrad_L[multi], V=cgrad_p[multi], num_nodes=num_nodes)
         # a row without force, force slope or driving-force turning has no blocks of its own
         # (in range of the search, out of reach of the law); it may still take part in its
         # group's coupling above
@@ -267,9 +310,10 @@ class ContactRows:
         else:
             dn, dlam = self.geometric
         rows, cols, blocks = row_block_sums(
-            np.flatnonzero(acting), ids, B, np.ascontiguousarray(self.normal), own,
-            np.ascontiguousarray(magnitude), self.geometric is not None,
-            np.ascontiguousarray(dn), np.ascontiguousarray(dlam), *outer, num_nodes)
+            live=np.flatnonzero(acting), ids=ids, B=B, normal=np.ascontiguousarray(self.normal),
+            own=own, magnitude=np.ascontiguousarray(magnitude),
+            geometric=self.geometric is not None, dn=np.ascontiguousarray(dn),
+            dlam=np.ascontiguousarray(dlam), extra=coupling, num_nodes=num_nodes)
         if clock is not None:
             clock.add("jacobian")
         return replace(result, jac_rows=rows, jac_cols=cols, jac_blocks=blocks)

@@ -10,7 +10,10 @@ triangle meanwhile; only a pair that separates forgets its side.  A pair seen fo
 time takes the side its node has on an adjacent triangle of the same body, if the node has
 one: a node sliding over a sheet keeps its face from triangle to triangle, and a crossing
 cannot begin in the middle of a contacted region.  Only a node that meets a sheet afresh
-(from afar, or around its free edge) takes the side it is on.
+(from afar, or around its free edge) takes the side it is on, and so does a node that no
+longer lies over a body's surface at an accepted state (its nearest pair with the body is
+not a face it projects into, :func:`nearest_inside`): it has nothing it could have passed
+through.
 
 The side is the face of the triangle's *oriented* sheet (+1: the side its normal
 ``(x1 − x0) × (x2 − x0)`` points to), so passing it on to an adjacent triangle assumes the
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["SideMemory", "present_side"]
+__all__ = ["SideMemory", "nearest_inside", "present_side"]
 
 
 def present_side(d0: np.ndarray) -> np.ndarray:
@@ -107,4 +110,36 @@ def _lookup(keys, sides, node_start, node, tri, adjacent, num_triangles):  # pra
             if around >= 0:
                 side = _remembered(keys, sides, lo, hi, n * num_triangles + around)
         out[i] = side
+    return out
+
+
+@numba.njit(cache=True)
+def nearest_inside(group, distance, inside):  # pragma: no cover
+    """Per pair, whether the nearest pair of its ``group`` (smallest ``distance``, NaN last;
+    of equal distances an ``inside`` one, then the first) is ``inside``: the order of
+    ``np.lexsort((~inside, distance, group))``, linear in the pairs and the largest label
+    instead of a sort.  With the pairs of a (node, body) as a group and ``inside`` a face
+    the node projects into, whether the node lies over the body's surface and keeps its
+    remembered sides with it
+    (:meth:`~valve_dolfinx.contact.surface.SurfaceContact.update_history`)."""
+    size = 0
+    for g in group:
+        size = max(size, g + 1)
+    best = np.full(size, -1, dtype=np.int64)
+    for i in range(len(group)):
+        b = best[group[i]]
+        if b < 0:
+            best[group[i]] = i
+            continue
+        d, e = distance[i], distance[b]
+        if d != d or e != e:  # NaN: after every number, equal to another NaN
+            nearer = e != e and d == d
+            tie = d != d and e != e
+        else:
+            nearer, tie = d < e, d == e
+        if nearer or (tie and inside[i] and not inside[b]):
+            best[group[i]] = i
+    out = np.empty(len(group), dtype=np.bool_)
+    for i in range(len(group)):
+        out[i] = inside[best[group[i]]]
     return out

@@ -20,8 +20,9 @@ Every call to :meth:`SurfaceContact.evaluate` searches the whole surface:
    that forces and moments balance.
 
 All of it works on all candidate pairs at once -- NumPy expressions, and loops
-compiled by Numba where a pair's work is a few dozen flops
-(:mod:`~valve_dolfinx.contact.kernels`) -- processed in blocks of triangles so
+compiled by Numba where a pair's work is a few dozen flops (the narrow phase,
+:mod:`~valve_dolfinx.contact.narrowphase`; the rows' presence,
+:mod:`~valve_dolfinx.contact.presence`) -- processed in blocks of triangles so
 that temporaries stay cache-sized.  The work of one call is
 linear in the number of candidate pairs (plus an ``S log S`` sort of the
 queried nodes), and the pairs of a node depend only on that node, so the sum
@@ -49,15 +50,6 @@ from valve_dolfinx.contact.exclusions import (
     seam_distances,
     triangle_halo,
 )
-from valve_dolfinx.contact.geometry import triangle_frames
-from valve_dolfinx.contact.kernels import (
-    group_index,
-    narrow_rows,
-    near_pairs,
-    nearest_inside,
-    presence_gradients,
-    row_presence,
-)
 from valve_dolfinx.contact.law import (
     DEFAULT_PARAMETERS,
     ContactParameters,
@@ -65,14 +57,17 @@ from valve_dolfinx.contact.law import (
     law_force_from_load,
 )
 from valve_dolfinx.contact.linearisation import direction_derivatives, turning_load
+from valve_dolfinx.contact.narrowphase import NearPairs, TriangleFrames, narrow_rows, near_pairs
+from valve_dolfinx.contact.presence import RowPlanes, presence_gradients, row_presence
 from valve_dolfinx.contact.results import (
     ContactResult,
     ContactRows,
     StepClock,
     check_nodes,
     check_positions,
+    group_index,
 )
-from valve_dolfinx.contact.sides import SideMemory, present_side
+from valve_dolfinx.contact.sides import SideMemory, nearest_inside, present_side
 from valve_dolfinx.exceptions import MeshError
 
 __all__ = ["FACE_BAND", "SurfaceContact"]
@@ -102,60 +97,18 @@ _BOUND_MARGIN = 1e-6
 TRACKING_FACTOR = 2.0
 
 
-@dataclass(frozen=True)
-class _TriangleFrames:
-    """Per-triangle data of the projection test, by axis ``(3, M)``.
-
-    ``origin`` is vertex 0, ``normal`` the unit normal and ``grad1``, ``grad2``
-    the in-plane gradients of the barycentric coordinates λ1, λ2
-    (:func:`~valve_dolfinx.contact.geometry.triangle_frames`), so that a
-    point ``p`` projects to ``λ_j = grad_j·(p - origin)`` at distance
-    ``normal·(p - origin)``.
-    """
-
-    origin: np.ndarray
-    normal: np.ndarray
-    grad1: np.ndarray
-    grad2: np.ndarray
-    altitudes: np.ndarray  # (3, M): 1/|∇λ_j|, the altitude of the triangle at vertex j
-    gradients_by_triangle: np.ndarray  # (M, 3, 3): the gradients g_j, [triangle, j, axis]
-
-    @classmethod
-    def at(cls, xt: np.ndarray, triangles: np.ndarray) -> _TriangleFrames:
-        a, b, c = (xt[:, triangles[:, j]] for j in range(3))
-        normal, grad, altitudes = triangle_frames(a, b, c)
-        return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes,
-                   gradients_by_triangle=np.ascontiguousarray(grad.transpose(2, 0, 1)))
-
-    def gradients(self, tri: np.ndarray) -> np.ndarray:
-        """``(K, 3, 3)`` barycentric gradients ``g_j`` (``[j, axis]``) of triangles ``tri``."""
-        return self.gradients_by_triangle[tri]
-
-
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
 @dataclass(frozen=True)
 class _RowGeometry:
-    """Per contact row, what its Jacobian terms need beyond :class:`ContactRows`: edge or
-    vertex contact, the law's pair weight, and the row's triangle plane: the barycentric
-    coordinates of the node's projection on it, the side, the plane's normal, the sided and
-    the unsided plane distance, the in-plane distance and the offset from the closest point
-    (edge rows), the smallest barycentric coordinate and the fade band (face rows), and
-    the triangle's barycentric gradients."""
+    """Per contact row, what its Jacobian terms need beyond :class:`ContactRows`: the row's
+    triangle plane (:class:`~valve_dolfinx.contact.presence.RowPlanes`), the law's pair
+    weight and the triangle's barycentric gradients."""
 
-    edge: np.ndarray
+    planes: RowPlanes
     weight: np.ndarray
-    plane_lam: np.ndarray
-    side: np.ndarray
-    plane_normal: np.ndarray
-    side_distance: np.ndarray
-    in_plane: np.ndarray
-    offset: np.ndarray
-    plane_distance: np.ndarray
-    face_lam_min: np.ndarray
-    band: np.ndarray
     plane_gradients: np.ndarray  # (A, 3, 3): g_j of the row's triangle, [j, axis]
 
 
@@ -336,13 +289,13 @@ class SurfaceContact:
         recorded, so that within the next step no side flips as the node moves.)"""
         x = check_positions(x, self.num_nodes, "x")
         xt = np.ascontiguousarray(x.T)
-        frames = _TriangleFrames.at(xt, self.triangles)
+        frames = TriangleFrames.at(xt, self.triangles)
         # faces within the tracking distance; edges and vertices within the law's reach (a
         # node beyond it of a triangle's boundary feels no force from it, and takes its side
         # from the adjacent faces when it slides over them)
         near = self._search(xt, frames, np.arange(self.num_nodes), StepClock(),
                             distance=TRACKING_FACTOR * self.search_distance)
-        node, tri, d0, gap, _, _, plane_lam = self._narrow(xt, frames, *near)
+        node, tri, d0, gap, _, _, plane_lam = self._narrow(xt, frames, near)
         face = np.isnan(gap)
         inside = face & (plane_lam.min(axis=1, initial=np.inf) >= -INSIDE_TOLERANCE)
         # the distance to the triangle: the plane's where the node projects into it, the
@@ -434,9 +387,9 @@ class SurfaceContact:
         thickness = p.thickness * self.thickness_scale[node, self.triangle_body[tri]]
         eps = p.blend_distance
         band = self._row_bands(node, tri)
-        edge, d, normal, side_distance, face_lam_min, in_plane, presence = row_presence(
-            s, d0, gap, offset, plane_lam, n_tri, thickness, band, eps, p.taper > 0.0,
-            p.cutoff)
+        edge, d, normal, side_distance, lam_min, in_plane, presence = row_presence(
+            side=s, d0=d0, gap=gap, offset=offset, plane_lam=plane_lam, plane_normal=n_tri,
+            thickness=thickness, band=band, eps=eps, tapered=p.taper > 0.0, cutoff=p.cutoff)
         keep = (d > -p.penetration_depth) & (presence > 0.0)
         weight = self._pair_weight(node, tri)
         keep &= weight > 0.0
@@ -459,12 +412,12 @@ class SurfaceContact:
                                f=f, dfdd=dfdd, partner=tri, group=group, blend=blend,
                                blend_scale=eps, blend_cutoff=p.cutoff, presence=presence,
                                surface_offset=thickness[rows])
-        geometry = _RowGeometry(
-            edge=edge[rows], weight=weight, plane_lam=plane_lam[rows], side=s[rows],
-            plane_normal=n_tri[rows], side_distance=side_distance[rows],
-            in_plane=in_plane[rows], offset=offset[rows], plane_distance=d0[rows],
-            face_lam_min=face_lam_min[rows], band=band[rows],
-            plane_gradients=frames.gradients(tri))
+        planes = RowPlanes(
+            edge=edge[rows], side=s[rows], normal=n_tri[rows], lam=plane_lam[rows],
+            distance=d0[rows], side_distance=side_distance[rows], in_plane=in_plane[rows],
+            offset=offset[rows], lam_min=lam_min[rows], band=band[rows])
+        geometry = _RowGeometry(planes=planes, weight=weight,
+                                plane_gradients=frames.gradients(tri))
         return contacts, geometry
 
     def _jacobian_terms(self, x: np.ndarray, f_ext: np.ndarray, contacts: ContactRows,
@@ -476,16 +429,12 @@ class SurfaceContact:
         node, support, lam, normal, d = (contacts.node, contacts.support, contacts.weights,
                                          contacts.normal, contacts.d)
         g = geometry
-        edge = g.edge
-        dn, dlam = direction_derivatives(x, node, support, lam, normal, edge,
+        dn, dlam = direction_derivatives(x, node, support, lam, normal, g.planes.edge,
                                          g.plane_gradients)
         B = np.concatenate([np.ones((len(node), 1)), -lam], axis=1)
-        grad_logp = presence_gradients(
-            B, np.ascontiguousarray(normal), d, p.taper > 0.0, p.cutoff, eps, edge,
-            np.ascontiguousarray(g.plane_lam), g.side, np.ascontiguousarray(g.plane_normal),
-            g.side_distance, g.in_plane, np.ascontiguousarray(g.offset), g.plane_distance,
-            ~edge & (g.face_lam_min < 0.0), np.ascontiguousarray(g.band),
-            np.ascontiguousarray(lam), dlam)
+        grad_logp = presence_gradients(B=B, normal=np.ascontiguousarray(normal), d=d, dlam=dlam,
+                                       planes=g.planes, eps=eps, tapered=p.taper > 0.0,
+                                       cutoff=p.cutoff)
         grad_f = None
         if p.driving_force == "normal":
             # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
@@ -504,26 +453,27 @@ class SurfaceContact:
         Returns ``node, tri``, the unsided distance ``d0``, the distance ``gap`` to the
         closest point, its barycentric coordinates ``(K, 3)``, the offset from it, those
         of the plane projection (:meth:`_narrow`), the triangle normals ``(K, 3)`` and the
-        triangles' frames (:class:`_TriangleFrames`).  They depend on the
-        positions only: a second search at the positions of the last one (a solver's
-        static residual after its step's last Newton residual, with new sides and
-        driving forces) returns the arrays of the first, which are not to be modified.
+        triangles' frames (:class:`~valve_dolfinx.contact.narrowphase.TriangleFrames`).
+        They depend on the positions only: a second search at the positions of the last
+        one (a solver's static residual after its step's last Newton residual, with new
+        sides and driving forces) returns the arrays of the first, which are not to be
+        modified.
         """
         last = self._last_candidates
         if last is not None and np.array_equal(last[0], x) and np.array_equal(last[1], nodes):
             return last[2]
         xt = np.ascontiguousarray(x.T)
-        frames = _TriangleFrames.at(xt, self.triangles)
+        frames = TriangleFrames.at(xt, self.triangles)
         near = self._search(xt, frames, nodes, clock)
-        node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, *near)
+        node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, near)
         clock.add("narrow")
         found = node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T, frames
         self._last_candidates = (x.copy(), nodes.copy(), found)
         return found
 
-    def _search(self, xt: np.ndarray, frames: _TriangleFrames, nodes: np.ndarray,
-                clock: StepClock, distance: float | None = None) -> tuple[np.ndarray, ...]:
-        """Box test, then :meth:`_near`, block by block of triangles (:meth:`_near`'s arrays).
+    def _search(self, xt: np.ndarray, frames: TriangleFrames, nodes: np.ndarray,
+                clock: StepClock, distance: float | None = None) -> NearPairs:
+        """Box test, then :meth:`_near`, block by block of triangles.
 
         ``distance`` (default: the search distance) bounds the pairs' plane distance."""
         distance = self.search_distance if distance is None else distance
@@ -540,33 +490,30 @@ class SurfaceContact:
         include_bands(xt, self.triangles, self.side_band, frames.normal, distance, lo, hi)
         index = CellIndex(xt, lo, hi, nodes)
         clock.add("broad")
-        found = [(np.empty(0, dtype=np.int64),) * 2 + (np.empty(0), np.empty((0, 3)),
-                                                       np.empty(0), np.empty(0, dtype=bool))]
+        found = [NearPairs(node=np.empty(0, dtype=np.int64), tri=np.empty(0, dtype=np.int64),
+                           d0=np.empty(0), lam=np.empty((0, 3)), beyond=np.empty(0),
+                           in_band=np.empty(0, dtype=bool))]
         for first in range(0, len(self.triangles), BLOCK_SIZE):
             block = slice(first, first + BLOCK_SIZE)
             node, tri = index.box_pairs(lo[:, block], hi[:, block])
             clock.add("broad")
             found.append(self._near(xt, frames, node, tri + first, distance))
             clock.add("narrow")
-        return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
+        return NearPairs(*(np.concatenate(parts) for parts in zip(*found, strict=True)))
 
-    def _near(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-              tri: np.ndarray, distance: float) -> tuple[np.ndarray, ...]:
+    def _near(self, xt: np.ndarray, frames: TriangleFrames, node: np.ndarray,
+              tri: np.ndarray, distance: float) -> NearPairs:
         """The cheap tests of :meth:`_narrow`: within ``distance`` of the plane, within reach
         of the triangle or in its fade band, and not in its neighbourhood
-        (:func:`~valve_dolfinx.contact.kernels.near_pairs`).  Returns ``node, tri``, the
-        plane distance ``d0``, the barycentric coordinates ``lam (K, 3)`` of the projection,
-        ``beyond``, a lower bound on its in-plane distance from the triangle, and
-        ``in_band`` (projection in the triangle or its fade band)."""
-        return near_pairs(node, tri, xt, frames.origin, frames.normal, frames.grad1,
-                          frames.grad2, frames.altitudes, self.node_body, self.triangle_body,
-                          self.side_band, FACE_BAND, self.excluded_nodes,
-                          distance, self.params.reach)
+        (:func:`~valve_dolfinx.contact.narrowphase.near_pairs`)."""
+        return near_pairs(node, tri, xt, frames, node_body=self.node_body,
+                          triangle_body=self.triangle_body, side_band=self.side_band,
+                          face_band=FACE_BAND, excluded=self.excluded_nodes,
+                          search_distance=distance, reach=self.params.reach)
 
-    def _narrow(self, xt: np.ndarray, frames: _TriangleFrames, node: np.ndarray,
-                tri: np.ndarray, d0: np.ndarray, lam: np.ndarray, beyond: np.ndarray,
-                in_band: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pairs within reach of the triangle, closest feature (from :meth:`_near`'s arrays).
+    def _narrow(self, xt: np.ndarray, frames: TriangleFrames, near: NearPairs
+                ) -> tuple[np.ndarray, ...]:
+        """Pairs within reach of the triangle, closest feature (of :meth:`_near`'s pairs).
 
         A node whose projection falls inside the triangle meets its face: the
         closest point is the projection, at plane distance ``d0``.  A node
@@ -586,9 +533,9 @@ class SurfaceContact:
         # face rows: the projection inside the triangle or in a thin band around it (where
         # they fade out, see _find_contacts); edge/vertex rows: the projection outside and,
         # by the lower bound √(beyond² + d0²) on the distance, possibly within reach
-        return narrow_rows(node, tri, d0, lam, beyond, in_band, xt, self.triangles,
-                           frames.normal, self.params.reach,
-                           self.params.reach + _BOUND_MARGIN, INSIDE_TOLERANCE)
+        return narrow_rows(near, xt, self.triangles, frames.normal, reach=self.params.reach,
+                           bound=self.params.reach + _BOUND_MARGIN,
+                           inside_tolerance=INSIDE_TOLERANCE)
 
     def _row_bands(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """``(K, 3)`` fade bands of face rows: wide beyond another body's free edge."""

@@ -12,6 +12,12 @@ bounded by
 
 Physical coordinates are millimetres: ``x_mm = d·x``, ``y_mm = d·y``.  A graft
 is the same outline scaled by ``1 + W`` across (x) and ``1 + H`` in height (y).
+
+A measured leaflet (SPEC §9: the excised leaflet's free edge ``L`` and midline height
+``H``, measured flat) is the default outline scaled by ``L/L₀`` across and ``H/H₀`` in
+height (:meth:`LeafletShape.measured`), written with the outline's own parameters:
+``d = d₀·L/L₀`` (the wrap diameter 3L/π), ``tan γ = tan γ₀·(L/L₀)/(H/H₀)`` and
+``h_c = h_c₀·H/H₀``.
 """
 
 from __future__ import annotations
@@ -85,11 +91,36 @@ class LeafletShape:
         """The same outline without graft enlargement."""
         return LeafletShape(self.root_diameter, self.gamma_deg, self.commissure_height)
 
+    @classmethod
+    def measured(cls, free_edge_mm: float, height_mm: float) -> LeafletShape:
+        """The SPEC §1 outline scaled to a leaflet measured flat (free edge and midline height).
+
+        The default outline scaled by ``kx = L/L₀`` across and ``ky = H/H₀`` in height:
+        ``d = d₀·kx`` (so the wrap diameter is 3L/π and three free edges make up the
+        circumference), ``tan γ = tan γ₀·kx/ky`` (the lower edge's rise ``d/(4 tan γ)``
+        scales by ``ky``) and ``h_c = h_c₀·ky``.  The default leaflet's own ``L₀`` and
+        ``H₀`` (:attr:`free_edge_length`, :attr:`height`) give the default outline's
+        parameters exactly, and so the default mesh; a uniformly scaled leaflet
+        (``kx = ky``) keeps γ exactly.
+        """
+        default = cls()
+        kx = free_edge_mm / default.free_edge_length
+        ky = height_mm / default.height
+        gamma = default.gamma_deg
+        if kx != ky:
+            gamma = math.degrees(math.atan(math.tan(math.radians(gamma)) * kx / ky))
+        return cls(default.root_diameter * kx, gamma, default.commissure_height * ky)
+
     # --- dimensions (mm) ---------------------------------------------------
     @property
     def half_width(self) -> float:
         """Half the free-edge length: (π/6)·d·(1+W)."""
         return math.pi / 6.0 * self.root_diameter * self.sx
+
+    @property
+    def free_edge_length(self) -> float:
+        """Length of the straight free edge: (π/3)·d·(1+W) (20.94 mm by default)."""
+        return 2.0 * self.half_width
 
     @property
     def commissure_bottom(self) -> float:

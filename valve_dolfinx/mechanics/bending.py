@@ -29,9 +29,21 @@ and the Jacobian ``K``: Newton sees it exactly.  The energy is exact for
 isometric bending and an approximation where the membrane also stretches,
 which is where membrane tension, not bending, carries the load.
 
-Checked in tests/test_bending.py against the closed form ``D·A/(2R²)`` of a
-flat sheet wrapped isometrically onto a cylinder of radius R, and for zero
-energy and force on flat placements and rigid motions.
+The rigidity is per node, ``D_i`` at interior node i.  Two consequences of
+measuring no curvature on the boundary:
+
+* a boundary held in place is a hinge: it takes no moment (a strip held at
+  both ends deflects as a simply supported plate);
+* two sheets of different rigidity that share boundary nodes (the graft and
+  its native neighbours at the commissures) add up without a seam term: an
+  interior node and its lumped area belong to one sheet's triangles, so
+  ``K`` is the sum of each sheet's own matrix.
+
+Checked in tests/test_bending.py against closed forms: the energy ``D·A/(2R²)``
+of a flat sheet wrapped isometrically onto a cylinder of radius R, the
+deflection of a simply supported strip under a uniform load, two sheets of
+different rigidity bent across their seam, and zero energy and force on flat
+placements and rigid motions.
 """
 
 from __future__ import annotations
@@ -46,7 +58,7 @@ __all__ = ["bending_stiffness_matrix", "flexural_rigidity"]
 
 def flexural_rigidity(modulus_kpa: float, thickness_mm: float) -> float:
     """D = E·t³/12 (kPa·mm³ = mN·mm) of a plate (Poisson ratio 0)."""
-    check_range("bending_modulus_kpa", modulus_kpa, 0.0, 1e7, unit="kPa")
+    check_range("flexural modulus E_b", modulus_kpa, 0.0, 1e7, unit="kPa")
     check_range("thickness", thickness_mm, 0.0, 5.0, low_open=True, unit="mm")
     return modulus_kpa * thickness_mm**3 / 12.0
 
@@ -89,7 +101,8 @@ def bending_stiffness_matrix(cells: np.ndarray, flat: np.ndarray, num_nodes: int
         measured at them (they still bend with their interior neighbours).
     rigidity
         Flexural rigidity D (mN·mm), a number or one value per node (the
-        tissue of the leaflet the node belongs to); 0 gives a zero matrix.
+        tissue of the leaflet the node belongs to; only interior nodes' values
+        enter); 0 gives a zero matrix.
     """
     rigidity = np.broadcast_to(np.asarray(rigidity, dtype=float), (num_nodes,))
     if np.any(rigidity < 0) or not np.all(np.isfinite(rigidity)):

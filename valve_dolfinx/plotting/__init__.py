@@ -44,6 +44,7 @@ from valve_dolfinx.plotting.study import (
     PANEL_IMAGES,
     plot_case_panel,
     plot_coaptation_vs_width,
+    plot_nomogram,
     plot_sizing_map,
 )
 from valve_dolfinx.plotting.style import (
@@ -78,6 +79,7 @@ __all__ = [
     "plot_cut_planes",
     "plot_flat_leaflet",
     "plot_gap_3d",
+    "plot_nomogram",
     "plot_orifice_map",
     "plot_sizing_map",
     "plot_valve_3d",

@@ -1,10 +1,15 @@
-"""Figures of a sizing study, drawn from the study table alone.
+"""Figures of a sizing study, drawn from its recommendations (the worst case per graft).
 
-* :func:`plot_coaptation_vs_width`: minimum native coaptation height against graft
-  width, one curve per graft height, the normal valve as a reference line;
-  cases that are not competent hollow.
-* :func:`plot_sizing_map`: the W × H grid as a heat map of the same figure, with
-  the reason written where a case is not competent (``competence_reason``).
+* :func:`plot_coaptation_vs_width`: the worst-case minimum native coaptation height
+  against graft width, one curve per graft height, with a bar up to the best member
+  (the spread), and the target (the normal valve's, per member) as a line or band;
+  grafts not sound in every member hollow.
+* :func:`plot_sizing_map`: the W × H grid as a heat map of the same worst case, each
+  cell with its spread, its margin over the target and why it is not competent (its
+  ``competence_reason``; with several members, how many leak, cross or did not
+  converge); the recommended (or best) graft framed.
+* :func:`plot_nomogram`: the recommended graft and its margin against the loaded root
+  diameter (:mod:`valve_dolfinx.study.nomogram`).
 * :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
   two axial cuts, coaptation region on the flat outline), assembled from the
   pictures ``run`` wrote into the case folder.
@@ -16,7 +21,9 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib import colormaps
@@ -24,11 +31,14 @@ from matplotlib.patches import Rectangle
 
 from valve_dolfinx.plotting.style import OKABE_ITO, SEQUENTIAL_CMAP, new_figure, save_figure
 
-__all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_case_panel", "PANEL_IMAGES"]
+if TYPE_CHECKING:
+    from valve_dolfinx.study.recommend import CellSummary, Recommendation
+
+__all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_nomogram", "plot_case_panel",
+           "PANEL_IMAGES"]
 
 log = logging.getLogger(__name__)
 
-FIGURE = "min_coaptation_height_mm"
 #: the pictures of a case folder that make its panel, with their captions
 PANEL_IMAGES = (("closed_valve_ventricular.png", "closed valve seen from the ventricle"),
                 ("cut_planes.png", "axial cuts"),
@@ -42,125 +52,229 @@ _TARGET_COLOUR = OKABE_ITO["vermillion"]
 _LEAK_COLOUR = OKABE_ITO["vermillion"]
 
 
-def _num(value) -> float:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
-        else math.nan
+def _targets(rec: Recommendation) -> list[float]:
+    return sorted({t for t in rec.targets_mm.values() if t is not None})
 
 
-def _sound(row: dict) -> bool:
-    return bool(row.get("converged")) and bool(row.get("competent"))
+def _worst(cell: CellSummary) -> float:
+    return math.nan if cell.worst_height_mm is None else cell.worst_height_mm
 
 
-def plot_coaptation_vs_width(rows: list[dict], path: Path | None = None, *,
-                             target_mm: float | None = None, title: str = ""):
-    """Minimum coaptation height against graft width, one curve per graft height."""
-    grafts = [r for r in rows if r.get("graft_width_pct") is not None]
-    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
-    heights = sorted({r["graft_height_pct"] for r in grafts})
+def _title(rec: Recommendation, what: str, title: str) -> str:
+    """``what``, and on a second line the comparison values and the members' worst case."""
+    n = len(rec.members)
+    worst = f"worst case over {n} members" if n > 1 else ""
+    more = ", ".join(p for p in (title, worst) if p)
+    return f"{what}\n{more}" if more else what
+
+
+def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
+                             title: str = ""):
+    """Worst-case minimum coaptation height against graft width, one curve per graft height;
+    a bar up to the best member shows the spread."""
+    cells = rec.cells
+    heights = sorted({c.height_pct for c in cells})
+    widths = sorted({c.width_pct for c in cells})
+    step = min(np.diff(widths)) if len(widths) > 1 else 10.0
     fig = new_figure(7.5, 5.0)
     ax = fig.add_subplot()
     for k, h in enumerate(heights):
         colour = _CURVE_COLOURS[k % len(_CURVE_COLOURS)]
-        curve = sorted((r for r in grafts if r["graft_height_pct"] == h),
-                       key=lambda r: r["graft_width_pct"])
-        w = np.array([r["graft_width_pct"] for r in curve], dtype=float)
-        y = np.array([_num(r.get(FIGURE)) for r in curve])
-        sound = np.array([_sound(r) for r in curve], dtype=bool)
+        curve = sorted((c for c in cells if c.height_pct == h), key=lambda c: c.width_pct)
+        # heights side by side within a width, so that their bars do not hide each other
+        shift = step * 0.06 * (k - (len(heights) - 1) / 2) if len(rec.members) > 1 else 0.0
+        w = np.array([c.width_pct for c in curve]) + shift
+        y = np.array([_worst(c) for c in curve])
+        spread = np.array([c.spread_mm if c.spread_mm is not None else 0.0 for c in curve])
+        sound = np.array([c.sound for c in curve], dtype=bool)
         ax.plot(w, y, "-", color=colour, lw=1.5, label=f"H +{h:g} %")
+        if len(rec.members) > 1:
+            ax.errorbar(w, y, yerr=[np.zeros_like(spread), spread], fmt="none", ecolor=colour,
+                        elinewidth=1.2, capsize=3)
         ax.plot(w[sound], y[sound], "o", color=colour, ms=7)
         ax.plot(w[~sound], y[~sound], "o", mfc="white", mec=colour, mew=1.8, ms=7)
-    if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
-        style = "-" if _sound(normal) else ":"
-        ax.axhline(_num(normal[FIGURE]), color="k", ls=style, lw=1.2,
-                   label=f"normal valve {_num(normal[FIGURE]):.2f} mm"
-                   + ("" if _sound(normal) else " (not competent)"))
-    if target_mm is not None:
-        ax.axhline(target_mm, color=_TARGET_COLOUR, ls="--", lw=1.2,
-                   label=f"target {target_mm:.2f} mm")
-    ax.plot([], [], "o", mfc="white", mec="0.3",
-            label="not competent (leaks, leaflets cross or not converged)")
+    targets = _targets(rec)
+    if len(targets) == 1:
+        ax.axhline(targets[0], color=_TARGET_COLOUR, ls="--", lw=1.2,
+                   label=f"target {targets[0]:.2f} mm ({rec.target_source})")
+    elif targets:
+        ax.axhspan(targets[0], targets[-1], color=_TARGET_COLOUR, alpha=0.15, lw=0,
+                   label=f"targets {targets[0]:.2f}–{targets[-1]:.2f} mm ({rec.target_source})")
+    ax.plot([], [], "o", mfc="white", mec="0.3", label="not competent"
+            + (" in some member" if len(rec.members) > 1 else ""))
+    if len(rec.members) > 1:
+        ax.errorbar([], [], yerr=[], fmt="none", ecolor="0.3", capsize=3,
+                    label="bar: up to the best member (spread)")
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("minimum native coaptation height (mm)")
-    widths = sorted({r["graft_width_pct"] for r in grafts})
     if widths:
         ax.set_xticks(widths)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(title or "Minimum coaptation height of the native leaflets")
+    ax.set_title(_title(rec, "Minimum coaptation height of the native leaflets", title),
+                 fontsize=11)
     return save_figure(fig, path, dpi=130)
 
 
-def plot_sizing_map(rows: list[dict], path: Path | None = None, *,
-                    recommended: str | None = None, best: str | None = None,
-                    title: str = ""):
-    """The W × H grid coloured by minimum coaptation height; cells that are not competent
-    hatched with the reason, failed and damaged cases marked.
+def _cell_lines(cell: CellSummary, n: int) -> list[str]:
+    value = _worst(cell)
+    lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
+    if n > 1 and cell.spread_mm is not None:
+        lines.append(f"spread {cell.spread_mm:.2f} mm")
+    if cell.margin_mm is not None:
+        lines.append(f"margin {cell.margin_mm:+.2f} mm")
+    if n == 1:  # why it is not competent, as its result.json says
+        for why in cell.reasons.values():
+            lines += (why or "not competent").split("; ")
+        return lines + (["missing"] if cell.missing else [])
+    for what, members in (("leaks", cell.leaking), ("crosses", cell.crossing),
+                          ("not converged", cell.unconverged), ("missing", cell.missing)):
+        if members:
+            lines.append(f"{what} {len(members)}/{n}")
+    return lines
 
-    The ``recommended`` cell is framed; when there is none, the ``best`` one is, labelled
-    as short of the target."""
-    grafts = [r for r in rows if r.get("graft_width_pct") is not None]
-    widths = sorted({r["graft_width_pct"] for r in grafts})
-    heights = sorted({r["graft_height_pct"] for r in grafts})
-    if not grafts:
+
+def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = ""):
+    """The W × H grid coloured by the worst-case minimum coaptation height; each cell with
+    its spread over the members, its margin over the target and its failures.
+
+    Cells that are not competent (in some member) are hatched; the recommended cell is
+    framed, or, when there is none, the best one, labelled as short of the target."""
+    cells = rec.cells
+    widths = sorted({c.width_pct for c in cells})
+    heights = sorted({c.height_pct for c in cells})
+    if not cells:
         fig = new_figure(5, 3)
         ax = fig.add_subplot()
         ax.text(0.5, 0.5, "no graft case finished yet", ha="center", va="center")
         ax.set_axis_off()
         return save_figure(fig, path, dpi=100)
+    n = len(rec.members)
     grid = np.full((len(heights), len(widths)), np.nan)
-    by_cell = {}
-    for r in grafts:
-        j, i = widths.index(r["graft_width_pct"]), heights.index(r["graft_height_pct"])
-        grid[i, j] = _num(r.get(FIGURE))
-        by_cell[(i, j)] = r
-    fig = new_figure(1.4 * len(widths) + 3.2, 1.1 * len(heights) + 2.2)
+    for c in cells:
+        grid[heights.index(c.height_pct), widths.index(c.width_pct)] = _worst(c)
+    fig = new_figure(1.5 * len(widths) + 3.2, (1.1 if n == 1 else 1.35) * len(heights) + 2.4)
     ax = fig.add_subplot()
     cmap = colormaps[SEQUENTIAL_CMAP].with_extremes(bad="0.85")
-    normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
-    # the colour range takes in the normal valve, so that its mark lies on the bar
-    values = [v for v in [*grid[np.isfinite(grid)],
-                          _num(normal.get(FIGURE)) if normal is not None else math.nan]
-              if math.isfinite(v)]
+    targets = _targets(rec)
+    # the colour range takes in the targets, so that their marks lie on the bar
+    values = [*grid[np.isfinite(grid)], *targets]
     limits = (min(values), max(values)) if values else (None, None)
     image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto",
                       vmin=limits[0], vmax=limits[1])
     bar = fig.colorbar(image, ax=ax)
-    bar.set_label("minimum coaptation height (mm)")
-    note = "vermillion hatched: not competent (the cell says why)"
-    if normal is not None and math.isfinite(_num(normal.get(FIGURE))):
-        bar.ax.axhline(_num(normal[FIGURE]), color="k", lw=2.5)
-        note += f"; black line on the colour bar: normal valve {_num(normal[FIGURE]):.2f} mm"
+    bar.set_label("worst-case minimum coaptation height (mm)" if n > 1 else
+                  "minimum coaptation height (mm)")
+    note = "vermillion hatched: not competent (leaks, crosses or not converged)"
+    if n > 1:
+        note += " in some member"
+    for t in targets:
+        bar.ax.axhline(t, color="k", lw=2.5)
+    if targets:
+        span = (f"{targets[0]:.2f} mm" if len(targets) == 1
+                else f"{targets[0]:.2f}–{targets[-1]:.2f} mm")
+        note += f"; black line{'s' if len(targets) > 1 else ''} on the colour bar: target {span}"
     finite = grid[np.isfinite(grid)]
     middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
-    for (i, j), r in by_cell.items():
+    framed = rec.recommended or rec.best
+    for c in cells:
+        i, j = heights.index(c.height_pct), widths.index(c.width_pct)
         value = grid[i, j]
-        lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
-        status = r.get("status", "finished")
-        incompetent = status == "finished" and not r.get("competent")
-        if status != "finished":  # failed, or damaged files
-            lines.append(status)
-        elif incompetent:  # why, as result.json says: leaks, crossing, not converged
-            lines += (r.get("competence_reason") or "not competent").split("; ")
         colour = "white" if math.isfinite(value) and value < middle else "black"
-        ax.text(j, i, "\n".join(lines), ha="center", va="center", fontsize=8, color=colour,
-                fontweight="bold" if incompetent else "normal")
-        if incompetent:
+        ax.text(j, i, "\n".join(_cell_lines(c, n)), ha="center", va="center",
+                fontsize=8 if n == 1 else 7, color=colour,
+                fontweight="bold" if c.incompetent else "normal")
+        if c.incompetent:
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
                                    lw=2.5, hatch="//", alpha=0.8))
-        label = f"W{r['graft_width_pct']:g}/H{r['graft_height_pct']:g}"
-        if label == (recommended or best):
-            for colour, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
+        if c.label == framed:
+            for edge, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
                 ax.add_patch(Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False,
-                                       ec=colour, lw=width))
+                                       ec=edge, lw=width))
     ax.set_xticks(range(len(widths)), [f"+{w:g}" for w in widths])
     ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
     ax.set_xlabel("graft width enlargement W (%)")
     ax.set_ylabel("graft height enlargement H (%)")
-    if recommended:
-        note += f"\nblack-and-white frame: recommended {recommended}"
-    elif best:
-        note += f"\nblack-and-white frame: best {best}, short of the target"
-    ax.set_title((title or "Graft sizing map") + f"\n{note}", fontsize=10)
+    if rec.recommended:
+        note += f"\nblack-and-white frame: recommended {rec.recommended}"
+    elif rec.best:
+        note += f"\nblack-and-white frame: best {rec.best}, short of the target"
+    if n > 1:
+        note += ("\nper cell: the lowest member's height, the spread over the members and the "
+                 "least margin over the member's target")
+    ax.set_title(_title(rec, "Graft sizing map", title) + f"\n{note}", fontsize=9)
+    return save_figure(fig, path, dpi=130)
+
+
+def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
+                  footnote: str):
+    """Recommended graft enlargements (top) and margin (bottom) against the loaded root
+    diameter; ``rows`` are :func:`valve_dolfinx.study.nomogram.nomogram_rows`.
+
+    A diameter where no graft on the grid qualifies is shaded, with the best graft's
+    enlargements hollow and its margin (negative: its shortfall) in vermillion."""
+    d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
+    ok = np.array([bool(r["recommended"]) for r in rows], dtype=bool)
+
+    def column(key: str) -> np.ndarray:
+        return np.array([np.nan if r[key] is None else r[key] for r in rows], dtype=float)
+
+    fig = new_figure(7.5, 8.0)
+    top, low, notes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [3, 2, 0.55]})
+    low.sharex(top)
+    step = min(np.diff(d)) if len(d) > 1 else 1.0
+    for ax in (top, low):
+        for x in d[~ok]:
+            ax.axvspan(x - step / 2, x + step / 2, color="0.88", lw=0)
+        ax.grid(alpha=0.3)
+    series = (("graft_width_pct", "best_width_pct", "width W", "o", OKABE_ITO["blue"], -1),
+              ("graft_height_pct", "best_height_pct", "height H", "s", OKABE_ITO["orange"], 1))
+    highest = 0.0
+    for key, best_key, label, marker, colour, side in series:
+        y, best = column(key), column(best_key)
+        x = d + side * 0.04 * step  # W and H side by side where they are equal
+        if ok.any():
+            top.plot(x[ok], y[ok], "-", marker=marker, color=colour, ms=8, lw=1.5,
+                     label=f"recommended {label}")
+        if (~ok).any():
+            top.plot(x[~ok], best[~ok], marker, mfc="white", mec=colour, mew=1.8, ms=8,
+                     ls="none", label=f"best {label} (grey: no graft qualifies)")
+        highest = np.nanmax([highest, *y[ok], *best[~ok]])
+    for r, x in zip(rows, d, strict=True):
+        name = r["recommended"] or (f"best {r['best']}" if r["best"] else "")
+        if name:
+            top.annotate(name, (x, 0), xytext=(0, 4), textcoords="offset points",
+                         xycoords=("data", "axes fraction"), ha="center", fontsize=8,
+                         color="black" if r["recommended"] else "0.4")
+    top.set_ylabel("graft enlargement over\nthe native leaflet (%)")
+    top.set_ylim(-0.3 * highest - 3, 1.45 * highest + 3)  # room for the names and legend
+    top.legend(fontsize=8, loc="upper left", ncol=2)
+    top.tick_params(labelbottom=False)
+    margin = np.where(ok, column("margin_mm"), -column("shortfall_mm"))
+    for where, colour, label in (
+            (ok, OKABE_ITO["bluish_green"], "margin over the target in every member"),
+            (~ok, OKABE_ITO["vermillion"], "no graft qualifies: the best one's margin "
+             "(if positive, it fails to converge or seal)")):
+        if where.any():
+            low.bar(d[where], margin[where], width=step / 2, color=colour, label=label)
+    for x, m in zip(d, margin, strict=True):
+        if math.isfinite(m):
+            low.annotate(f"{m:+.2f}" if abs(m) >= 0.005 else f"{m:+.3f}", (x, m),
+                         xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
+                         ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
+    low.axhline(0.0, color="k", lw=1.0)
+    finite = margin[np.isfinite(margin)]
+    lo, hi = min(0.0, *finite), max(0.0, *finite)
+    span = (hi - lo) or 0.1
+    low.set_ylim(lo - 0.2 * span, hi + 0.7 * span)  # room for the numbers and legend
+    low.set_ylabel("margin (mm)")
+    low.set_xlabel("loaded root diameter at 80 mmHg (mm)")
+    low.set_xticks(d, [f"{x:g}" for x in d])
+    low.legend(fontsize=8, loc="upper left")
+    notes.set_axis_off()
+    notes.text(0.0, 1.0, footnote, fontsize=7, va="top", ha="left", wrap=True,
+               transform=notes.transAxes)
+    fig.suptitle(title, fontsize=11)
     return save_figure(fig, path, dpi=130)
 
 

@@ -22,8 +22,9 @@ from functools import cached_property
 import numpy as np
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.contact.kernels import scalar_rows, sum_blocks, summed_already
+from valve_dolfinx.contact.blocks import sum_blocks, summed_already
 from valve_dolfinx.geometry.distributed import node_to_dof
+from valve_dolfinx.solvers.matrix_rows import scalar_rows
 
 __all__ = ["BlockPattern", "BlockRows", "NodalLayout", "NodalCoupling", "pressure_nodal_forces"]
 
@@ -60,7 +61,7 @@ class BlockRows:
 
     @cached_property
     def scalar(self) -> tuple[np.ndarray, ...]:
-        """One row per matrix row (:func:`~valve_dolfinx.contact.kernels.scalar_rows` at
+        """One row per matrix row (:func:`~valve_dolfinx.solvers.matrix_rows.scalar_rows` at
         the coupling's global indices): (row pointer, columns, values, matrix rows), the
         columns of a row ascending."""
         row_base, col_base = self._coupling._matrix_bases
@@ -167,7 +168,7 @@ class NodalCoupling:
     def merge_blocks(self, row_nodes: np.ndarray, col_nodes: np.ndarray, blocks: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The blocks summed per (row node, column node) pair, sorted by row then column,
-        all-zero blocks left out (:func:`~valve_dolfinx.contact.kernels.sum_blocks`: each
+        all-zero blocks left out (:func:`~valve_dolfinx.contact.blocks.sum_blocks`: each
         sum in the blocks' order); blocks that are so already (the contact Jacobian's,
         summed as they are computed) are returned as they are."""
         rows = np.asarray(row_nodes, dtype=np.int64)

@@ -1,28 +1,42 @@
 """The graft sizing grid and the study settings (SPEC §7), validated before anything runs.
 
 A study is the normal valve plus every graft of a width × height grid of
-enlargements (per cent of the native leaflet).  This module turns what a user
-typed (command-line values, a ``[study]`` table of a TOML file) into a
-validated :class:`StudySettings` and enumerates its cases in a fixed order:
-the normal valve first, then the grafts width by width, heights ascending
-within each width.  The case index (``--case-index I``) is the position in
-that order, so a job array indexes the same case in every task.
+enlargements (per cent of the native leaflet), at every combination of the
+values of its axes (:mod:`~valve_dolfinx.study.axes`) and along each of its
+numerical paths (:mod:`~valve_dolfinx.study.paths`).  This module turns what a
+user typed (command-line values, a ``[study]`` table of a TOML file, Python
+arguments) into a validated :class:`StudySettings`; :meth:`StudySettings.layout`
+enumerates its cases in a fixed order (:mod:`~valve_dolfinx.study.layout`), so
+``--case-index I`` names the same case in every task of a job array.
 
-Nothing here imports DOLFINx: a bad grid is reported in a fraction of a
+Nothing here imports DOLFINx: a bad grid or axis is reported in a fraction of a
 second, before any mesh is built.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from valve_dolfinx.exceptions import ParameterError, check_range
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
+from valve_dolfinx.study.axes import (
+    COMPARISON,
+    UNCERTAINTY,
+    StudyAxis,
+    axis_table,
+    check_axes,
+)
+from valve_dolfinx.study.layout import NORMAL_CASE, StudyCase, case_name
+from valve_dolfinx.study.paths import study_paths
+
+if TYPE_CHECKING:
+    from valve_dolfinx.study.layout import StudyLayout
 
 __all__ = [
     "STUDY_WIDTHS_PCT",
@@ -43,35 +57,10 @@ STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
 #: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
-#: Name of the normal valve's case folder
-NORMAL_CASE = "normal"
-
-
-def case_name(width_pct: float | None, height_pct: float | None) -> str:
-    """Folder name of a case: ``normal`` or ``W<width>_H<height>``.
-
-    The same as :func:`valve_dolfinx.config.case_name` of the case's geometry.
-    """
-    if width_pct is None:
-        return NORMAL_CASE
-    return f"W{width_pct:g}_H{height_pct:g}"
-
-
-@dataclass(frozen=True)
-class StudyCase:
-    """One case of the study: the normal valve (``width_pct is None``) or a graft size."""
-
-    index: int
-    width_pct: float | None
-    height_pct: float | None
-
-    @property
-    def name(self) -> str:
-        return case_name(self.width_pct, self.height_pct)
-
-    @property
-    def is_normal(self) -> bool:
-        return self.width_pct is None
+#: every solver stage's wall-clock limit (``wall_time_limit_s`` sets them all)
+_WALL_CLOCK_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
+#: how messages name the case settings as what sets a key
+_CASE_SETTINGS = "the case settings (--set or the configuration file)"
 
 
 def _split_values(values: Iterable[Any]) -> list[Any]:
@@ -160,6 +149,18 @@ class StudySettings:
     case
         Case settings applied to every case (the ``CaseConfig.to_dict()`` layout, nested
         tables for nested parameters; in a file, its top-level keys and tables).
+    vary
+        Comparison axes, ``{"section.key": values}`` (``--vary KEY=V1,V2``): a table, maps
+        and a recommendation per value (per combination of the values of several axes).
+    uncertain
+        Uncertainty axes (``--uncertain KEY=V1,V2``): with the paths they make the members
+        of every cell, and the recommendation holds in all of them.
+    paths
+        Numerical paths along which every graft is solved
+        (:data:`valve_dolfinx.study.paths.PATHS`; always uncertainty).
+
+    An axis key may not also be set by ``mesh_size_mm`` or ``wall_time_limit_s``, by a path
+    of the study, or by ``case`` to anything but its default value.
     """
 
     widths_pct: tuple[float, ...] = STUDY_WIDTHS_PCT
@@ -171,6 +172,9 @@ class StudySettings:
     panel_cases: tuple[str, ...] = DEFAULT_PANEL_CASES
     ranks_per_case: int = 1
     case: dict = field(default_factory=dict)
+    vary: dict = field(default_factory=dict)
+    uncertain: dict = field(default_factory=dict)
+    paths: int = 1
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise in place once
@@ -198,27 +202,69 @@ class StudySettings:
         set_(self, "panel_cases", tuple(str(p) for p in panels))
         if not isinstance(self.case, dict):
             raise ParameterError("study.case must be a table of case-configuration overrides")
+        vary, uncertain = axis_table("vary", self.vary), axis_table("uncertain", self.uncertain)
+        axes = check_axes(vary, uncertain, self.base_case(), self._fixed_keys())
+        set_(self, "vary", {a.key: a.values for a in axes if a.kind == COMPARISON})
+        set_(self, "uncertain", {a.key: a.values for a in axes if a.kind == UNCERTAINTY})
+
+    def base_case(self) -> dict:
+        """The case settings every case starts from: ``case``, then the mesh size and the
+        wall-clock limit (a new dict)."""
+        from valve_dolfinx.config import set_dotted
+
+        data = json.loads(json.dumps(self.case))  # a deep copy
+        if self.mesh_size_mm is not None:
+            set_dotted(data, "geometry.mesh_size", self.mesh_size_mm)
+        if self.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
+            for key in _WALL_CLOCK_KEYS:
+                set_dotted(data, key, self.wall_time_limit_s)
+        return data
+
+    def _fixed_keys(self) -> dict[str, str]:
+        """The keys something other than an axis sets, with what sets them; raises if a path
+        sets a key the case settings give another value."""
+        from valve_dolfinx.config import (
+            CaseConfig,
+            config_from_dict,
+            get_dotted,
+            setting_keys,
+        )
+
+        given = config_from_dict(self.case, source="study case settings").to_dict()
+        defaults = CaseConfig().to_dict()
+        fixed = {key: _CASE_SETTINGS for key in setting_keys(self.case)
+                 if get_dotted(given, key) != get_dotted(defaults, key)}
+        if self.mesh_size_mm is not None:
+            fixed["geometry.mesh_size"] = "--mesh-size (study.mesh_size)"
+        if self.wall_time_limit_s is not None:
+            fixed.update(dict.fromkeys(_WALL_CLOCK_KEYS, "--wall-time-limit "
+                                       "(study.wall_time_limit)"))
+        for path in study_paths(self.paths):
+            for key in path.overrides:
+                if key in fixed:
+                    raise ParameterError(f"paths = {self.paths}: {path.label} sets {key}, "
+                                         f"which {fixed[key]} sets too; drop it there, or "
+                                         "use --paths 1")
+                fixed[key] = f"the numerical {path.label} (paths = {self.paths})"
+        return fixed
 
     # --- the cases ---------------------------------------------------------------------
+    @property
+    def axes(self) -> tuple[StudyAxis, ...]:
+        """The comparison axes, then the uncertainty axes, in the order given."""
+        return (*(StudyAxis(k, v, COMPARISON) for k, v in self.vary.items()),
+                *(StudyAxis(k, v, UNCERTAINTY) for k, v in self.uncertain.items()))
+
+    def layout(self) -> StudyLayout:
+        """Every case, its configuration and where it stands among the axes
+        (:func:`valve_dolfinx.study.layout.study_layout`)."""
+        from valve_dolfinx.study.layout import study_layout
+
+        return study_layout(self)
+
     def cases(self) -> list[StudyCase]:
         """Every case, in the fixed order that ``--case-index`` counts."""
-        sizes: list[tuple[float | None, float | None]] = []
-        if self.include_normal:
-            sizes.append((None, None))
-        sizes += [(w, h) for w in self.widths_pct for h in self.heights_pct]
-        return [StudyCase(i, w, h) for i, (w, h) in enumerate(sizes)]
-
-    def select(self, indices: Sequence[int] | None) -> list[StudyCase]:
-        """The cases with the given indices (all if ``None``); bad indices name the range."""
-        cases = self.cases()
-        if indices is None:
-            return cases
-        for i in indices:
-            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(cases):
-                raise ParameterError(f"case index {i!r} is outside the allowed range "
-                                     f"[0, {len(cases) - 1}]: this grid has {len(cases)} cases "
-                                     "(`valve-dolfinx sweep --list` prints them)")
-        return [cases[i] for i in dict.fromkeys(indices)]
+        return list(self.layout().cases)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -260,6 +306,9 @@ def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySet
         heights = [0, 13, 27, 40]
         mesh_size = 0.8                 # mm
         panel_cases = ["W0_H0", "W7_H0", "W21_H27"]
+        vary = {bending_modulus_kpa = [0, 200]}                # comparison axes
+        uncertain = {"root.loaded_diameter" = [20, 21, 22]}    # uncertainty axes
+        paths = 2                       # numerical paths (uncertainty)
 
         [dynamics]                      # the case settings of every case
         max_steps = 30000

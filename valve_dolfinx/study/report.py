@@ -1,11 +1,13 @@
-"""Tables, figures, recommendation and ``report.md`` of a study folder, from the case folders alone.
+"""Tables, figures, recommendations and ``report.md`` of a study folder, from the case folders.
 
 :func:`build_report` is what a sweep does when its cases are done, and what
 ``valve-dolfinx report DIR`` does after a partial run or a job array: it reads
-``cases/*/result.json`` and ``case.json`` (and ``study.json``, if present, for
-the grid and the target), and writes ``results.csv``, ``results.json``,
-``summary.json``, ``coaptation_vs_width.png``, ``sizing_map.png``,
-``panels/<case>.png`` and ``report.md``.
+``cases/*/result.json`` and ``case.json`` and ``study.json`` (the settings: the
+grid, the axes, the paths and the target), and writes ``results.csv``,
+``results.json``, ``summary.json``, per comparison value a sizing map and a
+coaptation-against-width plot of the worst case, ``panels/<case>.png``, the
+nomogram when the study compares loaded root diameters
+(:mod:`~valve_dolfinx.study.nomogram`), and ``report.md``.
 """
 
 from __future__ import annotations
@@ -24,12 +26,16 @@ from valve_dolfinx.plotting.study import (
     plot_sizing_map,
 )
 from valve_dolfinx.result import competence_text
-from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
+from valve_dolfinx.study.axes import axis_label, value_text
+from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
+from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
+from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
 from valve_dolfinx.study.recommend import Recommendation, recommend
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
 from valve_dolfinx.study.table import case_rows, write_tables
 
-__all__ = ["StudyReport", "build_report", "read_settings", "SWEEP_LOG"]
+__all__ = ["StudyReport", "build_report", "read_settings", "member_tables", "figure_suffix",
+           "SWEEP_LOG"]
 
 log = logging.getLogger(__name__)
 
@@ -41,14 +47,17 @@ SWEEP_LOG = "sweeps.jsonl"
 class StudyReport:
     """What :func:`build_report` wrote and found.
 
-    ``missing`` are the cases of the study's grid with no folder yet; ``incomplete``
-    lists them with the cases that failed or whose files are damaged (the report's table
-    says why): a study without them all, or without any case, is not complete.
+    ``recommendations`` holds one :class:`Recommendation` per comparison value (one in a
+    study that varies nothing), in the order of ``layout.comparisons``.  ``missing`` are
+    the study's cases with no folder yet; :attr:`unfinished` lists them with the cases that
+    failed or whose files are damaged (the table says why): a study with any of them, or
+    without any case, is not :attr:`complete`.
     """
 
     out: Path
     rows: list[dict]
-    recommendation: Recommendation
+    layout: StudyLayout | None
+    recommendations: list[Recommendation]
     missing: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
 
@@ -64,6 +73,15 @@ class StudyReport:
     def complete(self) -> bool:
         return bool(self.rows) and not self.unfinished
 
+    @property
+    def text(self) -> str:
+        """Every recommendation's text, each headed by its comparison values."""
+        parts = []
+        for rec in self.recommendations:
+            head = axis_label(rec.comparison.items())
+            parts.append(f"[{head}] {rec.text}" if head else rec.text)
+        return "\n".join(parts) or "No cases yet."
+
 
 def read_settings(out: Path) -> StudySettings | None:
     """The settings a study folder was started with (``study.json``), if any."""
@@ -72,6 +90,30 @@ def read_settings(out: Path) -> StudySettings | None:
         return None
     data = json.loads(path.read_text())
     return StudySettings.from_dict(data.get("settings", data), source=str(path))
+
+
+def _settings_from_rows(rows: list[dict]) -> StudySettings | None:
+    """The grid of a folder without ``study.json``: its graft sizes, one member."""
+    widths = sorted({r["graft_width_pct"] for r in rows if r.get("graft_width_pct") is not None})
+    heights = sorted({r["graft_height_pct"] for r in rows
+                      if r.get("graft_height_pct") is not None})
+    if not widths:
+        return None
+    return StudySettings(widths_pct=tuple(widths), heights_pct=tuple(heights))
+
+
+def member_tables(layout: StudyLayout, comparison: int, rows: list[dict]
+                  ) -> dict[str, list[dict]]:
+    """``{member label: rows}`` of one comparison value: each member's normal valve and
+    grafts, from the rows at hand (a case not finished yet, or damaged, is left out)."""
+    by_name = {r["case"]: r for r in rows if r.get("status") != "damaged"}
+    return {member: [by_name[name] for name in cases.values() if name in by_name]
+            for member, cases in layout.member_cases(comparison).items()}
+
+
+def figure_suffix(rec: Recommendation) -> str:
+    """``""``, or ``__key=value`` per comparison value: the figures' file-name suffix."""
+    return "".join(f"__{k}={value_text(v)}" for k, v in rec.comparison.items())
 
 
 def _sweeps(out: Path) -> list[dict]:
@@ -122,31 +164,48 @@ def _table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _write_markdown(out: Path, rows: list[dict], rec: Recommendation,
-                    settings: StudySettings | None, unfinished: dict[str, list[str]],
-                    panels: list[Path]) -> Path:
+def _worst_case_table(rec: Recommendation) -> list[str]:
+    """One line per graft: its worst case over the members."""
+    n = len(rec.members)
+    head = ("graft", "worst min h (mm)", "spread (mm)", "margin (mm)", "limiting member",
+            "not converged", "leaks", "crosses", "qualifies")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for c in rec.cells:
+        counts = [f"{len(m)}/{n}" if m else "–" for m in (c.unconverged + c.missing,
+                                                          c.leaking, c.crossing)]
+        cells = (c.label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
+                 "–" if c.margin_mm is None else f"{c.margin_mm:+.2f}",
+                 c.limiting_member or "–", *counts, _fmt(c.qualifies))
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _what_was_run(out: Path, rows: list[dict], layout: StudyLayout | None,
+                  settings: StudySettings | None, unfinished: dict[str, list[str]]
+                  ) -> list[str]:
     first = rows[0] if rows else {}
     params = first.get("parameters") or {}
     mesh = first.get("mesh_size_mm", (params.get("geometry") or {}).get("mesh_size"))
     versions = first.get("versions") or {}
-    widths = sorted({r["graft_width_pct"] for r in rows if r.get("graft_width_pct") is not None})
-    heights = sorted({r["graft_height_pct"] for r in rows
-                      if r.get("graft_height_pct") is not None})
-    if settings is not None:
-        widths, heights = list(settings.widths_pct), list(settings.heights_pct)
     compute = sum(float(r.get("wall_time_s") or 0.0) * int(r.get("n_ranks") or 1) for r in rows)
     converged = sum(bool(r.get("converged")) for r in rows)
-    lines = ["# Graft sizing study", "",
-             "Normal valve and pericardial grafts of the non-coronary leaflet, closed under "
-             f"{_fmt(params.get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
-             "## What was run", "",
-             f"- grid: widths +{', +'.join(f'{w:g}' for w in widths)} %; heights "
-             f"+{', +'.join(f'{h:g}' for h in heights)} %"
-             + ("; and the normal valve" if settings is None or settings.include_normal else ""),
-             f"- mesh: target edge length {_fmt(mesh)} mm",
-             f"- cases: {len(rows)} in the table, {converged} converged"
-             + "".join(f"; {why}: {', '.join(names)}" for why, names in unfinished.items()),
-             f"- compute time: {compute:.0f} rank·s summed over the cases"]
+    lines = []
+    if settings is not None:
+        lines.append(f"- grid: widths +{', +'.join(f'{w:g}' for w in settings.widths_pct)} %; "
+                     f"heights +{', +'.join(f'{h:g}' for h in settings.heights_pct)} %"
+                     + ("; and the normal valve" if settings.include_normal else ""))
+    if layout is not None:
+        for axis in layout.axes:
+            values = ", ".join(value_text(v) for v in axis.values)
+            lines.append(f"- {axis.kind} axis `{axis.key}`: {values}")
+        paths = "; ".join(f"{p.number}. {p.name}: {p.description}" for p in layout.paths)
+        lines.append(f"- numerical paths (uncertainty): {paths}")
+        lines.append(f"- {len(layout.members)} member(s) per cell, {len(layout.comparisons)} "
+                     f"comparison value(s), {len(layout.cases)} cases")
+    lines += [f"- mesh: target edge length {_fmt(mesh)} mm",
+              f"- cases: {len(rows)} in the table, {converged} converged"
+              + "".join(f"; {why}: {', '.join(names)}" for why, names in unfinished.items()),
+              f"- compute time: {compute:.0f} rank·s summed over the cases"]
     for run in _sweeps(out)[-3:]:
         lines.append(f"- sweep run {run.get('started', '?')}: {run.get('n_ranks')} ranks, "
                      f"{run.get('ranks_per_case')} per case, {run.get('cases_run')} cases "
@@ -155,12 +214,39 @@ def _write_markdown(out: Path, rows: list[dict], rec: Recommendation,
         keys = ("valve_dolfinx", "dolfinx", "petsc", "numpy")
         lines.append("- versions: " + ", ".join(f"{k} {versions[k]}" for k in keys
                                                  if k in versions))
-    lines += ["", "## Recommendation", "", rec.text or "No cases yet.", "",
-              "## Results", "", *_table(rows), "",
+    return lines
+
+
+def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | None,
+                    panels: list[Path], nomogram: bool) -> Path:
+    rows = report.rows
+    params = (rows[0].get("parameters") or {}) if rows else {}
+    lines = ["# Graft sizing study", "",
+             "Normal valve and pericardial grafts of the non-coronary leaflet, closed under "
+             f"{_fmt(params.get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
+             "## What was run", "",
+             *_what_was_run(out, rows, report.layout, settings, report.unfinished), "",
+             "## Recommendation", ""]
+    if not report.recommendations:
+        lines += ["No cases yet.", ""]
+    for rec in report.recommendations:
+        head = axis_label(rec.comparison.items())
+        suffix = figure_suffix(rec)
+        if head:
+            lines += [f"### {head}", ""]
+        members = (f"Worst case of each graft over its {len(rec.members)} members "
+                   f"({'; '.join(rec.members)})." if len(rec.members) > 1 else
+                   "Each graft's result.")
+        lines += [rec.text, "", members, "", *_worst_case_table(rec), "",
+                  f"![minimum coaptation height against graft width{', ' + head if head else ''}]"
+                  f"(coaptation_vs_width{suffix}.png)", "",
+                  f"![sizing map{', ' + head if head else ''}](sizing_map{suffix}.png)", ""]
+    if nomogram:
+        lines += ["## Nomogram", "", "![sizing nomogram](nomogram.png)", "",
+                  "Numbers: [nomogram.csv](nomogram.csv).", ""]
+    lines += ["## Results", "", *_table(rows), "",
               "Full table: [results.csv](results.csv), [results.json](results.json).", "",
-              "## Figures", "",
-              "![minimum coaptation height against graft width](coaptation_vs_width.png)", "",
-              "![sizing map](sizing_map.png)", ""]
+              "## Panels", ""]
     for panel in panels:
         lines += [f"### {panel.stem}", "", f"![{panel.stem}](panels/{panel.name})", ""]
     lines += ["", f"_Report written {time.strftime('%Y-%m-%d %H:%M:%S')} by "
@@ -169,48 +255,85 @@ def _write_markdown(out: Path, rows: list[dict], rec: Recommendation,
     return atomic_write(out / "report.md", lambda tmp: tmp.write_text(text))
 
 
+def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None) -> list[Path]:
+    """The panel of the first case (in the study's order) of the normal valve and of each
+    panel graft (``W0_H0``)."""
+    panels = []
+    wanted = [NORMAL_CASE, *(settings.panel_cases if settings else DEFAULT_PANEL_CASES)]
+    for base in dict.fromkeys(wanted):
+        case = next((c for c in layout.cases if case_name(c.width_pct, c.height_pct) == base),
+                    None)
+        if case is None:
+            continue
+        panel = out / "panels" / f"{case.name}.png"
+        title = _panel_title(case.width_pct, case.height_pct)
+        values = axis_label((k, v) for k, v in case.values if not isinstance(v, tuple)
+                            and (k != "path" or v > 1))
+        if plot_case_panel(out / CASES_DIR / case.name, panel,
+                           title=f"{title}, {values}" if values else title) is not None:
+            panels.append(panel)
+    return panels
+
+
 def build_report(out: str | Path, settings: StudySettings | None = None,
                  target_mm: float | None = None) -> StudyReport:
-    """Rebuild every study-level file of ``out`` from its case folders (serial; rank 0)."""
+    """Rebuild every study-level file of ``out`` from its case folders (serial; rank 0).
+
+    Parameters
+    ----------
+    out
+        The study folder.
+    settings
+        The study's settings; default: ``study.json`` (without it, one member on the
+        graft sizes found).
+    target_mm
+        Minimum coaptation height every graft must reach in every member; default: the
+        settings' ``target_coaptation_mm``, else each member's normal valve's.
+    """
     out = Path(out)
     if not (out / CASES_DIR).is_dir():
         raise FileNotFoundError(f"{out} has no {CASES_DIR}/ folder: it is not a study folder "
                                 "(run `valve-dolfinx sweep --out DIR` first)")
     settings = settings or read_settings(out)
+    rows = case_rows(out)
+    inferred = settings or _settings_from_rows(rows)
+    layout = inferred.layout() if inferred is not None else None
     if target_mm is None and settings is not None:
         target_mm = settings.target_coaptation_mm
-    rows = case_rows(out)
-    missing = []
-    if settings is not None:
+    report = StudyReport(out, rows, layout, [])
+    if layout is not None:
+        report.rows = rows = case_rows(out, [c.name for c in layout.cases])
         have = {r["case"] for r in rows}
-        missing = [c.name for c in settings.cases() if c.name not in have]
-    rec = recommend(rows, target_mm)
-    report = StudyReport(out, rows, rec, missing)
-    files = report.files
-    files += write_tables(out, rows)
+        report.missing = [c.name for c in layout.cases if c.name not in have]
+        report.recommendations = [
+            recommend(member_tables(layout, c, rows), target_mm,
+                      comparison=dict(layout.comparisons[c]), n_paths=len(layout.paths))
+            for c in range(len(layout.comparisons))]
+    files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
-        "settings": settings.to_dict() if settings else None, "recommendation": rec.to_dict(),
-        "cases": len(rows), "missing": missing, "unfinished": report.unfinished}))
-    plot_coaptation_vs_width(rows, out / "coaptation_vs_width.png", target_mm=target_mm)
-    plot_sizing_map(rows, out / "sizing_map.png", recommended=rec.recommended, best=rec.best)
-    files += [out / "coaptation_vs_width.png", out / "sizing_map.png"]
-    panels = []
-    wanted = [NORMAL_CASE, *(settings.panel_cases if settings else ())]
-    for name in dict.fromkeys(wanted):
-        panel = out / "panels" / f"{name}.png"
-        if plot_case_panel(out / CASES_DIR / name, panel, title=_panel_title(name)) is not None:
-            panels.append(panel)
+        "settings": settings.to_dict() if settings else None,
+        "recommendations": [rec.to_dict() for rec in report.recommendations],
+        "cases": len(rows), "missing": report.missing, "unfinished": report.unfinished}))
+    for rec in report.recommendations:
+        head = axis_label(rec.comparison.items())
+        suffix = figure_suffix(rec)
+        for name, plot in (("coaptation_vs_width", plot_coaptation_vs_width),
+                           ("sizing_map", plot_sizing_map)):
+            plot(rec, out / f"{name}{suffix}.png", title=head)
+            files.append(out / f"{name}{suffix}.png")
+    panels = _panels(out, layout, settings) if layout is not None else []
     files += panels
-    files.append(_write_markdown(out, rows, rec, settings, report.unfinished, panels))
-    log.debug("report: %d cases, %s -> %s", len(rows), rec.recommended or
-             (f"none qualifies (best {rec.best})" if rec.best else "no recommendation"),
-             out / "report.md")
+    nomogram = layout is not None and is_nomogram(layout)
+    if nomogram:
+        files += write_nomogram(out, report.recommendations, layout, rows)
+    files.append(_write_markdown(out, report, settings, panels, nomogram))
+    report.files = files
+    log.debug("report: %d cases, %d recommendation(s) -> %s", len(rows),
+              len(report.recommendations), out / "report.md")
     return report
 
 
-def _panel_title(name: str) -> str:
-    if name == NORMAL_CASE:
+def _panel_title(width_pct: float | None, height_pct: float | None) -> str:
+    if width_pct is None:
         return "normal valve"
-    width, height = name[1:].split("_H")
-    return f"graft W +{width} %, H +{height} %"
-
+    return f"graft W +{width_pct:g} %, H +{height_pct:g} %"

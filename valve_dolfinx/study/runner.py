@@ -12,17 +12,29 @@ same folder share the work instead of repeating it.  Each case is computed on
 its own communicator exactly as a single run would be, so at one rank per case
 the results equal a serial sweep's bit for bit.
 
+Warm starts
+-----------
+A case may start from another case's loaded state (``StudyCase.start_from``, set by
+a numerical path, :mod:`~valve_dolfinx.study.paths`).  Such a case is started only
+once its source has finished: a group that reaches it claims and computes the
+source first, or, if another process holds the source's claim, takes other cases
+and comes back to it.  The case function receives the source's folder
+(``start=``).  The source is a fixed function of the study, so a serial sweep,
+``mpirun -n N`` and a job array compute the same cases from the same starts;
+with ``--case-index`` a task computes the selected case's source too, unless it
+is finished or being computed.
+
 Resuming
 --------
-A finished case records the settings hash of its configuration and the size of
-every file it wrote (``case.json``); a rerun skips it if
-:func:`~valve_dolfinx.result.check_case` finds it whole with unchanged settings,
-and recomputes it otherwise (a damaged case with a warning naming the file).  A
-case is written atomically when it finishes (staging folder renamed into
-place), so killing a sweep loses only the cases in flight.  A case that raises
-or does not converge is recorded with its reason and the sweep goes on; an
-interrupt (SIGINT, SIGTERM) stops the sweep, records nothing for the cases in
-flight and releases their claims.
+A finished case records its identity (``case.json``'s ``config_hash``, the
+settings hash) and the size of every file it wrote; a rerun skips it if
+:func:`~valve_dolfinx.result.check_case` finds it whole with an unchanged
+identity, and recomputes it otherwise (a damaged case with a warning naming the
+file).  A case is written atomically when it finishes (staging folder renamed
+into place), so killing a sweep loses only the cases in flight.  A case that
+raises or does not converge is recorded with its reason and the sweep goes on;
+an interrupt (SIGINT, SIGTERM) stops the sweep, records nothing for the cases
+in flight and releases their claims.
 
 Progress
 --------
@@ -45,13 +57,14 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.io import write_json
 from valve_dolfinx.result import competence_text
-from valve_dolfinx.study.grid import StudyCase, StudySettings
+from valve_dolfinx.study.grid import StudySettings
+from valve_dolfinx.study.layout import StudyCase, StudyLayout
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
 from valve_dolfinx.study.store import (
     RESULT_FILE,
@@ -65,49 +78,56 @@ from valve_dolfinx.study.store import (
     staging_dir,
 )
 
+if TYPE_CHECKING:
+    from valve_dolfinx.config import CaseConfig
+
 __all__ = [
     "CaseFunction",
     "SweepOutcome",
     "run_study",
     "run_closure_case",
-    "case_configs",
     "study_status",
 ]
 
 log = logging.getLogger(__name__)
 
-#: ``f(config, out_dir, comm) -> result dict`` (``CaseResult.to_dict()``), writing into out_dir
-CaseFunction = Callable[[Any, Path, MPI.Comm], dict]
+
+class CaseFunction(Protocol):
+    """What computes one case of a study, on its rank group, into a fresh folder.
+
+    ``config`` is the case's configuration, ``out_dir`` the (staging) folder to write
+    into, ``comm`` the group's communicator, and ``start`` the finished folder of the case
+    whose loaded state this one starts from (``StudyCase.start_from``; ``None``: the
+    unloaded valve).  It returns the case's result (``CaseResult.to_dict()``), which the
+    runner writes as ``result.json`` unless the function already did.
+    """
+
+    def __call__(self, config: CaseConfig, out_dir: Path, comm: MPI.Comm, *,
+                 start: Path | None) -> dict: ...
+
+
 #: ``progress(event)``: ``{"event": "start" | "case" | "end", "done", "total"}``; a "case"
 #: event also has the ``case`` name and its result ``row``
 ProgressCallback = Callable[[dict], None]
 
 
-def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, figures: bool = True,
-                     fields_output: bool = True) -> dict:
-    """The study's case: :func:`valve_dolfinx.case.run_case` into ``out_dir``."""
+def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, start: Path | None = None,
+                     figures: bool = True, fields_output: bool = True) -> dict:
+    """The study's case: :func:`valve_dolfinx.case.run_case` into ``out_dir``.
+
+    Raises
+    ------
+    NotImplementedError
+        For a warm start (``start`` given): ``run_case`` starts from the unloaded valve,
+        and no numerical path of :data:`valve_dolfinx.study.paths.PATHS` asks for one.
+    """
     from valve_dolfinx.case import run_case
 
+    if start is not None:
+        raise NotImplementedError(f"a start from the loaded state in {start} is not wired "
+                                  "into run_case; every path starts from the unloaded valve")
     return run_case(config, out_dir, comm=comm, figures=figures,
                     fields_output=fields_output).to_dict()
-
-
-def case_configs(settings: StudySettings, cases: Sequence[StudyCase]) -> dict[str, Any]:
-    """The validated ``CaseConfig`` of every case (raises ParameterError before any run).
-
-    The study's case settings (``settings.case``), then its mesh size and wall-clock
-    limit, then each case's graft size (none for the normal valve).
-    """
-    from valve_dolfinx.config import config_from_dict, set_dotted
-
-    data = json.loads(json.dumps(settings.case))  # a deep copy
-    if settings.mesh_size_mm is not None:
-        set_dotted(data, "geometry.mesh_size", settings.mesh_size_mm)
-    if settings.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
-        for stage in ("pseudo_transient", "dynamics"):
-            set_dotted(data, f"{stage}.wall_time_limit_s", settings.wall_time_limit_s)
-    base = config_from_dict(data, source="study case settings")
-    return {c.name: base.with_graft(c.width_pct, c.height_pct) for c in cases}
 
 
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
@@ -149,11 +169,11 @@ def case_line(name: str, row: dict, done: int | None = None, total: int | None =
 class _Monitor:
     """Rank 0's watcher of the case folders: one log line and one progress event per case."""
 
-    def __init__(self, out: Path, cases: list[StudyCase], configs: dict,
+    def __init__(self, out: Path, cases: list[StudyCase], layout: StudyLayout,
                  progress: ProgressCallback | None, poll_s: float) -> None:
-        self.out, self.cases, self.configs = out, cases, configs
+        self.out, self.cases, self.layout = out, cases, layout
         self.progress, self.poll_s = progress, poll_s
-        self.done = {c.name for c in cases if self._finished(c) is not None}
+        self.done = {c.name for c in cases if self._finished(c.name) is not None}
         self.initial = len(self.done)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="study-monitor")
@@ -170,16 +190,16 @@ class _Monitor:
         while not self._stop.wait(self.poll_s):
             self.scan()
 
-    def _finished(self, case: StudyCase) -> dict | None:
-        """The result of ``case`` if its folder holds it finished and whole."""
-        check = check_study_case(self.out, case.name, self.configs[case.name])
+    def _finished(self, name: str) -> dict | None:
+        """The result of case ``name`` if its folder holds it finished and whole."""
+        check = _check(self.out, self.layout, name)
         return check.result if check.finished else None
 
     def scan(self) -> None:
         for case in self.cases:
             if case.name in self.done:
                 continue
-            row = self._finished(case)
+            row = self._finished(case.name)
             if row is None:
                 continue
             self.done.add(case.name)
@@ -204,21 +224,26 @@ class SweepOutcome:
     cases: list[StudyCase]
     computed: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
+    report: StudyReport | None = None
     #: the cases of the selection recorded as failed (they raised): the study is incomplete
     failed: list[str] = field(default_factory=list)
-    report: StudyReport | None = None
 
 
-def _decide(out: Path, case: StudyCase, config, beat: ClaimHeartbeat
+def _check(out: Path, layout: StudyLayout, name: str):
+    """The resume check of case ``name`` (:func:`~valve_dolfinx.result.check_case`)."""
+    return check_study_case(out, name, layout.configs[name], layout.digests[name])
+
+
+def _decide(out: Path, case: StudyCase, layout: StudyLayout, beat: ClaimHeartbeat
             ) -> tuple[CaseClaim | None, Path | None]:
     """Leader: claim the case if it is unfinished and unclaimed; its staging folder."""
-    if check_study_case(out, case.name, config).finished:
+    if _check(out, layout, case.name).finished:
         return None, None
     claim = CaseClaim.for_case(out, case.name)
     if not claim.acquire():
         log.debug("%s is being computed by another process", case.name)
         return None, None
-    check = check_study_case(out, case.name, config)
+    check = _check(out, layout, case.name)
     if check.finished:  # finished between the test and the claim
         claim.release()
         return None, None
@@ -231,13 +256,14 @@ def _decide(out: Path, case: StudyCase, config, beat: ClaimHeartbeat
     return claim, staging_dir(out, case.name)
 
 
-def _run_one(case: StudyCase, config, staging: Path, group: MPI.Comm,
+def _run_one(case: StudyCase, config, digest: str, staging: Path, group: MPI.Comm,
              case_function: CaseFunction, out: Path) -> None:
     """Compute one case on ``group`` into ``staging``; the leader records and commits it."""
     started, t0 = _now(), time.perf_counter()
     error, result = None, None
+    start = case_dir(out, case.start_from) if case.start_from else None
     try:
-        result = case_function(config, staging, group)
+        result = case_function(config, staging, group, start=start)
     except Exception as err:  # recorded: one failed case must not stop the study
         error = f"{type(err).__name__}: {err}"
         log.debug("case %s failed", case.name, exc_info=True)
@@ -252,7 +278,8 @@ def _run_one(case: StudyCase, config, staging: Path, group: MPI.Comm,
     elif not (staging / RESULT_FILE).is_file():
         write_json(staging / RESULT_FILE, result)
     record = {"case": case.name, "index": case.index, "graft_width_pct": case.width_pct,
-              "graft_height_pct": case.height_pct, "settings_hash": config.settings_hash(),
+              "graft_height_pct": case.height_pct, "axes": case.axis_values,
+              "start_from": case.start_from, "config_hash": digest,
               "status": "failed" if failed else "finished", "reason": error or "",
               "converged": bool(result.get("converged")), "started_at": started,
               "finished_at": _now(), "elapsed_s": wall, "host": socket.gethostname(),
@@ -260,26 +287,75 @@ def _run_one(case: StudyCase, config, staging: Path, group: MPI.Comm,
     commit_case(out, case.name, staging, record)
 
 
-def _work(group: MPI.Comm, out: Path, cases: list[StudyCase], configs: dict,
-          case_function: CaseFunction) -> list[str]:
+class _Scheduler:
+    """The group leader's choice of the next case to compute.
+
+    Walks the cases in order: a finished case is dropped; a case whose source
+    (``start_from``) has not finished waits, unless the source can be claimed, which
+    is then computed first; any other case is claimed, or dropped if another process
+    holds its claim (that process computes it).  When only waiting cases are left, it
+    polls the study folder every ``poll_s`` until their sources are done.
+    """
+
+    def __init__(self, out: Path, cases: list[StudyCase], layout: StudyLayout,
+                 beat: ClaimHeartbeat, poll_s: float) -> None:
+        self.out, self.todo, self.layout = out, list(cases), layout
+        self.beat, self.poll_s = beat, poll_s
+
+    def _finished(self, name: str) -> bool:
+        return _check(self.out, self.layout, name).finished
+
+    def _claim(self, case: StudyCase) -> tuple[StudyCase, CaseClaim, Path] | None:
+        claim, staging = _decide(self.out, case, self.layout, self.beat)
+        return None if claim is None else (case, claim, staging)
+
+    def next(self) -> tuple[StudyCase, CaseClaim, Path] | None:
+        """The next case this group computes, claimed, with its staging folder; None when
+        nothing is left for it."""
+        while self.todo:
+            waiting = False
+            for case in list(self.todo):
+                if self._finished(case.name):
+                    self.todo.remove(case)
+                    continue
+                source = case.start_from
+                if source is not None and not self._finished(source):
+                    job = self._claim(self.layout.case(source))
+                    if job is not None:
+                        return job
+                    waiting = True  # another process computes the source
+                    continue
+                self.todo.remove(case)
+                job = self._claim(case)
+                if job is not None:
+                    return job
+            if waiting:
+                time.sleep(self.poll_s)
+        return None
+
+
+def _work(group: MPI.Comm, out: Path, layout: StudyLayout, cases: list[StudyCase],
+          case_function: CaseFunction, poll_s: float) -> list[str]:
     """Loop of one rank group over the cases; returns the names it computed."""
     leader = group.rank == 0
     computed = []
     with ClaimHeartbeat() as beat:
-        for case in cases:
-            claim, staging = (_decide(out, case, configs[case.name], beat) if leader
-                              else (None, None))
-            staging = group.bcast(str(staging) if staging else None, root=0)
-            if staging is None:
-                continue
+        scheduler = _Scheduler(out, cases, layout, beat, poll_s) if leader else None
+        while True:
+            job = scheduler.next() if leader else None
+            picked = group.bcast(None if job is None else (job[0].name, str(job[2])), root=0)
+            if picked is None:
+                break
+            case, staging = layout.case(picked[0]), Path(picked[1])
             try:
-                _run_one(case, configs[case.name], Path(staging), group, case_function, out)
+                _run_one(case, layout.configs[case.name], layout.digests[case.name], staging,
+                         group, case_function, out)
                 computed.append(case.name)
             finally:
                 if leader:
-                    claim.release()
-                    beat.remove(claim)
-                    if Path(staging).exists():  # interrupted before its commit
+                    job[1].release()
+                    beat.remove(job[1])
+                    if staging.exists():  # interrupted before its commit
                         shutil.rmtree(staging, ignore_errors=True)
     return computed
 
@@ -292,6 +368,12 @@ def _split(comm: MPI.Comm, ranks_per_case: int) -> MPI.Comm:
     return comm.Split(comm.rank // ranks_per_case, comm.rank)
 
 
+def _with_sources(layout: StudyLayout, cases: Sequence[StudyCase]) -> list[StudyCase]:
+    """``cases`` and the cases they start from, in the study's order."""
+    names = {c.name for c in cases} | {c.start_from for c in cases if c.start_from}
+    return [c for c in layout.cases if c.name in names]
+
+
 def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = None, *,
               case_indices: Sequence[int] | None = None,
               case_function: CaseFunction | None = None,
@@ -300,27 +382,36 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
               poll_s: float = 1.0) -> SweepOutcome:
     """Run the cases of a study (all, or ``case_indices``) into ``out`` and build its report.
 
+    Also ``valve_dolfinx.run_sweep``.  Every rank of ``comm`` calls it with the same
+    arguments.
+
     Parameters
     ----------
     settings
-        The grid and the case settings.
+        The grid, the axes, the paths and the case settings.
     out
         Study folder (created); see :mod:`valve_dolfinx.study.store` for its layout.
     comm
         The ranks that share the study (default ``COMM_WORLD``), split into groups of
         ``settings.ranks_per_case``.
     case_indices
-        Run only these cases (``--case-index``); the report is then left to
-        ``valve-dolfinx report``.
+        Run only these cases (``--case-index``; positions in ``settings.cases()``) and the
+        cases they start from; the report is then left to ``valve-dolfinx report``.
     case_function
-        ``f(config, out_dir, comm) -> dict`` computing one case; default
-        :func:`run_closure_case` (looked up at call time).
+        Computes one case (:class:`CaseFunction`); default :func:`run_closure_case`
+        (looked up at call time).
     progress
         Callback on world rank 0 (see ``ProgressCallback``).
     report
         Rebuild tables, figures and report.md at the end (rank 0).
     figures, fields_output
         Passed to ``run_case``: the PNG figures and the ParaView fields of every case.
+
+    Returns
+    -------
+    SweepOutcome
+        The selected cases, those this call computed, the elapsed time and (on rank 0,
+        with ``report``) the :class:`~valve_dolfinx.study.report.StudyReport`.
 
     Raises
     ------
@@ -335,11 +426,12 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(out)
     t0, started = time.perf_counter(), _now()
-    cases = settings.select(case_indices)
-    configs = case_configs(settings, cases)
+    layout = settings.layout()
+    cases = layout.select(case_indices)
+    todo = _with_sources(layout, cases)
     if case_function is None:
-        def case_function(config, folder, group):
-            return run_closure_case(config, folder, group, figures=figures,
+        def case_function(config, folder, group, *, start):
+            return run_closure_case(config, folder, group, start=start, figures=figures,
                                     fields_output=fields_output)
     error = None
     if comm.rank == 0:
@@ -354,18 +446,19 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     if error:
         raise error
     group = _split(comm, settings.ranks_per_case)
-    monitor = _Monitor(out, cases, configs, progress, poll_s) if comm.rank == 0 else None
+    monitor = _Monitor(out, todo, layout, progress, poll_s) if comm.rank == 0 else None
     if monitor:
         monitor.start()
     try:
-        computed = _work(group, out, cases, configs, case_function)
+        computed = _work(group, out, layout, todo, case_function, poll_s)
+        # every group is done: the monitor's last scan sees the other groups' last cases
+        computed = sorted(sum(comm.allgather(computed), []))
     finally:
         if monitor:
             monitor.stop()
         group.Free()
-    computed = sorted(sum(comm.allgather(computed), []))
     outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
-    states = comm.bcast(study_status(settings, out, cases) if comm.rank == 0 else None)
+    states = comm.bcast(_states(out, layout, todo) if comm.rank == 0 else None)
     outcome.failed = [case.name for case, state in states if state == "failed"]
     if comm.rank == 0:
         entry = {"started": started, "finished": _now(), "elapsed_s": outcome.elapsed_s,
@@ -379,16 +472,11 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     return outcome
 
 
-def study_status(settings: StudySettings, out: str | Path,
-                 cases: Sequence[StudyCase] | None = None) -> list[tuple[StudyCase, str]]:
-    """Each case (all, or ``cases``) and its state in ``out``: finished, failed, damaged,
-    changed, running or pending."""
-    out = Path(out)
-    cases = settings.cases() if cases is None else list(cases)
-    configs = case_configs(settings, cases)
+def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
+            ) -> list[tuple[StudyCase, str]]:
     status = []
     for case in cases:
-        check = check_study_case(out, case.name, configs[case.name])
+        check = _check(out, layout, case.name)
         if check.finished:
             state = check.record.get("status", "finished")
         elif CaseClaim.for_case(out, case.name).path.exists():
@@ -397,3 +485,10 @@ def study_status(settings: StudySettings, out: str | Path,
             state = {"empty": "pending", "damaged": "damaged"}.get(check.state, "changed")
         status.append((case, state))
     return status
+
+
+def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
+    """Each case and its state in ``out``: finished, failed, damaged, changed, running or
+    pending."""
+    layout = settings.layout()
+    return _states(Path(out), layout, layout.cases)

@@ -10,11 +10,13 @@ Layout of a study folder ``DIR``::
 
 A case is computed in a staging folder and renamed into ``cases/<name>`` when
 it is complete, so ``cases/<name>`` is either absent or whole: a sweep that is
-killed loses only the cases in flight.  ``case.json`` records the settings hash
-of the case (``CaseConfig.settings_hash``) and the size of every file the case
-wrote; a rerun skips the cases that :func:`~valve_dolfinx.result.check_case`
-finds finished, whole and with unchanged settings, and recomputes the others
-(a damaged case with a warning naming the file).
+killed loses only the cases in flight.  ``case.json`` records the identity of
+the case (:func:`valve_dolfinx.study.layout.case_digest`, its ``config_hash``:
+the settings hash, and the start's identity for a warm start) and the size of
+every file the case wrote; a rerun skips the cases that
+:func:`~valve_dolfinx.result.check_case` finds finished, whole and with an
+unchanged identity, and recomputes the others (a damaged case with a warning
+naming the file).
 
 Before a case is computed, its claim file is created with ``O_CREAT | O_EXCL``
 (atomic, also on NFS v3+), so two sweeps on the same folder -- two MPI rank
@@ -73,9 +75,11 @@ def case_dir(out: Path, name: str) -> Path:
     return Path(out) / CASES_DIR / name
 
 
-def check_study_case(out: Path, name: str, config=None) -> CaseCheck:
-    """:func:`~valve_dolfinx.result.check_case` of the case folder ``name`` of a study."""
-    return check_case(case_dir(out, name), config, record=True)
+def check_study_case(out: Path, name: str, config=None, digest: str | None = None
+                     ) -> CaseCheck:
+    """:func:`~valve_dolfinx.result.check_case` of the case folder ``name`` of a study, whose
+    identity is ``digest`` (:func:`~valve_dolfinx.study.layout.case_digest`)."""
+    return check_case(case_dir(out, name), config, record=True, digest=digest)
 
 
 def prepare_output(out: Path) -> Path:

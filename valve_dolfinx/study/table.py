@@ -1,12 +1,15 @@
 """The study table: one row per case, read from the case folders alone (SPEC §7 schema).
 
 A row is a case's ``result.json`` (whatever fields ``CaseResult`` has) with the
-study's bookkeeping (case name, status, reason, settings hash).  The SPEC §7
-columns come first, then the bookkeeping, then every other field of the
-result in its own order.  A case folder whose files are damaged
-(:func:`~valve_dolfinx.result.check_case`) is a row with status ``damaged`` and the
-reason, its result fields empty.  ``results.json`` keeps the nested fields (per-leaflet
-numbers, parameters, versions) as they are; ``results.csv`` flattens them into
+study's bookkeeping (case name, its axis values, status, reason, configuration
+hash).  The SPEC §7 columns come first, then the case name, one column per axis
+key (``root.loaded_diameter``, ...) and ``path`` (a list where the case serves
+several values, as the normal valve serves every path), then the rest of the
+bookkeeping, then every other field of the result in its own order.  A case
+folder whose files are damaged (:func:`~valve_dolfinx.result.check_case`) is a
+row with status ``damaged`` and the reason, its result fields empty.
+``results.json`` keeps the nested fields (per-leaflet numbers, parameters,
+versions) as they are; ``results.csv`` flattens them into
 dotted column names (``parameters.geometry.mesh_size``), so both hold the
 same numbers.
 """
@@ -19,6 +22,7 @@ import json
 import logging
 import math
 import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +30,7 @@ from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
 from valve_dolfinx.study.store import CASES_DIR, check_study_case
 
-__all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables",
+__all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables", "write_csv",
            "read_csv_rows"]
 
 log = logging.getLogger(__name__)
@@ -41,11 +45,12 @@ SPEC_COLUMNS = (
 
 def _sort_key(row: dict) -> tuple:
     w, h = row.get("graft_width_pct"), row.get("graft_height_pct")
-    return (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
+    size = (0, 0.0, 0.0) if w is None else (1, float(w), float(h if h is not None else 0.0))
+    return (*size, row["case"])
 
 
-#: a graft case's folder name
-_GRAFT_NAME = re.compile(r"W(\d+(?:\.\d+)?)_H(\d+(?:\.\d+)?)")
+#: a graft case's folder name: its size, then any axis values (``W14_H13__path=2``)
+_GRAFT_NAME = re.compile(r"W(\d+(?:\.\d+)?)_H(\d+(?:\.\d+)?)(?:__.*)?")
 
 
 def _reason(record: dict, result: dict) -> str:
@@ -56,11 +61,13 @@ def _reason(record: dict, result: dict) -> str:
     return ""
 
 
-def case_rows(out: Path) -> list[dict]:
-    """Rows of every case folder under ``out/cases`` (normal first, then W, H).
+def case_rows(out: Path, order: Sequence[str] | None = None) -> list[dict]:
+    """Rows of every case folder under ``out/cases``.
 
-    A case whose files are missing, unreadable or disagree is a row with status
-    ``damaged`` and the reason; a folder whose name is no case's is skipped with a warning.
+    In the order of the case names ``order`` (a study's cases), then any other case
+    folder; without ``order``, the normal valve first, then by W and H.  A case whose
+    files are missing, unreadable or disagree is a row with status ``damaged`` and the
+    reason; a folder whose name is no case's is skipped with a warning.
     """
     rows = []
     root = Path(out) / CASES_DIR
@@ -68,7 +75,7 @@ def case_rows(out: Path) -> list[dict]:
         if folder.name.startswith(".") or not folder.is_dir():
             continue
         size = _graft_size(folder.name)
-        if size is False:
+        if size is None:
             log.warning("skipping %s: not a case folder of a study", folder)
             continue
         check = check_study_case(out, folder.name)
@@ -78,28 +85,34 @@ def case_rows(out: Path) -> list[dict]:
         reason = check.reason or "no result.json or case.json"
         log.warning("%s: %s", folder, reason)
         rows.append(_damaged_row(folder.name, size, reason))
-    return sorted(rows, key=_sort_key)
+    rows.sort(key=_sort_key)
+    if order is not None:
+        place = {name: i for i, name in enumerate(order)}
+        rows.sort(key=lambda row: place.get(row["case"], len(place)))
+    return rows
 
 
-def _graft_size(name: str) -> tuple[float | None, float | None] | bool:
-    """(W, H) of a case folder's name, (None, None) for the normal valve, False for others."""
-    if name == NORMAL_CASE:
+def _graft_size(name: str) -> tuple[float | None, float | None] | None:
+    """(W, H) of a case folder's name, (None, None) for a normal valve, None for others."""
+    if name == NORMAL_CASE or name.startswith(f"{NORMAL_CASE}__"):
         return None, None
     match = _GRAFT_NAME.fullmatch(name)
-    return (float(match[1]), float(match[2])) if match else False
+    return (float(match[1]), float(match[2])) if match else None
 
 
 def _damaged_row(name: str, size: tuple, reason: str) -> dict:
     row: dict[str, Any] = dict.fromkeys(SPEC_COLUMNS)
     row["graft_width_pct"], row["graft_height_pct"] = size
-    row.update(case=name, status="damaged", reason=reason, settings_hash=None)
+    row.update(case=name, status="damaged", reason=reason, config_hash=None)
     return row
 
 
 def _row(name: str, record: dict, result: dict) -> dict:
     row: dict[str, Any] = {key: result.get(key) for key in SPEC_COLUMNS}
-    row.update(case=name, status=record.get("status", "finished"),
-               reason=_reason(record, result), settings_hash=record.get("settings_hash"))
+    row["case"] = name
+    row.update(record.get("axes") or {})
+    row.update(status=record.get("status", "finished"), reason=_reason(record, result),
+               config_hash=record.get("config_hash"))
     for key, value in result.items():
         if key not in row:
             row[key] = value
@@ -133,18 +146,23 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
+def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str] | None = None) -> Path:
+    """Write flat ``rows`` as CSV, atomically (``columns``: every key in order of appearance)."""
+    if columns is None:
+        columns = list(dict.fromkeys(key for row in rows for key in row))
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_cell(row.get(key)) for key in columns])
+    return atomic_write(Path(path), lambda tmp: tmp.write_text(buffer.getvalue()))
+
+
 def write_tables(out: Path, rows: list[dict]) -> tuple[Path, Path]:
     """Write ``results.json`` (rows as they are) and ``results.csv`` (flattened), atomically."""
     out = Path(out)
     json_path = write_json(out / "results.json", rows)
-    flat = [flatten(row) for row in rows]
-    columns = list(dict.fromkeys(key for row in flat for key in row))
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    for row in flat:
-        writer.writerow([_cell(row.get(key)) for key in columns])
-    csv_path = atomic_write(out / "results.csv", lambda tmp: tmp.write_text(buffer.getvalue()))
+    csv_path = write_csv(out / "results.csv", [flatten(row) for row in rows])
     return csv_path, json_path
 
 

@@ -1,0 +1,202 @@
+"""Which modelling choices the sizing answer depends on: the study grid under each choice that
+the published method does not fix, one at a time around the defaults (docs/sensitivity.md).
+
+Runs into one results folder (``--out``, default ``results/sensitivity``):
+
+* ``defaults/``: the study at the package defaults (the normal valve and the W × H grid);
+* ``<choice>/``: per choice of :data:`CHOICES`, the same study with the choice's other
+  values as a comparison axis (``vary``); its default value is the ``defaults/`` study.
+
+Then prints, per choice, a Markdown table per cell (the minimum coaptation height, and
+whether it leaks, has leaflets crossing or did not converge; the worst case over the
+members with ``--paths 2``), a row of the recommendation each value gives, and the wall
+time of its study.  A choice whose setting the package does not have is skipped with a
+message.  Every study is resumable: a rerun with the same ``--out`` computes only what is
+missing.
+
+Run on the 2-core machine: ``.venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sensitivity.py``
+(the default grid and mesh: hours).  A smoke test: ``--mesh-size 2.0 --widths 0 14
+--heights 0 27 --choices nodulus``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from valve_dolfinx._compat import MPI
+from valve_dolfinx.config import CaseConfig, get_dotted
+from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
+from valve_dolfinx.interrupts import interrupt_on_signals
+from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
+from valve_dolfinx.study.axes import check_axis_values, value_text
+from valve_dolfinx.study.runner import run_study
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One modelling choice: a case setting and the values to compare (the default among
+    them), as a function of the setting's default and the study's mesh size."""
+
+    name: str
+    title: str
+    key: str
+    values: Callable[[Any, float], tuple]
+    missing: str = ""
+
+
+#: The choices of docs/sensitivity.md, in its order
+CHOICES = (
+    Choice("root", "loaded root diameter (mm; none: the wall law, 20.09 mm)",
+           "root.loaded_diameter", lambda d, mesh: (19.0, None, 21.0, 22.0)),
+    Choice("native_bending", "the native leaflets' bending modulus (kPa)",
+           "bending_modulus_kpa", lambda d, mesh: (0.0, 200.0, 800.0)),
+    # TODO(issue 47): the graft's own bending modulus (a cited value for fixed pericardium,
+    # and a decade either side); skipped until the setting exists
+    Choice("graft_bending", "the graft's bending modulus (kPa)", "graft_bending_modulus_kpa",
+           lambda d, mesh: (d / 10, d, d * 10),
+           missing="the graft's own bending modulus is not a setting yet (issue 47)"),
+    # TODO: how the graft carries compression (the tension field against the plain Fung
+    # law): valve_dolfinx/materials.py has both energies (relaxed_energy, fung_energy), but
+    # MembraneModel.wrinkling is not a case setting; skipped until one exists
+    Choice("graft_compression", "the graft's compressive response (true: tension field; "
+           "false: the plain Fung law)", "graft_tension_field", lambda d, mesh: (True, False),
+           missing="no case setting chooses the graft's compressive response"),
+    Choice("graft_thickness", "graft thickness (mm)", "graft_material.thickness",
+           lambda d, mesh: (0.3, 0.5)),
+    Choice("nodulus", "nodulus length left out of the coaptation heights (mm)",
+           "nodulus_length_mm", lambda d, mesh: (0.0, 1.0)),
+    Choice("contact_thickness", "contact thickness (mm): half and double",
+           "contact.thickness", lambda d, mesh: (d / 2, d, d * 2)),
+    Choice("mesh", "mesh size (mm)", "geometry.mesh_size",
+           lambda d, mesh: (mesh, round(0.75 * mesh, 3))),
+)
+
+
+def _values(choice: Choice, mesh: float) -> tuple[tuple, Any] | None:
+    """The choice's values (checked) and its default; None if the setting does not exist."""
+    if choice.key == "geometry.mesh_size":
+        default = mesh
+    else:
+        try:
+            default = get_dotted(CaseConfig().to_dict(), choice.key)
+        except KeyError:
+            return None
+    values = check_axis_values(f"choice {choice.name}", choice.key,
+                               list(choice.values(default, mesh)), {})
+    return values, default
+
+
+def _cell(cell) -> str:
+    """One table entry: the worst-case height and what went wrong in any member."""
+    if cell is None or cell.worst_height_mm is None:
+        return "–"
+    text = f"{cell.worst_height_mm:.2f}"
+    n = len(cell.members)
+
+    def members(which: list) -> str:
+        return "" if n == 1 else f" in {len(which)}/{n}"
+
+    if cell.leaking:
+        text += f", leaks {cell.largest_orifice_mm2:.2g} mm²" + members(cell.leaking)
+    if cell.crossing:
+        text += f", crosses {cell.longest_crossing_mm:.2f} mm" + members(cell.crossing)
+    if cell.unconverged or cell.missing:
+        text += ", not converged" + members(cell.unconverged + cell.missing)
+    return text
+
+
+def _answer(rec) -> str:
+    if rec.recommended:
+        return f"{rec.recommended} ({rec.margin_mm:+.2f})"
+    if rec.best and rec.shortfall_mm is not None:
+        return f"none (best {rec.best}, {-rec.shortfall_mm:+.2f})"
+    return "none"
+
+
+def _normal(rec) -> str:
+    targets = sorted(t for t in rec.targets_mm.values() if t is not None)
+    if not targets:
+        return "–"
+    return f"{targets[0]:.2f}" if len(targets) == 1 else f"{targets[0]:.2f}–{targets[-1]:.2f}"
+
+
+def print_table(choice: Choice, columns: list[tuple[Any, Any]]) -> None:
+    """The Markdown table of one choice: ``columns`` are ``(value, Recommendation)``."""
+    print(f"\n### {choice.title} (`{choice.key}`)\n")
+    print("| cell | " + " | ".join(value_text(v) for v, _ in columns) + " |")
+    print("|---|" + "---:|" * len(columns))
+    print("| normal | " + " | ".join(_normal(rec) for _, rec in columns) + " |")
+    for cell in columns[0][1].cells:
+        entries = [_cell(rec.cell(cell.label)) for _, rec in columns]
+        print(f"| {cell.label} | " + " | ".join(entries) + " |")
+    print("| **recommended** (margin mm) | " + " | ".join(_answer(rec) for _, rec in columns)
+          + " |")
+
+
+def _run(settings: StudySettings, out: Path, comm) -> tuple[Any, float]:
+    outcome = run_study(settings, out, comm)
+    return outcome.report, outcome.elapsed_s
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("results/sensitivity"))
+    parser.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE, metavar="MM")
+    parser.add_argument("--widths", type=float, nargs="+", default=list(STUDY_WIDTHS_PCT))
+    parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
+    parser.add_argument("--paths", type=int, default=1, help="numerical paths per cell")
+    parser.add_argument("--choices", nargs="+", default=[c.name for c in CHOICES],
+                        choices=[c.name for c in CHOICES], metavar="NAME",
+                        help=f"a subset of {', '.join(c.name for c in CHOICES)}")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    comm = MPI.COMM_WORLD
+    if comm.rank == 0:  # one line per finished case
+        logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
+    grid = {"widths_pct": tuple(args.widths), "heights_pct": tuple(args.heights),
+            "paths": args.paths, "panel_cases": ()}
+    t0 = time.perf_counter()
+    defaults, wall = _run(StudySettings(mesh_size_mm=args.mesh_size, **grid),
+                          args.out / "defaults", comm)
+    walls = {"defaults": wall}
+    tables = []
+    for choice in (c for c in CHOICES if c.name in args.choices):
+        found = _values(choice, args.mesh_size)
+        if found is None:
+            if comm.rank == 0:
+                print(f"{choice.name}: skipped: {choice.missing or 'no such setting'} "
+                      f"(`{choice.key}`)")
+            continue
+        values, default = found
+        others = [v for v in values if v != default]
+        mesh = None if choice.key == "geometry.mesh_size" else args.mesh_size
+        settings = StudySettings(mesh_size_mm=mesh, vary={choice.key: others}, **grid)
+        report, walls[choice.name] = _run(settings, args.out / choice.name, comm)
+        if comm.rank == 0:
+            by_value = dict(zip(others, report.recommendations, strict=True))
+            by_value[default] = defaults.recommendations[0]
+            tables.append((choice, [(v, by_value[v]) for v in values]))
+    if comm.rank != 0:
+        return 0
+    print(f"\nStudies of {len(args.widths)} × {len(args.heights)} grafts and the normal valve, "
+          f"mesh {args.mesh_size:g} mm, {args.paths} path(s), {comm.size} MPI rank(s); "
+          "minimum coaptation height in mm (the worst member's with several paths), the "
+          "recommendation with its margin (mm).")
+    for choice, columns in tables:
+        print_table(choice, columns)
+        print(f"\nwall time of its study: {walls[choice.name]:.0f} s")
+    total = time.perf_counter() - t0
+    print(f"\nwall time: defaults {walls['defaults']:.0f} s; all studies {total:.0f} s "
+          f"({total / 3600:.2f} h) -> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    with interrupt_on_signals():  # an interrupted benchmark resumes with the same --out
+        raise SystemExit(main())

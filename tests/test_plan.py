@@ -1,0 +1,523 @@
+"""Planning one patient's repair (SPEC §9): inputs, the reach bound, the template, the report.
+
+Expected numbers are worked out here from the SPEC's formulas: the SPEC §1 leaflet (free
+edge π/3·20 mm, height 20·sin²(π/6)/tan 34° + 5 mm), the Fung law of SPEC §3 written out
+by hand, a graft W/H as the measured leaflet scaled by (1 + W, 1 + H).  The study behind
+a plan is a stand-in case function where a real solve adds nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from valve_dolfinx._compat import MPI
+from valve_dolfinx.exceptions import OutputConflictError, ParameterError
+from valve_dolfinx.plan.patient import (
+    FIELDS,
+    PatientInput,
+    patient_from_mapping,
+    patient_toml,
+    read_patient,
+    write_patient,
+)
+from valve_dolfinx.plan.reach import (
+    free_edge_reach,
+    free_edge_strains,
+    largest_root_mm,
+    max_fibre_stretch,
+)
+from valve_dolfinx.plan.recommendation import GraftSize, PlanRecommendation
+
+ROOT = Path(__file__).resolve().parents[1]
+FREE_EDGE_MM = math.pi / 3 * 20.0
+HEIGHT_MM = 20.0 * 0.25 / math.tan(math.radians(34.0)) + 5.0
+KPA_80 = 80 * 0.133322
+#: SPEC §3: native leaflet (Billiar & Sacks 2000), thickness 0.5 mm
+C, A1, A2, A3 = 9.7, 49.56, 5.29, -3.12
+THICKNESS = 0.5
+
+
+# --- the patient's inputs --------------------------------------------------------------------
+def test_defaults_are_the_spec_leaflet_exactly():
+    patient = PatientInput(root_diameter_mm=21.0)
+    assert patient.leaflet_free_edge_mm == pytest.approx(FREE_EDGE_MM, rel=1e-15)
+    assert patient.leaflet_height_mm == pytest.approx(HEIGHT_MM, rel=1e-15)
+    shape = patient.native_shape
+    assert (shape.root_diameter, shape.gamma_deg, shape.commissure_height) == (20.0, 34.0, 5.0)
+    assert patient.root_diameters_mm == (20.0, 21.0, 22.0)
+    assert PatientInput(root_diameter_mm=21.0, root_uncertainty_mm=0.0).root_diameters_mm == (
+        21.0,)
+
+
+@pytest.mark.parametrize("patient", [
+    PatientInput(root_diameter_mm=22.0),
+    PatientInput(root_diameter_mm=23.4, root_uncertainty_mm=0.7, leaflet_free_edge_mm=22.1,
+                 leaflet_height_mm=13.3, pressure_mmhg=90.0, graft_widths_pct=(0, 7.5),
+                 graft_heights_pct=(13,), target_coaptation_mm=2.5,
+                 graft_fibre_angle_deg=-15.0, label='plan "7" ± 1'),
+])
+def test_patient_file_round_trip(tmp_path, patient):
+    path = write_patient(tmp_path / "patient.toml", patient)
+    assert read_patient(path) == patient
+    text = path.read_text()
+    for key in FIELDS:  # every key is in the file, with its unit where it has one
+        assert key in text
+    assert "root_diameter_mm = " in text and "# mm;" in text
+
+
+def test_the_default_leaflet_gives_the_default_mesh_exactly():
+    """A plan without a measured leaflet (or with the SPEC §1 leaflet's exact dimensions)
+    builds the valve of the default geometry: same points, cells and flat coordinates."""
+    from valve_dolfinx.config import config_from_dict
+    from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, build_valve
+
+    patient = PatientInput(root_diameter_mm=20.0, leaflet_free_edge_mm=FREE_EDGE_MM,
+                           leaflet_height_mm=HEIGHT_MM)
+    config = config_from_dict(patient.case_settings())
+    assert config.geometry.mesh_size == DEFAULT_MESH_SIZE
+    planned, default = build_valve(config.geometry), build_valve()
+    for name in ("points", "cells", "flat", "fibres", "edges"):
+        assert np.array_equal(getattr(planned, name), getattr(default, name)), name
+    assert config.root.loaded_diameter == 20.0
+
+
+def test_a_longer_free_edge_gives_a_proportionally_larger_wrap_diameter():
+    base = PatientInput(root_diameter_mm=22.0, leaflet_free_edge_mm=20.0, leaflet_height_mm=12.0)
+    longer = PatientInput(root_diameter_mm=22.0, leaflet_free_edge_mm=22.0,
+                          leaflet_height_mm=12.0)
+    assert longer.wrap_diameter_mm / base.wrap_diameter_mm == pytest.approx(1.1, rel=1e-13)
+    assert base.wrap_diameter_mm == pytest.approx(3 * 20.0 / math.pi, rel=1e-13)
+
+
+@pytest.mark.parametrize("key,value,bound", [
+    ("root_diameter_mm", 15.9, "[16, 35]"), ("root_diameter_mm", 2.2, "[16, 35]"),
+    ("root_diameter_mm", 220.0, "[16, 35]"), ("root_uncertainty_mm", -0.5, "[0, 3]"),
+    ("root_uncertainty_mm", 5.0, "[0, 3]"), ("leaflet_free_edge_mm", 14.0, "[15, 50]"),
+    ("leaflet_free_edge_mm", 60.0, "[15, 50]"), ("leaflet_height_mm", 9.0, "[10, 30]"),
+    ("leaflet_height_mm", 31.0, "[10, 30]"), ("pressure_mmhg", 10.0, "[40, 120]"),
+    ("pressure_mmhg", 200.0, "[40, 120]"), ("target_coaptation_mm", 0.0, "(0, 10]"),
+    ("target_coaptation_mm", 12.0, "(0, 10]"), ("graft_fibre_angle_deg", 120.0, "[-90, 90]"),
+    ("root_diameter_mm", float("nan"), "[16, 35]"),
+])
+def test_every_input_out_of_range_is_named(key, value, bound):
+    data = {"root_diameter_mm": 22.0, key: value}
+    if key.startswith("leaflet"):
+        data.setdefault("leaflet_free_edge_mm", 22.0)
+        data.setdefault("leaflet_height_mm", 13.0)
+    with pytest.raises(ParameterError) as err:
+        patient_from_mapping(data, source="PATIENT.toml")
+    message = str(err.value)
+    assert message.startswith("PATIENT.toml: ") and key in message and bound in message
+    assert FIELDS[key].flag in message
+
+
+@pytest.mark.parametrize("data,expected", [
+    ({}, "root_diameter_mm is missing"),
+    ({"root_diameter": 22.0}, "root_diameter_mm (mm)"),
+    ({"root_diameter_mm": 22.0, "leaflet_height": 13.0}, "leaflet_height_mm (mm)"),
+    ({"root_diameter_mm": "22 mm"}, "is not a number"),
+    ({"root_diameter_mm": True}, "is not a number"),
+    ({"root_diameter_mm": 22.0, "pressure_mmhg": "80"}, "is not a number"),
+    ({"root_diameter_mm": 22.0, "leaflet_free_edge_mm": 22.0}, "needs leaflet_height_mm"),
+    ({"root_diameter_mm": 22.0, "graft_widths_pct": [0, 7, 7]}, "given twice"),
+    ({"root_diameter_mm": 22.0, "graft_heights_pct": ["x"]}, "not a number"),
+    ({"root_diameter_mm": 22.0, "label": "two\nlines"}, "printable characters"),
+    ({"root_diameter_mm": 22.0, "colour": "red"}, "allowed keys are"),
+])
+def test_bad_patient_data_gives_a_named_error(data, expected):
+    with pytest.raises(ParameterError, match=None) as err:
+        patient_from_mapping(data)
+    assert expected in str(err.value)
+
+
+def test_a_patient_file_that_is_not_toml_or_missing(tmp_path):
+    from valve_dolfinx.exceptions import ConfigurationError, InputFileError
+
+    with pytest.raises(InputFileError):
+        read_patient(tmp_path / "absent.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("root_diameter_mm = = 22\n")
+    with pytest.raises(ConfigurationError, match="not valid TOML"):
+        read_patient(bad)
+
+
+# --- can the leaflets close the root at all? ------------------------------------------------
+def _pk2(e11: float, e22: float) -> tuple[float, float]:
+    """SPEC §3 by hand, E12 = 0: S11 = c e^Q (A1 E11 + A3 E22), S22 = c e^Q (A2 E22 + A3 E11)."""
+    g = C * math.exp(A1 * e11**2 + A2 * e22**2 + 2 * A3 * e11 * e22)
+    return g * (A1 * e11 + A3 * e22), g * (A2 * e22 + A3 * e11)
+
+
+def _cauchy_tensions(e11: float, e22: float) -> tuple[float, float]:
+    """Membrane tension per current length: T_i = t·λ_i·S_i/λ_j."""
+    s11, s22 = _pk2(e11, e22)
+    l1, l2 = math.sqrt(1 + 2 * e11), math.sqrt(1 + 2 * e22)
+    return THICKNESS * l1 * s11 / l2, THICKNESS * l2 * s22 / l1
+
+
+def _strains_at(t1: float, t2: float) -> tuple[float, float]:
+    from scipy.optimize import fsolve
+
+    for start in ((0.05, 0.2), (0.05, 0.03), (0.1, 0.5)):
+        sol, _, ok, msg = fsolve(lambda e: np.subtract(_cauchy_tensions(*e), (t1, t2)),
+                                 start, xtol=1e-13, full_output=True)
+        if ok == 1:
+            return float(sol[0]), float(sol[1])
+    raise AssertionError(f"no strain state with tensions {t1:g}, {t2:g} mN/mm: {msg}")
+
+
+def test_the_hand_written_law_gives_the_spec_worked_numbers():
+    """The law written out here reproduces SPEC §3: E11 = 0.0301, E22 = 0.1884 at equal
+    second Piola-Kirchhoff stresses of 10.67 kPa (so the checks below rest on it)."""
+    from scipy.optimize import fsolve
+
+    e = fsolve(lambda e: np.subtract(_pk2(*e), 10.67), (0.03, 0.2), xtol=1e-13)
+    assert e == pytest.approx((0.0301, 0.1884), abs=1e-4)
+
+
+@pytest.mark.parametrize("tension", [5.0, 50.0, 213.3, 400.0])
+def test_free_edge_strains_satisfy_the_fung_law(tension):
+    """Tension ``tension`` along the free edge and none across it, by the law written out
+    here (a free edge carries no load across itself)."""
+    e11, e22 = free_edge_strains(_native(), tension)
+    assert _cauchy_tensions(e11, e22) == pytest.approx((tension, 0.0), rel=1e-9, abs=1e-9)
+    assert 0 < e22 < e11  # the fibres stretch; the leaflet extends across them too (A3 < 0)
+
+
+def test_the_stretch_bound_is_the_free_edge_at_the_largest_tension():
+    """Along the free edge (no tension across it) the fibre stretch grows with the tension,
+    so none up to p·D exceeds the bound, which the bound reaches at p·D."""
+    d = 22.0
+    bound = max_fibre_stretch(KPA_80, d)
+    stretches = [math.sqrt(1 + 2 * _strains_at(t, 0.0)[0])
+                 for t in np.linspace(0.05, 1.0, 12) * KPA_80 * d]
+    assert np.all(np.diff(stretches) > 0)
+    assert stretches[-1] == pytest.approx(bound, rel=1e-9)
+    assert 1.1 < bound < 1.25
+
+
+def test_the_largest_root_is_where_the_reach_meets_the_diameter():
+    d_max = largest_root_mm(FREE_EDGE_MM, KPA_80)
+    e11, _ = _strains_at(KPA_80 * d_max, 0.0)
+    assert FREE_EDGE_MM * math.sqrt(1 + 2 * e11) == pytest.approx(d_max, rel=1e-9)
+    assert 23.0 < d_max < 26.0  # a stretch of 1.10-1.24 at most
+    assert free_edge_reach(FREE_EDGE_MM, d_max * (1 - 1e-6), 80.0).can_seal
+    assert not free_edge_reach(FREE_EDGE_MM, d_max * (1 + 1e-6), 80.0).can_seal
+
+
+def test_cannot_seal_is_one_line_with_its_numbers():
+    reach = free_edge_reach(18.0, 23.0, 80.0)
+    assert not reach.can_seal and reach.reach_mm < 23.0
+    line = reach.sentence()
+    assert "\n" not in line and "cannot seal this 23.0 mm root whatever the graft" in line
+    assert f"{reach.reach_mm:.1f} mm" in line and f"{reach.largest_root_mm:.1f} mm" in line
+    assert free_edge_reach(FREE_EDGE_MM, 20.0, 80.0).can_seal  # the SPEC's valve closes
+
+
+def _native():
+    from valve_dolfinx.materials import NATIVE_LEAFLET
+
+    return NATIVE_LEAFLET
+
+
+# --- the graft template ----------------------------------------------------------------------
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def _path_points(element) -> np.ndarray:
+    tokens = element.attrib["d"].replace("M", " ").replace("L", " ").replace("Z", " ").split()
+    return np.array(tokens, dtype=float).reshape(-1, 2)
+
+
+@pytest.fixture(scope="module")
+def template(tmp_path_factory):
+    """The W21/H27 template of a 22 mm × 13 mm leaflet, its files and the expected sizes."""
+    from valve_dolfinx.plan.template import GraftTemplate, template_drawing, write_template
+
+    patient = PatientInput(root_diameter_mm=22.0, leaflet_free_edge_mm=22.0,
+                           leaflet_height_mm=13.0, label="test")
+    drawn = GraftTemplate(patient.native_shape, GraftSize(21.0, 27.0), label="test")
+    files = write_template(drawn, tmp_path_factory.mktemp("template"))
+    graft_width, graft_height = 22.0 * 1.21, 13.0 * 1.27
+    return {"files": files, "page": template_drawing(drawn), "template": drawn,
+            "cut": (graft_width + 2.0, graft_height + 1.0)}
+
+
+def test_template_svg_is_in_millimetres_at_true_size(template):
+    root = ET.parse(template["files"].svg).getroot()
+    assert (root.attrib["width"], root.attrib["height"]) == ("210mm", "297mm")
+    assert root.attrib["viewBox"] == "0 0 210 297"
+    paths = {p.attrib.get("id"): p for p in root.iter(f"{SVG}path")}
+    cut = _path_points(paths["cut-line"])
+    assert np.ptp(cut, axis=0) == pytest.approx(template["cut"], abs=1e-6)
+    bar = _path_points(paths["calibration-bar"])
+    assert np.ptp(bar[:, 0]) == pytest.approx(50.0, abs=1e-9)
+    free = _path_points(paths["free-edge"])
+    assert np.ptp(free[:, 0]) == pytest.approx(22.0 * 1.21, abs=1e-9)
+    texts = " ".join(t.text for t in root.iter(f"{SVG}text"))
+    assert "free edge 26.6 mm" in texts and "height 16.5 mm" in texts and "test" in texts
+
+
+def test_the_margin_is_one_millimetre_along_the_attachment_and_none_on_the_free_edge(template):
+    t = template["template"]
+    s = t.shape
+    cut, attachment = t.cut_line(), t.attachment()
+    top = s.height
+    # the free edge is part of the cut line: no margin beyond it
+    assert cut[:, 1].max() == pytest.approx(top, abs=1e-12)
+    edge = [i for i in range(len(cut) - 1)
+            if np.allclose(cut[i], [s.half_width, top]) and np.allclose(cut[i + 1],
+                                                                        [-s.half_width, top])]
+    assert len(edge) == 1
+    # every other point of the cut line lies 1 mm from the attachment edge
+    a, b = attachment[:-1], attachment[1:]
+    below = cut[cut[:, 1] < top - 1e-9]
+    ab = b - a
+    t_ = np.clip(np.einsum("pij,ij->pi", below[:, None, :] - a, ab)
+                 / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+    closest = a + t_[..., None] * ab
+    distance = np.linalg.norm(below[:, None, :] - closest, axis=2).min(axis=1)
+    assert len(below) > 200
+    assert distance == pytest.approx(np.full(len(below), 1.0), abs=2e-3)
+
+
+def _raster(pdf: Path, dpi: int = 300) -> np.ndarray:
+    pdfium = pytest.importorskip("pypdfium2")
+    document = pdfium.PdfDocument(str(pdf))
+    try:
+        assert len(document) == 1
+        width, height = document[0].get_size()
+        assert (width, height) == pytest.approx((210 / 25.4 * 72, 297 / 25.4 * 72), abs=0.01)
+        image = document[0].render(scale=dpi / 72).to_pil().convert("L")
+    finally:
+        document.close()
+    return np.asarray(image)
+
+
+def _ink_extent(gray: np.ndarray, box: tuple[float, float, float, float], dpi: int = 300
+                ) -> tuple[float, float]:
+    """Width and height (mm) of the ink inside the page box (mm, y up)."""
+    px = dpi / 25.4
+    x0, y0, x1, y1 = box
+    rows = slice(int((297 - y1) * px), int(math.ceil((297 - y0) * px)))
+    cols = slice(int(x0 * px), int(math.ceil(x1 * px)))
+    ink = gray[rows, cols] < 160
+    ys, xs = np.nonzero(ink)
+    return (xs.max() - xs.min() + 1) / px, (ys.max() - ys.min() + 1) / px
+
+
+def test_template_pdf_printed_at_100_percent_measures_what_it_says(template):
+    """Rasterised at 300 dpi, the cut piece and the calibration bar have their size in mm."""
+    from valve_dolfinx.plan.template import CUT_WIDTH_MM, FREE_EDGE_WIDTH_MM
+
+    gray = _raster(template["files"].pdf)
+    page = template["page"]
+    x0, y0, x1, y1 = page.regions["cut"]
+    width, height = _ink_extent(gray, (x0 - 1.5, y0 - 1.5, x1 + 1.5, y1 + 1.5))
+    # the ink reaches half a line width beyond the lines' centres
+    assert width - CUT_WIDTH_MM == pytest.approx(template["cut"][0], abs=0.3)
+    assert height - 0.5 * (CUT_WIDTH_MM + FREE_EDGE_WIDTH_MM) == pytest.approx(
+        template["cut"][1], abs=0.3)
+    bx0, by0, bx1, by1 = page.regions["calibration"]
+    bar, _ = _ink_extent(gray, (bx0 - 2.0, by0 + 1.0, bx1 + 2.0, by1 - 1.0))
+    assert bar == pytest.approx(50.0, abs=0.3)
+
+
+def test_graft_size_parse():
+    assert GraftSize.parse("14/13") == GraftSize(14.0, 13.0)
+    assert GraftSize.parse("W21/H27").stem == "W21_H27"
+    for bad in ("14", "a/b", "-5/10", "14/200"):
+        with pytest.raises(ParameterError, match="--template"):
+            GraftSize.parse(bad)
+
+
+# --- the one-page report ---------------------------------------------------------------------
+def _pdf_text(path: Path) -> str:
+    pdfium = pytest.importorskip("pypdfium2")
+    document = pdfium.PdfDocument(str(path))
+    try:
+        assert len(document) == 1
+        return " ".join(document[0].get_textpage().get_text_range().split())
+    finally:
+        document.close()
+
+
+ANSWERS = {
+    "graft": (PlanRecommendation(graft=GraftSize(14, 13), margin_mm=0.12,
+                                 limiting_member="root 23.0 mm, billowed placement",
+                                 target_mm=2.31, target_source="the normal valve's",
+                                 members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
+              ["Recommended graft W14/H13", "smallest margin is 0.12 mm",
+               "root 23.0 mm, billowed placement", "in all 3 members"]),
+    "closest": (PlanRecommendation(closest=GraftSize(27, 40), shortfall_mm=0.4, target_mm=2.3,
+                                   target_source="given", members=("a", "b")),
+                ["No graft on the grid is robust", "The closest is W27/H40",
+                 "0.40 mm short"]),
+    "cannot": (PlanRecommendation(cannot_seal=free_edge_reach(16.0, 22.0, 80.0).sentence()),
+               ["cannot seal this 22.0 mm root whatever the graft", "Nothing was computed"]),
+}
+
+
+@pytest.mark.parametrize("kind", ANSWERS)
+def test_the_report_is_one_a4_page_with_the_answer(tmp_path, kind):
+    from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
+
+    rec, words = ANSWERS[kind]
+    patient = PatientInput(root_diameter_mm=22.0, label="report test")
+    md, pdf = write_plan_report(tmp_path, patient, rec, PlanFigures(), RunInfo(),
+                                "only a test", free_edge_reach(FREE_EDGE_MM, 22.0, 80.0))
+    text = _pdf_text(pdf)
+    markdown = md.read_text()
+    for word in [*words, "Repair plan: report test", "22.0 ± 1.0 mm", "only a test"]:
+        if word != "Nothing was computed":
+            assert word in markdown, word
+        assert word in text, word
+    if kind != "cannot":
+        assert "not made" in text  # the pictures that were not given say so
+
+
+def test_a_recommendation_has_one_answer():
+    with pytest.raises(ParameterError, match="one of"):
+        PlanRecommendation(graft=GraftSize(0, 0), margin_mm=0.1, closest=GraftSize(7, 0))
+    with pytest.raises(ParameterError, match="margin"):
+        PlanRecommendation(graft=GraftSize(0, 0))
+
+
+# --- the plan, end to end on a stand-in study ---------------------------------------------
+#: minimum coaptation height of each case of the stand-in study (mm)
+STAND_IN = {None: 2.0, (7.0, 13.0): 1.8, (14.0, 13.0): 2.3}
+
+
+def stand_in_case(config, out_dir: Path, comm) -> dict:
+    """A case result from the table above, with the two closed-valve pictures a case writes."""
+    import matplotlib.image
+
+    g = config.geometry
+    key = None if g.graft_width_pct is None else (g.graft_width_pct, g.graft_height_pct)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name in ("closed_valve_aortic.png", "closed_valve_ventricular.png"):
+        matplotlib.image.imsave(out_dir / name, np.full((8, 8), 0.5), cmap="gray")
+    return {"graft_width_pct": g.graft_width_pct, "graft_height_pct": g.graft_height_pct,
+            "converged": True, "competent": True, "min_coaptation_height_mm": STAND_IN[key],
+            "regurgitant_orifice_area_mm2": 0.0, "root_diameter_mm": config.root.loaded_diameter,
+            "mesh_size_mm": g.mesh_size, "n_ranks": comm.size, "wall_time_s": 0.01,
+            "parameters": config.to_dict(), "versions": {"valve_dolfinx": "test"}}
+
+
+def _patient(**changes) -> PatientInput:
+    data = dict(root_diameter_mm=22.0, leaflet_free_edge_mm=22.0, leaflet_height_mm=13.0,
+                graft_widths_pct=(7.0, 14.0), graft_heights_pct=(13.0,), label="stand-in")
+    return PatientInput(**{**data, **changes})
+
+
+def test_a_plan_writes_its_answer_template_and_report(tmp_path):
+    from valve_dolfinx.plan.runner import run_plan
+
+    patient = _patient()
+    outcome = run_plan(patient, tmp_path / "plan", MPI.COMM_SELF, mesh_size_mm=2.0,
+                       templates=[GraftSize(21, 27)], case_function=stand_in_case)
+    rec = outcome.recommendation
+    assert rec.graft == GraftSize(14.0, 13.0)
+    assert rec.margin_mm == pytest.approx(2.3 - 2.0, abs=1e-12)
+    assert rec.limiting_member == "root 22.0 mm, conformal placement"
+    out = tmp_path / "plan"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["recommendation"]["graft"]["label"] == "W14/H13"
+    assert summary["reach"]["can_seal"] is True
+    assert summary["run"]["cases"] == 3 and summary["run"]["converged"] == 3
+    assert summary["run"]["wall_time_s"] == pytest.approx(3 * 0.01)
+    assert summary["run"]["mesh_size_mm"] == 2.0
+    dims = {t["graft"]: t for t in summary["templates"]}
+    assert set(dims) == {"W14/H13", "W21/H27"}
+    assert dims["W14/H13"]["cut_width_mm"] == pytest.approx(22.0 * 1.14 + 2.0, rel=1e-12)
+    assert dims["W14/H13"]["cut_height_mm"] == pytest.approx(13.0 * 1.13 + 1.0, rel=1e-12)
+    for name in ("plan.md", "plan.pdf", "template_W14_H13.svg", "template_W14_H13.pdf",
+                 "template_W21_H27.pdf", "study/sizing_map.png"):
+        assert (out / name).is_file(), name
+    assert read_patient(out / "patient.toml") == patient
+    assert "Recommended graft W14/H13" in _pdf_text(out / "plan.pdf")
+    # a rerun with the same inputs is accepted; another patient in the folder is refused
+    run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=stand_in_case)
+    other = _patient(root_diameter_mm=23.0)
+    with pytest.raises(OutputConflictError, match="other inputs"):
+        run_plan(other, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=stand_in_case)
+
+
+def test_a_plan_names_the_closest_graft_when_none_qualifies(tmp_path):
+    from valve_dolfinx.plan.runner import run_plan
+
+    outcome = run_plan(_patient(target_coaptation_mm=2.5), tmp_path, MPI.COMM_SELF,
+                       mesh_size_mm=2.0, case_function=stand_in_case)
+    rec = outcome.recommendation
+    assert rec.graft is None and rec.closest == GraftSize(14.0, 13.0)
+    assert rec.shortfall_mm == pytest.approx(0.2, abs=1e-12)
+    assert (tmp_path / "template_W14_H13.pdf").is_file()
+
+
+def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path):
+    from valve_dolfinx.plan.runner import run_plan
+
+    def no_case(*args):
+        raise AssertionError("a case was computed")
+
+    patient = _patient(root_diameter_mm=30.0, leaflet_free_edge_mm=20.0)
+    outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
+                       case_function=no_case)
+    assert outcome.recommendation.cannot_seal == outcome.reach.sentence()
+    assert not outcome.reach.can_seal and outcome.templates == []
+    assert not (tmp_path / "study").exists()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["recommendation"]["cannot_seal"].startswith("The native leaflets cannot")
+    assert "cannot seal this 30.0 mm root" in _pdf_text(tmp_path / "plan.pdf")
+
+
+# --- the command line --------------------------------------------------------------------
+@pytest.mark.parametrize("args,expected", [
+    (["--root-diameter", "55"], "root_diameter_mm (--root-diameter) = 55.0"),
+    (["--root-diameter", "22", "--root-uncertainty", "4"], "root_uncertainty_mm"),
+    (["--root-diameter", "22", "--leaflet-free-edge", "22"], "needs leaflet_height_mm"),
+    (["--root-diameter", "22", "--leaflet-free-edge", "70", "--leaflet-height", "13"],
+     "leaflet_free_edge_mm (--leaflet-free-edge) = 70.0"),
+    (["--root-diameter", "22", "--pressure", "300"], "pressure_mmhg"),
+    (["--root-diameter", "22", "--widths", "-5"], "graft_widths_pct"),
+    (["--root-diameter", "22", "--template", "14"], "--template '14'"),
+    (["--root-diameter", "22", "--mesh-size", "3.0"], "mesh_size"),
+    ([], "root_diameter_mm is missing"),
+])
+def test_cli_plan_stops_on_bad_input_before_any_computation(tmp_path, caplog, args, expected):
+    from valve_dolfinx.cli import main
+
+    out = tmp_path / "plan"
+    assert main(["plan", "--out", str(out), *args]) == 2
+    assert expected in caplog.text
+    assert not out.exists()
+
+
+def test_cli_plan_reads_a_patient_file_and_names_it_in_errors(tmp_path):
+    bad = tmp_path / "PATIENT.toml"
+    bad.write_text('root_diameter_mm = 22.0\nleaflet_free_edge = 22.0\n')
+    out = tmp_path / "plan"
+    proc = subprocess.run([sys.executable, "-m", "valve_dolfinx.cli", "plan", str(bad),
+                           "--out", str(out)], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert f"{bad}: unknown key 'leaflet_free_edge'" in proc.stderr
+    assert "leaflet_free_edge_mm (mm)" in proc.stderr
+    assert not out.exists()
+
+
+def test_patient_toml_documents_every_key():
+    text = patient_toml(PatientInput(root_diameter_mm=22.0))
+    assert "# target_coaptation_mm = (unset)" in text
+    for key, spec in FIELDS.items():
+        assert f"{key} = " in text and spec.meaning[:20] in text

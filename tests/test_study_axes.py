@@ -1,0 +1,527 @@
+"""Studies over axes (SPEC §7): --vary, --uncertain, --paths, warm starts, the worst case per
+graft, the robust recommendation and the nomogram.
+
+The sweeps run a stand-in case function (:func:`stand_in_case`): a closed-form figure of the
+graft size, the loaded root diameter, the bending modulus and the numerical path, so that
+the recommendation of every table is known by hand (:func:`margin`).  One test runs the
+nomogram on real closures (a 2.5 mm mesh, one graft).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import pytest
+
+# tests/test_study.py: the CLI with a case function of our own, and a study's table without
+# the fields that differ between runs
+from test_study import cli_with, stable_csv
+
+from valve_dolfinx._compat import MPI
+
+GRID = ["--widths", "0", "7", "14", "--heights", "0", "13"]
+
+
+# --- the stand-in ----------------------------------------------------------------------------
+def path_number(config) -> int:
+    """The numerical path of a configuration: 1 conformal, 2 billowed in, 3 billowed out."""
+    g = config.geometry
+    if g.graft_placement == "conformal":
+        return 1
+    return 2 if g.billow_mm > 0 else 3
+
+
+def figure(config) -> float:
+    """The stand-in's minimum coaptation height (mm)."""
+    d = config.root.loaded_diameter or 20.0
+    if not config.geometry.has_graft:
+        return 3.0 - 0.5 * (d - 20.0)
+    w, h = config.geometry.graft_width_pct, config.geometry.graft_height_pct
+    return (2.2 + 0.06 * w + 0.02 * h - 0.6 * (d - 20.0)
+            - (config.bending_modulus_kpa - 200.0) / 1000 - 0.1 * (path_number(config) - 1))
+
+
+def margin(w: float, h: float, d: float, eb: float, path: int) -> float:
+    """The stand-in's graft figure minus its normal valve's, worked out by hand."""
+    return (-0.8 + 0.06 * w + 0.02 * h - 0.1 * (d - 20.0) - (eb - 200.0) / 1000
+            - 0.1 * (path - 1))
+
+
+def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> dict:
+    """A result of the closed-form :func:`figure`; W0 grafts leak.  With a start, the source
+    must be finished and be the normal valve of the same member.  The normal valve of a
+    20 mm root takes longer (0.4 s), so that under MPI the other group reaches grafts whose
+    start is still being computed."""
+    g = config.geometry
+    slow = not g.has_graft and config.root.loaded_diameter == 20.0
+    time.sleep(0.4 if slow else 0.01)
+    started = None
+    if start is not None:
+        record = json.loads((start / "case.json").read_text())
+        source = json.loads((start / "result.json").read_text())
+        if record["status"] != "finished" or source["graft_width_pct"] is not None:
+            raise RuntimeError(f"started from {start.name}, not a finished normal valve")
+        if source["parameters"]["root"] != config.to_dict()["root"]:
+            raise RuntimeError(f"started from {start.name}, another member's normal valve")
+        started = source["min_coaptation_height_mm"]
+    log = Path(out_dir).parents[2] / "runs.log"
+    if comm.rank == 0:
+        with open(log, "a") as fh:
+            fh.write(f"{Path(out_dir).name.split('@')[0]}\n")
+    w = g.graft_width_pct
+    leaks = w == 0.0
+    return {"graft_width_pct": w, "graft_height_pct": g.graft_height_pct, "converged": True,
+            "min_coaptation_height_mm": figure(config), "competent": not leaks,
+            "regurgitant_orifice_area_mm2": 0.5 if leaks else 0.0,
+            "leaflet_intersection_mm": 0.0, "mesh_size_mm": g.mesh_size,
+            "root_diameter_mm": config.root.loaded_diameter or 20.09, "n_ranks": comm.size,
+            "start_height_mm": started, "parameters": config.to_dict()}
+
+
+def _runs(out: Path) -> list[str]:
+    log = out / "runs.log"
+    return log.read_text().split() if log.exists() else []
+
+
+def _main(argv: list[str]) -> int:
+    """The CLI with the stand-in case function."""
+    return cli_with(stand_in_case, argv)
+
+
+@pytest.fixture
+def warm_paths(monkeypatch):
+    """Paths whose grafts start from the normal valve of their member (the runner's warm
+    start), otherwise the package's."""
+    from dataclasses import replace
+
+    from valve_dolfinx.study import paths
+
+    warm = tuple(replace(p, start=paths.START_FROM_NORMAL) for p in paths.PATHS)
+    monkeypatch.setattr(paths, "PATHS", warm)
+    return warm
+
+
+def _settings(**kw):
+    from valve_dolfinx.study.grid import StudySettings
+
+    kw.setdefault("widths_pct", (0, 7, 14))
+    kw.setdefault("heights_pct", (0, 13))
+    kw.setdefault("mesh_size_mm", 2.0)
+    kw.setdefault("panel_cases", ())
+    return StudySettings(**kw)
+
+
+# --- cases, names, rows and hashes ----------------------------------------------------------
+def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
+    """--vary and --uncertain with two values each, two paths: the normal valve once per
+    combination of the axes, every graft once per combination and path; the values in the
+    folder names, the rows (one column per key, and path) and the hashes."""
+    from valve_dolfinx.study.layout import case_digest
+    from valve_dolfinx.study.runner import run_study
+    from valve_dolfinx.study.table import read_csv_rows
+
+    settings = _settings(vary={"bending_modulus_kpa": [0, 200]},
+                         uncertain={"root.loaded_diameter": "20, 21"}, paths=2)
+    assert settings.vary == {"bending_modulus_kpa": (0.0, 200.0)}
+    out = tmp_path / "study"
+    outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
+    layout = settings.layout()
+    assert len(layout.cases) == 2 * 2 * (1 + 2 * 6) == 52
+    assert sorted(_runs(out)) == sorted(c.name for c in layout.cases)  # each once
+    assert sorted(outcome.computed) == sorted(c.name for c in layout.cases)
+    assert [c.name for c in layout.cases[:4]] == [
+        "normal__bending_modulus_kpa=0__root.loaded_diameter=20",
+        "normal__bending_modulus_kpa=0__root.loaded_diameter=21",
+        "normal__bending_modulus_kpa=200__root.loaded_diameter=20",
+        "normal__bending_modulus_kpa=200__root.loaded_diameter=21"]
+    assert {c.name for c in layout.cases} >= {
+        "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21",
+        "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21__path=2"}
+    rows = read_csv_rows(out / "results.csv")
+    assert len(rows) == 52 and list(rows[0])[13:17] == [
+        "case", "bending_modulus_kpa", "root.loaded_diameter", "path"]
+    for row in rows:
+        folder = out / "cases" / row["case"]
+        config = json.loads((folder / "result.json").read_text())["parameters"]
+        assert float(row["bending_modulus_kpa"]) == config["bending_modulus_kpa"]
+        assert float(row["root.loaded_diameter"]) == config["root"]["loaded_diameter"]
+        assert f"bending_modulus_kpa={float(row['bending_modulus_kpa']):g}" in row["case"]
+        placement = config["geometry"]["graft_placement"]
+        if row["graft_width_pct"] == "":  # the normal valve serves both paths
+            assert row["path"] == "[1, 2]" and placement == "conformal"
+        else:
+            assert row["path"] == ("1" if placement == "conformal" else "2")
+            assert row["case"].endswith("__path=2") == (row["path"] == "2")
+        assert row["config_hash"] == case_digest(config)  # the hash is the configuration's
+    assert len({r["config_hash"] for r in rows}) == 52
+
+
+def test_graft_settings_do_not_multiply_the_normal_valve(tmp_path):
+    """An uncertain graft-only setting and two paths: one normal valve per diameter, which
+    serves every thickness and path (its folder name leaves them out, its row lists them)."""
+    from valve_dolfinx.study.runner import run_study
+
+    settings = _settings(widths_pct=(7,), heights_pct=(0,), paths=2,
+                         vary={"root.loaded_diameter": [20, 21]},
+                         uncertain={"graft_material.thickness": [0.4, 0.5]})
+    out = tmp_path / "study"
+    outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
+    normals = [r for r in outcome.report.rows if r["graft_width_pct"] is None]
+    assert [r["case"] for r in normals] == ["normal__root.loaded_diameter=20",
+                                            "normal__root.loaded_diameter=21"]
+    assert [r["graft_material.thickness"] for r in normals] == [[0.4, 0.5]] * 2
+    assert [r["path"] for r in normals] == [[1, 2]] * 2
+    assert len(_runs(out)) == 2 + 2 * 2 * 2
+    layout = settings.layout()
+    assert layout.member_cases(1)["graft_material.thickness=0.4, path 2 (billowed)"] == {
+        None: "normal__root.loaded_diameter=21",
+        (7.0, 0.0): "W7_H0__root.loaded_diameter=21__graft_material.thickness=0.4__path=2"}
+
+
+def test_rerun_skips_every_finished_member(tmp_path):
+    """A rerun computes nothing; a third uncertain value computes only its own members."""
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    settings = _settings(uncertain={"root.loaded_diameter": [20, 21]}, paths=2)
+    run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case, report=False)
+    first = _runs(out)
+    again = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
+    assert again.computed == [] and _runs(out) == first
+    wider = settings.replace(uncertain={"root.loaded_diameter": [20, 21, 22]})
+    more = run_study(wider, out, MPI.COMM_SELF, case_function=stand_in_case)
+    assert sorted(more.computed) == sorted(_runs(out)[len(first):])
+    assert len(more.computed) == 1 + 2 * 6 and all("=22" in n for n in more.computed)
+
+
+def test_first_path_keeps_the_plain_sweep_names(tmp_path):
+    """--paths 2 after a plain sweep reuses its cases as path 1 and computes path 2 only."""
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    plain = run_study(_settings(), out, MPI.COMM_SELF, case_function=stand_in_case)
+    assert sorted(plain.computed) == sorted(["normal", "W0_H0", "W0_H13", "W7_H0", "W7_H13",
+                                             "W14_H0", "W14_H13"])
+    two = run_study(_settings(paths=2), out, MPI.COMM_SELF, case_function=stand_in_case)
+    assert sorted(two.computed) == sorted(f"{n}__path=2" for n in plain.computed
+                                          if n != "normal")
+
+
+# --- the recommendation over axes -------------------------------------------------------------
+def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
+    """Hand-worked margins (:func:`margin`): alone, W14/H0 reaches the normal valve by
+    0.04 mm; over two diameters and two paths the worst member (21 mm, path 2) asks for
+    W14/H13 (margin 0.10 mm); with bending_modulus_kpa=400 nothing is robust and W14/H13 is
+    0.10 mm short there."""
+    from valve_dolfinx.study.runner import run_study
+
+    one = run_study(_settings(), tmp_path / "one", MPI.COMM_SELF,
+                    case_function=stand_in_case).report
+    assert [r.recommended for r in one.recommendations] == ["W14/H0"]
+    assert one.recommendations[0].margin_mm == pytest.approx(margin(14, 0, 20, 200, 1))
+
+    settings = _settings(vary={"bending_modulus_kpa": [200, 400]},
+                         uncertain={"root.loaded_diameter": [20, 21]}, paths=2)
+    report = run_study(settings, tmp_path / "axes", MPI.COMM_SELF,
+                       case_function=stand_in_case).report
+    soft, stiff = report.recommendations
+    assert soft.comparison == {"bending_modulus_kpa": 200.0}
+    assert stiff.comparison == {"bending_modulus_kpa": 400.0}
+    worst = "root.loaded_diameter=21, path 2 (billowed)"
+    assert soft.members == ["root.loaded_diameter=20, path 1 (conformal)",
+                            "root.loaded_diameter=20, path 2 (billowed)",
+                            "root.loaded_diameter=21, path 1 (conformal)", worst]
+    assert soft.targets_mm == pytest.approx(dict(zip(soft.members, [3.0, 3.0, 2.5, 2.5],
+                                                      strict=True)))
+    assert soft.recommended == "W14/H13" and soft.qualifying == ["W14/H13"]
+    assert soft.margin_mm == pytest.approx(margin(14, 13, 21, 200, 2)) == pytest.approx(0.1)
+    assert soft.limiting_member == worst and f"limited by `{worst}`" in soft.text
+    cell = soft.cell("W14/H13")
+    assert cell.spread_mm == pytest.approx(figure_of(14, 13, 20, 200, 1)
+                                           - figure_of(14, 13, 21, 200, 2))
+    assert stiff.recommended is None and stiff.best == "W14/H13"
+    assert stiff.shortfall_mm == pytest.approx(-margin(14, 13, 21, 400, 2))
+    assert "No graft on the grid is robust" in stiff.text and worst in stiff.text
+    w0 = stiff.cell("W0/H13")
+    assert w0.leaking == stiff.members and not w0.qualifies
+    for suffix in ("__bending_modulus_kpa=200", "__bending_modulus_kpa=400"):
+        for name in ("sizing_map", "coaptation_vs_width"):
+            assert (tmp_path / "axes" / f"{name}{suffix}.png").stat().st_size > 10_000
+    summary = json.loads((tmp_path / "axes" / "summary.json").read_text())
+    assert [r["recommended"] for r in summary["recommendations"]] == ["W14/H13", None]
+    text = (tmp_path / "axes" / "report.md").read_text()
+    assert "### bending_modulus_kpa=400" in text and "| W14/H13 | " in text
+
+
+def figure_of(w, h, d, eb, path) -> float:
+    """:func:`figure` of a graft written out (the spread's check)."""
+    return 2.2 + 0.06 * w + 0.02 * h - 0.6 * (d - 20) - (eb - 200) / 1000 - 0.1 * (path - 1)
+
+
+def _member(rows, **flags):
+    """A member's table from ``{"W/H": height}`` (None: the normal valve)."""
+    out = []
+    for size, height in rows.items():
+        w, h = (None, None) if size is None else map(float, size.split("/"))
+        leak = size is not None and flags.get("leaks") == size
+        converged = size is None or flags.get("unconverged") != size
+        out.append({"graft_width_pct": w, "graft_height_pct": h, "converged": converged,
+                    "competent": not leak and converged,
+                    "regurgitant_orifice_area_mm2": 1.5 if leak else 0.0,
+                    "min_coaptation_height_mm": height})
+    return out
+
+
+def test_worst_case_recommendation_on_constructed_tables():
+    """Three members: 7/0 qualifies in two and leaks in the third, so 14/0 (the next in flat
+    area, lowest member 2.95 mm against its target 2.90 mm) is recommended with that margin
+    and member; without 14/0 nothing qualifies and the best graft's shortfall is named."""
+    from valve_dolfinx.study.recommend import recommend
+
+    tables = {
+        "D=20": _member({None: 3.0, "7/0": 3.3, "14/0": 3.4, "0/13": 2.0}),
+        "D=21": _member({None: 2.9, "7/0": 3.5, "14/0": 2.95, "0/13": 2.1}, leaks="7/0"),
+        "D=22": _member({None: 2.5, "7/0": 2.8, "14/0": 3.0, "0/13": 2.2}),
+    }
+    rec = recommend(tables)
+    assert rec.recommended == "W14/H0" and rec.qualifying == ["W14/H0"]
+    assert rec.margin_mm == pytest.approx(0.05) and rec.limiting_member == "D=21"
+    assert rec.recommended_height_mm == pytest.approx(2.95)  # the worst member's height
+    assert rec.spread_mm == pytest.approx(3.4 - 2.95)
+    leaky = rec.cell("W7/H0")
+    assert leaky.leaking == ["D=21"] and not leaky.qualifies
+    assert leaky.margin_mm == pytest.approx(0.3)  # it reaches the target everywhere
+    assert rec.cell("W0/H13").margin_mm == pytest.approx(-1.0)
+    assert "margin 0.05 mm, limited by `D=21` (2.95 mm against 2.90 mm)" in rec.text
+
+    without = {m: [r for r in rows if r["graft_width_pct"] != 14.0] for m, rows in tables.items()}
+    none = recommend(without)
+    # W7/H0 leaks in D=21, so the best is the graft sound in every member: W0/H13, whose
+    # worst margin is D=20's 2.0 - 3.0
+    assert none.recommended is None and none.best == "W0/H13"
+    assert none.shortfall_mm == pytest.approx(1.0) and none.limiting_member == "D=20"
+    assert "No graft on the grid is robust" in none.text
+    assert "1.00 mm short in `D=20`" in none.text
+
+    unconverged = recommend({**tables, "D=21": _member(
+        {None: 2.9, "7/0": 3.5, "14/0": 2.95, "0/13": 2.1}, leaks="7/0", unconverged="14/0")})
+    assert unconverged.recommended is None and unconverged.qualifying == []
+    assert unconverged.cell("W14/H0").unconverged == ["D=21"]
+    missing = recommend({**tables, "D=22": [r for r in tables["D=22"]
+                                            if r["graft_width_pct"] != 14.0]})
+    assert missing.cell("W14/H0").missing == ["D=22"] and missing.recommended is None
+    given = recommend(tables, target_mm=2.8)  # one target for every member
+    assert given.recommended == "W14/H0" and given.margin_mm == pytest.approx(0.15)
+
+
+# --- bad input --------------------------------------------------------------------------------
+@pytest.mark.parametrize("args,expect", [
+    (["--vary", "no_such_key=1,2"], ["--vary no_such_key", "unknown key"]),
+    (["--vary", "bending_modulus_kps=0,200"], ["unknown key", "bending_modulus_kpa"]),
+    (["--uncertain", "root.loaded_diameter=20,5"], ["root.loaded_diameter", "5"]),
+    (["--vary", "bending_modulus_kpa=0,200,0.0"], ["bending_modulus_kpa", "0.0", "twice"]),
+    (["--vary", "root.loaded_diameter=20", "--vary", "root.loaded_diameter=21"],
+     ["root.loaded_diameter", "already an axis"]),
+    (["--vary", "root.loaded_diameter=20,21", "--uncertain", "root.loaded_diameter=22"],
+     ["root.loaded_diameter", "already an axis"]),
+    (["--vary", "bending_modulus_kpa=0,200", "--set", "bending_modulus_kpa=100"],
+     ["bending_modulus_kpa", "--set"]),
+    (["--vary", "geometry.graft_width_pct=0,7"], ["--widths"]),
+    (["--vary", "root=1"], ["names a table"]),
+    (["--vary", "bending_modulus_kpa="], ["no value"]),
+    (["--vary", "bending_modulus_kpa"], ["KEY=V1,V2"]),
+    (["--vary", "solver=ptc,newton"], ["solver", "newton"]),
+    (["--paths", "4"], ["paths = 4", "1 to 3"]),
+    (["--paths", "2", "--set", "geometry.graft_placement=billowed"],
+     ["path 2 (billowed)", "geometry.graft_placement"]),
+    (["--paths", "2", "--uncertain", "geometry.billow_mm=1,2"], ["geometry.billow_mm", "path"]),
+])
+def test_bad_axes_stop_before_computing(tmp_path, caplog, quiet_cli, monkeypatch, args, expect):
+    """Every bad axis stops the sweep at once with one line naming it; nothing is computed
+    and the output folder is not created."""
+    from valve_dolfinx import cli
+    from valve_dolfinx.study import runner
+
+    def must_not_run(*a, **kw):
+        raise AssertionError("a case ran")
+
+    monkeypatch.setattr(runner, "run_closure_case", must_not_run)
+    out = tmp_path / "study"
+    assert cli.main(["sweep", *GRID, "--out", str(out), *args]) == 2
+    err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(err) == 1 and "\n" not in err[0], err
+    for text in expect:
+        assert text in err[0], err[0]
+    assert not out.exists()
+
+
+def test_axes_from_the_study_table(tmp_path):
+    """[study] vary/uncertain/paths, dotted or nested keys; the same named errors."""
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.study.grid import load_study_toml
+
+    path = tmp_path / "study.toml"
+    path.write_text('[study]\nwidths = [7]\nheights = [0]\npaths = 2\n'
+                    'vary = {bending_modulus_kpa = [0, 200]}\n'
+                    'uncertain = {root = {loaded_diameter = ["none", 21]}}\n')
+    settings = load_study_toml(path)
+    assert settings.vary == {"bending_modulus_kpa": (0.0, 200.0)}
+    assert settings.uncertain == {"root.loaded_diameter": (None, 21.0)}  # none: the wall law
+    names = [c.name for c in settings.cases()]
+    assert "W7_H0__bending_modulus_kpa=200__root.loaded_diameter=none__path=2" in names
+    assert settings == type(settings).from_dict(json.loads(json.dumps(settings.to_dict())))
+    for text, match in (
+            ("pressure_mmhg = 90\n[study]\nvary = {pressure_mmhg = [80, 100]}\n",
+             "vary pressure_mmhg: it is also set by the case"),
+            ("[study]\nvary = {pressure_mmhg = [80]}\nuncertain = {pressure_mmhg = [9]}\n",
+             "both varied"),
+            ('[study]\nuncertain = {"root.loaded_diameter" = 50}\n',
+             "uncertain root.loaded_diameter=50")):
+        path.write_text(text)
+        with pytest.raises(ParameterError, match=match):
+            load_study_toml(path)
+
+
+# --- parallel, job arrays and warm starts -----------------------------------------------------
+@pytest.mark.mpi
+def test_axes_and_warm_starts_give_the_serial_tables(tmp_path_factory, warm_paths):
+    """On COMM_WORLD (1 or 2 ranks) with every graft starting from its member's normal
+    valve: each case once, every start finished before its case (the stand-in fails
+    otherwise; on 2 ranks one group waits for the slow 20 mm normal valve), and the tables
+    of a serial sweep."""
+    from valve_dolfinx.study.runner import run_study
+
+    comm = MPI.COMM_WORLD
+    root = Path(comm.bcast(str(tmp_path_factory.mktemp("axes")) if comm.rank == 0 else None))
+    settings = _settings(widths_pct=(0, 14), heights_pct=(13,), paths=2,
+                         uncertain={"root.loaded_diameter": [20, 21]})
+    assert all(c.start_from == f"normal__root.loaded_diameter={c.axis_values[k]:g}"
+               for c in settings.cases() if not c.is_normal
+               for k in ["root.loaded_diameter"])
+    outcome = run_study(settings, root / "world", comm, case_function=stand_in_case,
+                        poll_s=0.05)
+    assert sorted(outcome.computed) == sorted(c.name for c in settings.cases())
+    if comm.rank == 0:
+        assert sorted(_runs(root / "world")) == sorted(outcome.computed)
+        rows = outcome.report.rows
+        assert all(r["status"] == "finished" for r in rows), [r["reason"] for r in rows]
+        assert all(r["start_height_mm"] == 3.0 - 0.5 * (r["root.loaded_diameter"] - 20)
+                   for r in rows if r["graft_width_pct"] is not None)
+        run_study(settings, root / "serial", MPI.COMM_SELF, case_function=stand_in_case)
+        assert (stable_csv(root / "world" / "results.csv")
+                == stable_csv(root / "serial" / "results.csv"))
+
+
+def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, capsys, quiet_cli,
+                                                                   warm_paths):
+    """A job array over an axis and two paths: each task runs its case (and, first, the
+    normal valve it starts from, unless finished); `report` then gives one sweep's table."""
+    args = ["--widths", "7", "14", "--heights", "0", "--uncertain",
+            "root.loaded_diameter=20,21", "--paths", "2", "--no-progress"]
+    whole, array = tmp_path / "whole", tmp_path / "array"
+    assert _main(["sweep", *args, "--out", str(whole)]) == 0
+    capsys.readouterr()
+    assert _main(["sweep", *args, "--out", str(array), "--list"]) == 0
+    listing = capsys.readouterr().out.splitlines()
+    assert len(listing) == 1 + 2 + 2 * 2 * 2
+    assert "W14_H0__root.loaded_diameter=21__path=2" in listing[-1]
+    last = int(listing[-1].split()[0])
+    assert _main(["sweep", *args, "--out", str(array), "--case-index", str(last)]) == 0
+    assert _runs(array) == ["normal__root.loaded_diameter=21",
+                            "W14_H0__root.loaded_diameter=21__path=2"]
+    for i in range(last):
+        assert _main(["sweep", *args, "--out", str(array), "--case-index", str(i)]) == 0
+    assert sorted(_runs(array)) == sorted(_runs(whole))  # every case once
+    assert _main(["report", str(array)]) == 0
+    assert stable_csv(array / "results.csv") == stable_csv(whole / "results.csv")
+    assert "W14/H0" in capsys.readouterr().out
+
+
+# --- the nomogram -----------------------------------------------------------------------------
+def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli):
+    """Two diameters, two paths: nomogram.csv holds each diameter's recommendation as
+    summary.json has it and as :func:`margin` gives it by hand (21 mm: W14/H13, margin
+    0.10 mm on path 2; 22 mm: nothing qualifies, W14/H13 0.10 mm short)."""
+    from valve_dolfinx.study.table import read_csv_rows
+
+    out = tmp_path / "nomogram"
+    assert _main(["nomogram", "--root-diameters", "21", "22", *GRID, "--mesh-size", "2",
+                  "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "nomogram.png" in printed and "[root.loaded_diameter=21]" in printed
+    rows = read_csv_rows(out / "nomogram.csv")
+    summary = json.loads((out / "summary.json").read_text())["recommendations"]
+    assert [float(r["root_loaded_diameter_mm"]) for r in rows] == [21.0, 22.0]
+    for row, rec in zip(rows, summary, strict=True):
+        assert row["recommended"] == (rec["recommended"] or "")
+        assert row["best"] == (rec["best"] or "")
+        assert row["limiting_member"] == rec["limiting_member"]
+        assert row["members"] == "2"
+    d21, d22 = rows
+    assert d21["recommended"] == "W14/H13" and float(d21["graft_width_pct"]) == 14.0
+    assert float(d21["margin_mm"]) == pytest.approx(margin(14, 13, 21, 200, 2))
+    assert d21["limiting_member"] == "path 2 (billowed)"
+    assert float(d21["target_mm"]) == pytest.approx(2.5)
+    assert d22["recommended"] == "" and d22["graft_width_pct"] == ""
+    assert d22["best"] == "W14/H13"
+    assert float(d22["shortfall_mm"]) == pytest.approx(-margin(14, 13, 22, 200, 2))
+    assert (out / "nomogram.png").stat().st_size > 20_000
+    assert "## Nomogram" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("diameters,expect", [
+    (["20", "5"], ["--root-diameters root.loaded_diameter=5", "root.loaded_diameter"]),
+    (["20", "none"], ["--root-diameters", "in mm"]),
+    (["20", "20.0"], ["--root-diameters root.loaded_diameter", "twice"]),
+])
+def test_nomogram_bad_diameters_stop_before_computing(tmp_path, caplog, quiet_cli, diameters,
+                                                       expect):
+    out = tmp_path / "nomogram"
+    assert _main(["nomogram", "--root-diameters", *diameters, "--out", str(out)]) == 2
+    err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(err) == 1 and all(text in err[0] for text in expect), err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_nomogram_on_real_closures(tmp_path, quiet_cli):
+    """`valve-dolfinx nomogram` on real closures: two diameters, the normal valve and W21/H27
+    on a 2.5 mm mesh along one path; nomogram.csv matches the study's recommendations."""
+    from valve_dolfinx import cli
+    from valve_dolfinx.study.table import read_csv_rows
+
+    out = tmp_path / "nomogram"
+    assert cli.main(["nomogram", "--root-diameters", "19", "20", "--widths", "21", "--heights",
+                     "27", "--paths", "1", "--mesh-size", "2.5", "--wall-time-limit", "240",
+                     "--out", str(out), "--no-progress"]) == 0
+    results = read_csv_rows(out / "results.csv")
+    assert len(results) == 4 and {r["status"] for r in results} == {"finished"}
+    rows = read_csv_rows(out / "nomogram.csv")
+    summary = json.loads((out / "summary.json").read_text())["recommendations"]
+    assert [float(r["root_loaded_diameter_mm"]) for r in rows] == [19.0, 20.0]
+    for row, rec in zip(rows, summary, strict=True):
+        graft = next(r for r in results if r["graft_width_pct"] == "21.0"
+                     and r["root.loaded_diameter"] == row["root_loaded_diameter_mm"])
+        normal = next(r for r in results if r["graft_width_pct"] == ""
+                      and r["root.loaded_diameter"] == row["root_loaded_diameter_mm"])
+        reaches = (graft["converged"] == "true" and graft["competent"] == "true"
+                   and normal["converged"] == "true"
+                   and float(graft["min_coaptation_height_mm"])
+                   >= float(normal["min_coaptation_height_mm"]))
+        assert row["recommended"] == ("W21/H27" if reaches else "") == (rec["recommended"]
+                                                                         or "")
+        if reaches:
+            assert float(row["margin_mm"]) == pytest.approx(
+                float(graft["min_coaptation_height_mm"])
+                - float(normal["min_coaptation_height_mm"]))
+    assert (out / "nomogram.png").stat().st_size > 20_000
+
+
+if __name__ == "__main__":  # the CLI with the stand-in case function
+    import sys
+
+    sys.exit(_main(sys.argv[1:]))

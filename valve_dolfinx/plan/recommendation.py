@@ -1,0 +1,138 @@
+"""What a plan answers: a graft size, the robust recommendation and its margin, in plain words.
+
+:class:`PlanRecommendation` is the plan's answer as the report prints it, independent of
+how the study behind it is organised: the plan's study (:func:`valve_dolfinx.plan.runner.
+run_plan_study`) maps its own result onto it.  It is one of three answers:
+
+* a graft is recommended: the smallest graft that converges, seals and reaches the
+  target in every member of the study (the root diameters and the numerical paths),
+  with its margin over the target in the member that limits it;
+* no graft on the grid is robust: the closest graft and its shortfall;
+* the native leaflets cannot seal the root whatever the graft (the closed-form check of
+  :mod:`valve_dolfinx.plan.reach`): nothing was computed.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
+
+__all__ = ["GraftSize", "PlanRecommendation"]
+
+
+class GraftSize(NamedTuple):
+    """A graft's enlargement over the measured leaflet, per cent of its width and height."""
+
+    width_pct: float
+    height_pct: float
+
+    @property
+    def label(self) -> str:
+        """``W14/H13``, as the study names it."""
+        return f"W{self.width_pct:g}/H{self.height_pct:g}"
+
+    @property
+    def stem(self) -> str:
+        """``W14_H13``: the graft's part of a file name."""
+        return f"W{self.width_pct:g}_H{self.height_pct:g}"
+
+    @classmethod
+    def parse(cls, text: str, option: str = "--template") -> GraftSize:
+        """``"14/13"`` or ``"W14/H13"`` (per cent), range-checked."""
+        match = re.fullmatch(r"\s*W?\s*([-+0-9.eE]+)\s*[/_,]\s*H?\s*([-+0-9.eE]+)\s*", text)
+        try:
+            size = cls(float(match.group(1)), float(match.group(2)))
+        except (AttributeError, ValueError):
+            raise ParameterError(f"{option} {text!r}: give the graft as W/H in per cent of "
+                                 "the measured leaflet, e.g. 14/13") from None
+        for value in size:
+            if not 0.0 <= value <= MAX_GRAFT_PCT:
+                reason = GRAFT_TOO_SMALL if value < 0 else GRAFT_TOO_LARGE
+                raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
+                                     f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
+        return size
+
+
+@dataclass(frozen=True)
+class PlanRecommendation:
+    """The plan's answer (mm); exactly one of ``graft``, ``closest`` and ``cannot_seal``
+    says what it is (``closest`` may also be None when no graft case produced a figure).
+
+    Attributes
+    ----------
+    graft
+        The recommended graft: it converges, seals and reaches the target in every member.
+    margin_mm
+        The recommended graft's lowest minimum coaptation height minus its target.
+    limiting_member
+        The member (root diameter, path) where that margin is taken, in words.
+    closest, shortfall_mm
+        When no graft is robust: the graft closest to qualifying and by how much its
+        worst member falls short of the target.
+    target_mm, target_source
+        The minimum coaptation height a graft must reach, and where it comes from.
+    members
+        The members the recommendation was taken over, in words.
+    cannot_seal
+        The closed-form verdict (one line) when the native leaflets cannot seal the root
+        whatever the graft; nothing was computed then.
+    """
+
+    graft: GraftSize | None = None
+    margin_mm: float | None = None
+    limiting_member: str | None = None
+    closest: GraftSize | None = None
+    shortfall_mm: float | None = None
+    target_mm: float | None = None
+    target_source: str = ""
+    members: tuple[str, ...] = ()
+    cannot_seal: str | None = None
+
+    def __post_init__(self) -> None:
+        answers = sum(x is not None for x in (self.graft, self.closest, self.cannot_seal))
+        if answers > 1:
+            raise ParameterError("a plan recommends a graft, or names the closest one, or "
+                                 "says the leaflets cannot seal: give one of graft, closest "
+                                 "and cannot_seal")
+        if self.graft is not None and self.margin_mm is None:
+            raise ParameterError("a recommended graft needs its margin_mm over the target")
+
+    @property
+    def template_graft(self) -> GraftSize | None:
+        """The graft to draw: the recommended one, else the closest."""
+        return self.graft or self.closest
+
+    def headline(self) -> str:
+        """The answer in one sentence or two, as the surgeon reads it first."""
+        if self.cannot_seal is not None:
+            return self.cannot_seal
+        target = ("the target minimum coaptation height ("
+                  + (f"{self.target_mm:.2f} mm, " if self.target_mm is not None else "")
+                  + f"{self.target_source or 'as given'})")
+        n = len(self.members)
+        if self.graft is not None:
+            scope = f" in all {n} members" if n > 1 else ""
+            where = f", in {self.limiting_member}" if self.limiting_member else ""
+            return (f"Recommended graft {self.graft.label} (+{self.graft.width_pct:g} % width, "
+                    f"+{self.graft.height_pct:g} % height). It converges, seals and reaches "
+                    f"{target}{scope}; its smallest margin is {self.margin_mm:.2f} mm{where}.")
+        if self.closest is not None:
+            scope = f" in every one of the {n} members" if n > 1 else ""
+            short = (f", {self.shortfall_mm:.2f} mm short in its worst member"
+                     if self.shortfall_mm is not None else "")
+            return (f"No graft on the grid is robust: none converges, seals and reaches "
+                    f"{target}{scope}. The closest is {self.closest.label}{short}.")
+        return "No graft case produced a coaptation height: nothing to recommend."
+
+    def to_dict(self) -> dict:
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        for key in ("graft", "closest"):
+            size = out[key]
+            out[key] = None if size is None else {"label": size.label, **size._asdict()}
+        out["members"] = list(self.members)
+        out["headline"] = self.headline()
+        return out

@@ -1,0 +1,110 @@
+"""The sizing nomogram: the recommended graft against the loaded root diameter (SPEC §7).
+
+A study whose one comparison axis is the loaded root diameter
+(``root.loaded_diameter``, numbers only) -- what ``valve-dolfinx nomogram
+--root-diameters 18 19 ...`` runs, with the numerical paths (and any
+``--uncertain`` axis) as the members -- also writes:
+
+* ``nomogram.csv``: one row per diameter, the recommendation of that diameter
+  (:data:`NOMOGRAM_COLUMNS`);
+* ``nomogram.png``: the recommended width and height enlargements and the margin
+  against the diameter; a diameter where no graft on the grid qualifies is
+  shaded, with the best graft and its shortfall.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from valve_dolfinx.plotting.study import plot_nomogram
+from valve_dolfinx.study.axes import value_text
+from valve_dolfinx.study.layout import StudyLayout
+from valve_dolfinx.study.recommend import Recommendation
+from valve_dolfinx.study.table import write_csv
+
+__all__ = ["NOMOGRAM_KEY", "NOMOGRAM_COLUMNS", "is_nomogram", "nomogram_rows",
+           "write_nomogram"]
+
+#: the comparison axis of a nomogram
+NOMOGRAM_KEY = "root.loaded_diameter"
+#: the columns of ``nomogram.csv``: the diameter; the recommended graft, its enlargements,
+#: flat area, margin (mm) and limiting member, its worst-case minimum coaptation height and
+#: the limiting member's target; when none qualifies, the best graft, its enlargements and
+#: shortfall (mm); and the number of members of each cell
+NOMOGRAM_COLUMNS = (
+    "root_loaded_diameter_mm", "recommended", "graft_width_pct", "graft_height_pct",
+    "flat_area_ratio", "margin_mm", "limiting_member", "min_coaptation_height_mm",
+    "target_mm", "best", "best_width_pct", "best_height_pct", "shortfall_mm", "members",
+)
+
+
+def is_nomogram(layout: StudyLayout) -> bool:
+    """A study whose one comparison axis is the loaded root diameter, in millimetres."""
+    compared = [a for a in layout.axes if a.is_comparison]
+    return (len(compared) == 1 and compared[0].key == NOMOGRAM_KEY
+            and all(isinstance(v, float) for v in compared[0].values))
+
+
+def nomogram_rows(recommendations: Sequence[Recommendation]) -> list[dict]:
+    """One row per diameter (:data:`NOMOGRAM_COLUMNS`), in the order given."""
+    rows = []
+    for rec in recommendations:
+        chosen, best = rec.cell(rec.recommended), rec.cell(rec.best)
+        limit = rec.limiting_member
+        rows.append({
+            "root_loaded_diameter_mm": rec.comparison[NOMOGRAM_KEY],
+            "recommended": rec.recommended or "",
+            "graft_width_pct": chosen.width_pct if chosen else None,
+            "graft_height_pct": chosen.height_pct if chosen else None,
+            "flat_area_ratio": rec.recommended_area_ratio,
+            "margin_mm": rec.margin_mm,
+            "limiting_member": limit if limit is not None else "",
+            "min_coaptation_height_mm": rec.recommended_height_mm,
+            "target_mm": rec.targets_mm.get(limit) if limit is not None else rec.target_mm,
+            "best": rec.best or "",
+            "best_width_pct": best.width_pct if best else None,
+            "best_height_pct": best.height_pct if best else None,
+            "shortfall_mm": rec.shortfall_mm,
+            "members": len(rec.members),
+        })
+    return rows
+
+
+def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],
+              rows: Sequence[dict]) -> str:
+    """The settings a nomogram stands on, for its footnote."""
+    first = next((r for r in rows if r.get("parameters")), {})
+    params = first.get("parameters") or {}
+    mesh = (params.get("geometry") or {}).get("mesh_size")
+    pressure = params.get("pressure_mmhg")
+    widths = sorted({w for w, _ in layout.sizes})
+    heights = sorted({h for _, h in layout.sizes})
+    paths = ", ".join(p.name for p in layout.paths)
+    uncertain = "; ".join(f"uncertain {a.key}: {', '.join(value_text(v) for v in a.values)}"
+                          for a in layout.axes if not a.is_comparison)
+    source = recommendations[0].target_source if recommendations else ""
+    n = len(layout.sizes)
+    parts = [f"Per diameter: the normal valve and {n} graft{'s' if n != 1 else ''} (W "
+             f"{', '.join(f'{w:g}' for w in widths)} %; H {', '.join(f'{h:g}' for h in heights)}"
+             f" % of the native leaflet) along {len(layout.paths)} numerical path(s) ({paths})"
+             + (f"; {uncertain}" if uncertain else "") + ".",
+             f"Recommended: the smallest graft (flat area) that converges, seals and reaches the "
+             f"target ({source}) in every member; margin = least height minus target.",
+             f"Mesh {mesh if mesh is not None else '?'} mm, "
+             f"{pressure if pressure is not None else '?'} mmHg, valve_dolfinx "
+             f"{(first.get('versions') or {}).get('valve_dolfinx', '?')}."]
+    return "\n".join(parts)
+
+
+def write_nomogram(out: Path, recommendations: Sequence[Recommendation], layout: StudyLayout,
+                   rows: Sequence[dict]) -> list[Path]:
+    """Write ``nomogram.csv`` and ``nomogram.png`` into ``out``; the files written."""
+    out = Path(out)
+    table = nomogram_rows(recommendations)
+    csv_path = write_csv(out / "nomogram.csv", table, NOMOGRAM_COLUMNS)
+    png = out / "nomogram.png"
+    plot_nomogram(table, png, title="Pericardial graft sizing nomogram: the smallest graft "
+                  "that seals and coapts\nlike the normal valve, against the loaded root "
+                  "diameter", footnote=_footnote(layout, recommendations, rows))
+    return [csv_path, png]
