@@ -10,8 +10,7 @@ Runs into one results folder (``--out``, default ``results/sensitivity``):
 Then prints, per choice, a Markdown table per cell (the minimum coaptation height, and
 whether it leaks, has leaflets crossing or did not converge; the worst case over the
 members with ``--paths 2``), a row of the recommendation each value gives, and the wall
-time of its study.  A choice whose setting the package does not have is skipped with a
-message.  Every study is resumable: a rerun with the same ``--out`` computes only what is
+time of its study.  Every study is resumable: a rerun with the same ``--out`` computes only what is
 missing.
 
 Run on the 2-core machine: ``.venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sensitivity.py``
@@ -47,7 +46,6 @@ class Choice:
     title: str
     key: str
     values: Callable[[Any, float], tuple]
-    missing: str = ""
 
 
 #: The choices of docs/sensitivity.md, in its order
@@ -56,17 +54,10 @@ CHOICES = (
            "root.loaded_diameter", lambda d, mesh: (19.0, None, 21.0, 22.0)),
     Choice("native_bending", "the native leaflets' bending modulus (kPa)",
            "bending_modulus_kpa", lambda d, mesh: (0.0, 200.0, 800.0)),
-    # TODO(issue 47): the graft's own bending modulus (a cited value for fixed pericardium,
-    # and a decade either side); skipped until the setting exists
-    Choice("graft_bending", "the graft's bending modulus (kPa)", "graft_bending_modulus_kpa",
-           lambda d, mesh: (d / 10, d, d * 10),
-           missing="the graft's own bending modulus is not a setting yet (issue 47)"),
-    # TODO: how the graft carries compression (the tension field against the plain Fung
-    # law): valve_dolfinx/materials.py has both energies (relaxed_energy, fung_energy), but
-    # MembraneModel.wrinkling is not a case setting; skipped until one exists
+    Choice("graft_bending", "the graft's bending modulus (kPa): a decade either side",
+           "graft_bending_modulus_kpa", lambda d, mesh: (d / 10, d, d * 10)),
     Choice("graft_compression", "the graft's compressive response (true: tension field; "
-           "false: the plain Fung law)", "graft_tension_field", lambda d, mesh: (True, False),
-           missing="no case setting chooses the graft's compressive response"),
+           "false: the plain Fung law)", "graft_tension_field", lambda d, mesh: (True, False)),
     Choice("graft_thickness", "graft thickness (mm)", "graft_material.thickness",
            lambda d, mesh: (0.3, 0.5)),
     Choice("nodulus", "nodulus length left out of the coaptation heights (mm)",
@@ -78,15 +69,12 @@ CHOICES = (
 )
 
 
-def _values(choice: Choice, mesh: float) -> tuple[tuple, Any] | None:
-    """The choice's values (checked) and its default; None if the setting does not exist."""
+def _values(choice: Choice, mesh: float) -> tuple[tuple, Any]:
+    """The choice's values (checked) and its default."""
     if choice.key == "geometry.mesh_size":
         default = mesh
     else:
-        try:
-            default = get_dotted(CaseConfig().to_dict(), choice.key)
-        except KeyError:
-            return None
+        default = get_dotted(CaseConfig().to_dict(), choice.key)
     values = check_axis_values(f"choice {choice.name}", choice.key,
                                list(choice.values(default, mesh)), {})
     return values, default
@@ -167,13 +155,7 @@ def main(argv=None) -> int:
     walls = {"defaults": wall}
     tables = []
     for choice in (c for c in CHOICES if c.name in args.choices):
-        found = _values(choice, args.mesh_size)
-        if found is None:
-            if comm.rank == 0:
-                print(f"{choice.name}: skipped: {choice.missing or 'no such setting'} "
-                      f"(`{choice.key}`)")
-            continue
-        values, default = found
+        values, default = _values(choice, args.mesh_size)
         others = [v for v in values if v != default]
         mesh = None if choice.key == "geometry.mesh_size" else args.mesh_size
         settings = StudySettings(mesh_size_mm=mesh, vary={choice.key: others}, **grid)

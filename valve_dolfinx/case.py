@@ -59,11 +59,12 @@ VALVE_PRESSURE_SIDE = -1.0
 # --- building blocks -----------------------------------------------------------------------
 def closure_model(domain: ValveDomain, config: CaseConfig) -> MembraneModel:
     """The membrane model of a valve domain: native leaflets and (if present) the graft."""
-    materials = {}
+    materials, relaxed = {}, {}
     for patch in domain.valve.leaflets:
         materials[patch.tag] = config.graft_material if patch.is_graft else config.native_material
+        relaxed[patch.tag] = config.graft_tension_field or not patch.is_graft
     return MembraneModel(domain, materials, pressure_side=VALVE_PRESSURE_SIDE,
-                         quadrature_degree=config.quadrature_degree)
+                         quadrature_degree=config.quadrature_degree, wrinkling=relaxed)
 
 
 def _radial_scaling(model: MembraneModel, factor: float) -> fem.Function:

@@ -95,8 +95,9 @@ _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
 #: settings that only a graft uses (dotted keys; a key that names a table covers all of it):
 #: the normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`),
 #: so normal valves that differ in graft settings alone are one case
-GRAFT_ONLY_SETTINGS = ("graft_material", "geometry.graft_fibre_angle_deg",
-                       "geometry.graft_placement", "geometry.billow_mm")
+GRAFT_ONLY_SETTINGS = ("graft_material", "graft_bending_modulus_kpa", "graft_tension_field",
+                       "geometry.graft_fibre_angle_deg", "geometry.graft_placement",
+                       "geometry.billow_mm")
 
 #: the nested parameter sets of a CaseConfig, by field name
 _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
@@ -120,6 +121,10 @@ class CaseConfig:
     at the scale of the mesh (docs/model.md §3; its effect on the figure of merit:
     docs/numerics.md §7).  ``graft_bending_modulus_kpa`` is the graft's own, with the
     graft's thickness: fixed pericardium carries compression by bending.
+    ``graft_tension_field`` chooses how the graft carries compression: the tension-field
+    relaxed energy (the default: it wrinkles at no compressive stress, held by its bending
+    stiffness) or, false, the plain Fung law, which resists compression in-plane (SPEC §3;
+    the native leaflets always wrinkle).
     ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
     pseudo-transient continuation with PETSc TS and SNES, contact and bending
     in the Newton system from the first step,
@@ -151,6 +156,7 @@ class CaseConfig:
     symmetric_reference: bool = False
     bending_modulus_kpa: float = BENDING_MODULUS_KPA
     graft_bending_modulus_kpa: float = GRAFT_BENDING_MODULUS_KPA
+    graft_tension_field: bool = True
 
     def __post_init__(self) -> None:
         check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
@@ -242,6 +248,9 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "graft_bending_modulus_kpa": ("kPa", "flexural modulus E_b of the graft (fixed "
                                       "pericardium), D = E_b·t³/12 with the graft's "
                                       "thickness (0: pure membrane)"),
+        "graft_tension_field": ("", "how the graft carries compression: true, the "
+                                "tension-field relaxed energy (it wrinkles); false, the plain "
+                                "Fung law (it resists compression in-plane)"),
     },
     "geometry": {
         "root_diameter": ("mm", "root diameter the flat leaflets are sized on"),

@@ -66,14 +66,16 @@ class MembraneModel:
     quadrature_degree
         Quadrature degree of every integral (1 is exact on P1 triangles).
     wrinkling
-        Use the tension-field relaxed energy (no compression).
+        Use the tension-field relaxed energy (no compression): for every region, or
+        ``{tag: bool}`` per region (a region left out is relaxed); False gives the plain
+        Fung law, which resists compression.
     """
 
     domain: MembraneDomain
     materials: Mapping[int, FungMaterial]
     pressure_side: float = 1.0
     quadrature_degree: int = 1
-    wrinkling: bool = True
+    wrinkling: bool | Mapping[int, bool] = True
     V: fem.FunctionSpace = field(init=False)
     u: fem.Function = field(init=False)
     pressure: fem.Constant = field(init=False)
@@ -94,6 +96,10 @@ class MembraneModel:
         self.pressure = fem.Constant(mesh, dolfinx.default_scalar_type(0.0))
         self.dx = ufl.Measure("dx", domain=mesh, subdomain_data=self.domain.cell_tags,
                               metadata={"quadrature_degree": self.quadrature_degree})
+        relaxed = self.wrinkling
+        self._relaxed = ({tag: bool(relaxed.get(tag, True)) for tag in self.materials}
+                         if isinstance(relaxed, Mapping)
+                         else dict.fromkeys(self.materials, bool(relaxed)))
 
     # --- kinematics ---------------------------------------------------------
     def deformation_gradient(self, u=None):
@@ -107,17 +113,19 @@ class MembraneModel:
         return reference_area_factor(self.domain.reference)
 
     # --- energy and forms -----------------------------------------------------
-    def energy_density(self, material: FungMaterial, u=None):
-        """t·W per reference area."""
-        E = self.strain(u)
-        W = relaxed_energy(material, E) if self.wrinkling else fung_energy(material, E)
-        return material.thickness * W
+    def _energy(self, tag: int, E):
+        """W(E) of region ``tag``: tension-field relaxed, or the plain Fung law."""
+        material = self.materials[tag]
+        return relaxed_energy(material, E) if self._relaxed[tag] else fung_energy(material, E)
+
+    def energy_density(self, tag: int, u=None):
+        """t·W per reference area of region ``tag``."""
+        return self.materials[tag].thickness * self._energy(tag, self.strain(u))
 
     def strain_energy(self, u=None):
         """Π = Σ ∫ t·W dA_ref (UFL form of rank 0)."""
         dA = self.area_factor()
-        return sum(self.energy_density(m, u) * dA * self.dx(tag)
-                   for tag, m in self.materials.items())
+        return sum(self.energy_density(tag, u) * dA * self.dx(tag) for tag in self.materials)
 
     def pressure_work(self, v, u=None):
         """Virtual work of the follower pressure: ∫ s·p (F₁×F₂)·v dA_ref."""
@@ -135,7 +143,7 @@ class MembraneModel:
         """
         dE = to_material_axes(self.strain_variation(w, u), self.domain.fibre)
         dA = self.area_factor()
-        return sum(material.thickness * ufl.inner(self.stress(material, u), dE) * dA
+        return sum(material.thickness * ufl.inner(self.stress(tag, u), dE) * dA
                    * self.dx(tag) for tag, material in self.materials.items())
 
     def strain_variation(self, w, u=None):
@@ -155,11 +163,11 @@ class MembraneModel:
         return ufl.derivative(residual, self.u, ufl.TrialFunction(self.V))
 
     # --- post-processing ----------------------------------------------------
-    def stress(self, material: FungMaterial, u=None):
-        """Second Piola–Kirchhoff stress (kPa) in the material axes, from ∂W/∂E."""
+    def stress(self, tag: int, u=None):
+        """Second Piola–Kirchhoff stress (kPa) of region ``tag`` in the material axes,
+        from ∂W/∂E."""
         E = ufl.variable(self.strain(u))
-        W = relaxed_energy(material, E) if self.wrinkling else fung_energy(material, E)
-        return ufl.diff(W, E)
+        return ufl.diff(self._energy(tag, E), E)
 
     def cell_fields(self) -> dict[str, fem.Function]:
         """DG0 fields for ParaView: strain and stress (material axes), tension, area stretch."""
@@ -175,9 +183,9 @@ class MembraneModel:
         expr_area = fem.Expression(ufl.sqrt(ufl.det(F.T * F)), points)
         out["strain"].interpolate(expr_strain)
         out["area_stretch"].interpolate(expr_area)
-        for tag, material in self.materials.items():
+        for tag in self.materials:
             cells = self.domain.cell_tags.find(tag)
-            out["stress"].interpolate(fem.Expression(self.stress(material), points), cells0=cells)
+            out["stress"].interpolate(fem.Expression(self.stress(tag), points), cells0=cells)
         for f in out.values():
             f.x.scatter_forward()
         return out
