@@ -137,7 +137,7 @@ def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: flo
     from valve_dolfinx.result import CaseResult
 
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
-                        converged=False, competence_reason="no result (the case failed)",
+                        converged=False, competence_reason="the case failed",
                         n_ranks=n_ranks, wall_time_s=wall,
                         solver_message=error, parameters=config.to_dict(),
                         versions=package_versions(), settings_hash=config.settings_hash(),
