@@ -1,4 +1,5 @@
-"""Writing files atomically; JSON results; the valve surface as VTK for ParaView.
+"""An output folder checked before any computation; writing files atomically; JSON results;
+the valve surface as VTK for ParaView.
 
 The valve mesh's own reloadable format is :func:`valve_dolfinx.geometry.valve.save_valve_mesh`.
 """
