@@ -31,9 +31,10 @@ from typing import Any
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import CaseConfig, get_dotted
 from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
+from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.axes import check_axis_values, value_text
-from valve_dolfinx.study.runner import run_study, terminate_on_sigterm
+from valve_dolfinx.study.runner import run_study
 
 
 @dataclass(frozen=True)
@@ -146,7 +147,6 @@ def main(argv=None) -> int:
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
         logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
-    terminate_on_sigterm()  # a killed benchmark resumes with the same --out
     grid = {"widths_pct": tuple(args.widths), "heights_pct": tuple(args.heights),
             "paths": args.paths, "panel_cases": ()}
     t0 = time.perf_counter()
@@ -180,4 +180,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    with interrupt_on_signals():  # an interrupted benchmark resumes with the same --out
+        raise SystemExit(main())

@@ -20,8 +20,9 @@ import time
 from pathlib import Path
 
 from valve_dolfinx._compat import MPI
+from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
-from valve_dolfinx.study.runner import run_study, terminate_on_sigterm
+from valve_dolfinx.study.runner import run_study
 
 
 def main(argv=None) -> int:
@@ -42,8 +43,8 @@ def main(argv=None) -> int:
         out = Path("results/benchmark_sweep") / stamp
     settings = StudySettings(widths_pct=tuple(args.widths), heights_pct=tuple(args.heights),
                              mesh_size_mm=args.mesh_size, wall_time_limit_s=args.wall_time_limit)
-    terminate_on_sigterm()  # a killed benchmark resumes with the same --out
-    outcome = run_study(settings, out, comm)
+    with interrupt_on_signals():  # an interrupted benchmark resumes with the same --out
+        outcome = run_study(settings, out, comm)
     if comm.rank != 0:
         return 0
     rows = outcome.report.rows

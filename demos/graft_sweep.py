@@ -35,9 +35,10 @@ import logging
 from pathlib import Path
 
 from valve_dolfinx._compat import MPI
+from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.logs import configure_logging
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
-from valve_dolfinx.study.runner import run_study, terminate_on_sigterm
+from valve_dolfinx.study.runner import run_study
 
 
 def main(argv: list[str] | None = None):
@@ -83,7 +84,6 @@ def main(argv: list[str] | None = None):
     library.setLevel(logging.WARNING if comm.rank == 0 else logging.ERROR)
     if comm.rank == 0:
         logging.getLogger("valve_dolfinx.study").setLevel(logging.INFO)
-    terminate_on_sigterm()  # kill/Slurm: clean up the cases in flight, keep the finished ones
     bar = None
     if comm.rank == 0 and not args.no_progress:
         from tqdm import tqdm
@@ -99,7 +99,9 @@ def main(argv: list[str] | None = None):
                 bar.close()
     else:
         progress = None
-    outcome = run_study(settings, args.out, comm, progress=progress)
+    # Ctrl-C, kill, Slurm: the cases in flight are dropped, the finished ones kept
+    with interrupt_on_signals():
+        outcome = run_study(settings, args.out, comm, progress=progress)
 
     # %% [markdown]
     # ## What it wrote

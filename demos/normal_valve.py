@@ -20,8 +20,9 @@
 # leaflet contact (pseudo-transient continuation: PETSc TS with SNES).  The
 # coaptation height is the height of the strip along the free edge where a
 # leaflet lies within the coaptation threshold (0.5 mm, about the leaflet
-# thickness) of another; the valve is competent when no regurgitant orifice is
-# left when looking along the axis.
+# thickness) of another; the valve is competent when the case converged, no
+# regurgitant orifice is left when looking along the axis and no two leaflets pass
+# through each other (otherwise the key numbers say which of these fails).
 #
 # Run as a script: `python demos/normal_valve.py [--mesh-size 1.6] [--out DIR]`
 # (the default 0.8 mm mesh takes about a minute and a half on one core; 1.6 mm

@@ -55,16 +55,6 @@ def _assert_one_error_line(stderr: str, *expected: str) -> str:
     return lines[0]
 
 
-@pytest.fixture
-def restore_logging():
-    """Undo the levels the sweep command sets in this process."""
-    names = ("valve_dolfinx", "valve_dolfinx.study")
-    saved = {n: logging.getLogger(n).level for n in names}
-    yield
-    for name, level in saved.items():
-        logging.getLogger(name).setLevel(level)
-
-
 # --- exit statuses -------------------------------------------------------------------------
 def test_exit_codes_are_distinct_and_listed_in_the_help():
     codes = [int(c) for c in ExitCode]
@@ -119,11 +109,12 @@ def test_missing_or_broken_mesh_file_is_an_input_error(tmp_path):
     proc = _cli("run", "--mesh", str(missing), "--out", str(tmp_path / "a"), timeout=120)
     assert proc.returncode == ExitCode.INPUT, proc.stderr[-2000:]
     _assert_one_error_line(proc.stderr, str(missing), "valve-dolfinx mesh")
-    broken = tmp_path / "broken.npz"
-    broken.write_bytes(b"not a mesh")
-    proc = _cli("run", "--mesh", str(broken), "--out", str(tmp_path / "b"), timeout=120)
-    assert proc.returncode == ExitCode.INPUT, proc.stderr[-2000:]
-    _assert_one_error_line(proc.stderr, str(broken), "valve-dolfinx mesh")
+    for broken, content in (("broken.npz", b"not a mesh"), ("empty.npz", b"")):
+        broken = tmp_path / broken
+        broken.write_bytes(content)
+        proc = _cli("run", "--mesh", str(broken), "--out", str(tmp_path / "b"), timeout=120)
+        assert proc.returncode == ExitCode.INPUT, proc.stderr[-2000:]
+        _assert_one_error_line(proc.stderr, str(broken), "valve-dolfinx mesh")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
@@ -239,10 +230,84 @@ def test_unconverged_run_exits_3_with_files_readable_under_umask_022(tmp_path):
     assert proc.returncode == ExitCode.NOT_CONVERGED, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr
     assert "wall-clock limit" in proc.stderr and "NOT converged" in proc.stdout
+    # stderr is no terminal: no progress bar; VTK's warnings (no X display) only under -v
+    assert "\r" not in proc.stderr and "\x1b[" not in proc.stderr
+    assert "X server" not in proc.stderr and (out / "closed_valve.png").is_file()
     files = [p for p in out.rglob("*") if p.is_file()]
     assert {"result.json", "config.toml", "history.csv"} <= {p.name for p in files}
     modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode)) for p in files}
     assert set(modes.values()) == {"0o644"}, modes
+
+
+# --- the output folder, before any computation ------------------------------------------
+def _must_not_build(monkeypatch) -> None:
+    from valve_dolfinx.geometry import valve
+
+    def build_valve(*args, **kwargs):
+        raise AssertionError("a mesh was built")
+
+    monkeypatch.setattr(valve, "build_valve", build_valve)
+
+
+@pytest.mark.parametrize("command", [["run", "--mesh-size", "2.0"], ["mesh"],
+                                     ["sweep", "--widths", "0", "--heights", "0"]])
+def test_out_below_a_file_is_the_same_error_in_every_command(tmp_path, caplog, monkeypatch,
+                                                             quiet_cli, command):
+    """--out below a file: status 7 and one line naming the file, before any mesh is built,
+    in run, mesh and sweep alike; --out that is a file: the same status."""
+    from valve_dolfinx.cli import main
+
+    _must_not_build(monkeypatch)
+    blocker = tmp_path / "results"
+    blocker.write_text("keep me")
+    for out, text in ((blocker / "case", f"is below the file {blocker}"),
+                      (blocker, "is a file")):
+        caplog.clear()
+        assert main([*command, "--out", str(out)]) == ExitCode.OUTPUT_NOT_FOLDER
+        errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+        assert len(errors) == 1 and f"--out {out} {text}" in errors[0], errors
+    assert blocker.read_text() == "keep me"
+
+
+#: prctl(2) operation, and the capabilities that let root write through permissions
+PR_CAPBSET_DROP, CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH = 24, 1, 2
+
+
+def _respect_permissions() -> None:
+    """In a child of root: drop the capabilities to override file permissions (from its
+    bounding set, so that they do not come back at exec)."""
+    if os.geteuid() == 0:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        for cap in (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH):
+            if libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0) != 0:
+                raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def test_run_into_a_read_only_folder_stops_before_the_mesh(tmp_path):
+    """--out inside a folder that may not be written: status 8 and one line, before the mesh
+    is built (the run logs nothing else)."""
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    out = locked / "case"
+    proc = subprocess.run([sys.executable, "-m", "valve_dolfinx.cli", "run", "--mesh-size",
+                           "2.0", "--out", str(out)], cwd=ROOT, capture_output=True, text=True,
+                          timeout=120, preexec_fn=_respect_permissions)
+    assert proc.returncode == ExitCode.OUTPUT_NOT_WRITABLE, proc.stderr[-2000:]
+    line = _assert_one_error_line(proc.stderr, f"--out {out} cannot be created",
+                                  "Permission denied")
+    assert proc.stderr.strip() == line and not out.exists()
+
+
+def test_load_case_names_the_damaged_file(tmp_path):
+    from valve_dolfinx import load_case
+    from valve_dolfinx.exceptions import InputFileError
+
+    (tmp_path / "result.json").write_text('{"converged": tr')
+    with pytest.raises(InputFileError, match=rf"{tmp_path}: result.json is not valid JSON"):
+        load_case(tmp_path)
+    assert exit_code(InputFileError("x")) == ExitCode.INPUT
 
 
 @pytest.mark.parametrize("umask,mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])

@@ -94,7 +94,7 @@ def test_reference_writes_every_output(reference):
     assert load_config(out / "config.toml") == _reference_config()
     assert data["settings_hash"] == _reference_config().settings_hash()
     for name in ("closed_valve_ventricular.png", "closed_valve.png", "cut_planes.png",
-                 "fields.xdmf", "fields.h5", "history.csv", "loaded_state.npz"):
+                 "fields.vtu", "history.csv", "loaded_state.npz"):
         assert (out / name).stat().st_size > 0, name
 
 
@@ -211,7 +211,32 @@ def test_leaflets_passing_through_each_other_are_not_a_competent_valve(tmp_path,
     result = run_case(config, comm=MPI.COMM_SELF, figures=False, fields_output=False)
     assert result.converged and result.regurgitant_orifice_area_mm2 == 0.0
     assert result.leaflet_intersection_mm == config.geometry.mesh_size
-    assert not result.competent
+    assert not result.competent and result.competence_reason == "leaflets cross 1.20 mm"
+
+
+@pytest.mark.parametrize("converged,orifice,crossing,expected", [
+    (True, 0.0, 0.59, (True, "")),
+    (True, 0.0, 0.6, (False, "leaflets cross 0.60 mm")),  # one element: 0.6 mm
+    (True, 0.4, 0.0, (False, "leaks 0.40 mm²")),
+    (True, 0.0025, 0.0, (False, "leaks 0.003 mm²")),  # one pixel is not "0.00"
+    (False, 66.5, 1.97, (False, "not converged; leaks 66.50 mm²; leaflets cross 1.97 mm")),
+    (False, math.nan, math.nan, (False, "not converged; no orifice area")),
+])
+def test_competence_is_sealed_converged_and_uncrossed(converged, orifice, crossing, expected):
+    from valve_dolfinx.result import competence
+
+    assert competence(converged, orifice, crossing, element_mm=0.6) == expected
+
+
+def test_a_given_mesh_must_be_the_configurations(caplog):
+    """run_case with a valve mesh that is not config.geometry's refuses it before solving,
+    naming both values, instead of recording the configuration's geometry."""
+    from valve_dolfinx.geometry.valve import build_valve
+
+    config = _reference_config()  # 0.8 mm
+    with pytest.raises(ParameterError, match=r"mesh_size 2\.0 \(config\.geometry: 0\.8\)"):
+        run_case(config, comm=MPI.COMM_SELF, valve=build_valve(mesh_size=2.0))
+    assert not any("root:" in r.getMessage() for r in caplog.records)  # nothing solved
 
 
 def test_bad_configuration_names_the_parameter():
@@ -339,7 +364,7 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
     tip differently; docs/numerics.md reports both.)"""
     _, fields, *_ = default_mesh_cases["normal"]
     _, reference, *_ = default_mesh_cases["reference"]
-    assert fields["regurgitant_orifice_area_mm2"] == 0.0 and fields["competent"]
+    assert fields["regurgitant_orifice_area_mm2"] == 0.0
     assert fields["coaptation_area_mm2"] == pytest.approx(reference["coaptation_area_mm2"],
                                                           rel=0.02)
 

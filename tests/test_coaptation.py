@@ -351,7 +351,7 @@ def test_sealed_sectors_have_no_orifice():
     assert area == 0.0
     assert diag["radius_mm"] == pytest.approx(R_ORIFICE, abs=1e-9)
     res = analyse_coaptation(x, valve, THRESHOLD, PIXEL)
-    assert res.competent and res.regurgitant_orifice_area_mm2 == 0.0
+    assert res.sealed and res.regurgitant_orifice_area_mm2 == 0.0
 
 
 def test_gap_narrower_than_threshold_is_sealed():
@@ -360,7 +360,7 @@ def test_gap_narrower_than_threshold_is_sealed():
     with pytest.raises(ParameterError, match="nodulus_length_mm = 1 mm is not shorter"):
         analyse_coaptation(x, valve, THRESHOLD, PIXEL)
     res = analyse_coaptation(x, valve, THRESHOLD, PIXEL, nodulus_length_mm=0.0)
-    assert res.competent and res.regurgitant_orifice_area_mm2 == 0.0
+    assert res.sealed and res.regurgitant_orifice_area_mm2 == 0.0
 
 
 @pytest.mark.parametrize("rho", [pytest.param(1.0, marks=pytest.mark.slow), 1.5])
@@ -371,7 +371,7 @@ def test_central_hole_area(rho):
     assert area == pytest.approx(expected, rel=0.01)  # pixel resolution (0.3 % seen)
     assert diag["channel_area_mm2"] == 0.0
     res = analyse_coaptation(x, valve, THRESHOLD, PIXEL)
-    assert not res.competent
+    assert not res.sealed
     assert res.regurgitant_orifice_area_mm2 == area
 
 
@@ -383,7 +383,7 @@ def test_overlap_without_touching_is_a_leak(lift):
     assert diag["open_area_mm2"] == 0.0  # fully covered in projection ...
     assert area == pytest.approx(alpha * R_ORIFICE**2, rel=0.01)  # ... but a 17.1 mm² leak
     assert area == diag["channel_area_mm2"]
-    assert not analyse_coaptation(x, valve, THRESHOLD, PIXEL).competent
+    assert not analyse_coaptation(x, valve, THRESHOLD, PIXEL).sealed
 
 
 @pytest.mark.parametrize("lift", [0.45, 0.2])
@@ -421,7 +421,7 @@ def test_pocket_above_a_sealed_floor_is_a_dead_end():
     assert diag["through_flow"] is False
     assert diag["dead_end_area_mm2"] == pytest.approx(wedge, rel=0.01)
     assert area == 0.0 and diag["channel_area_mm2"] == 0.0
-    assert analyse_coaptation(x, valve, THRESHOLD, PIXEL).competent
+    assert analyse_coaptation(x, valve, THRESHOLD, PIXEL).sealed
 
 
 def test_slit_in_the_floor_makes_the_pocket_a_leak():
@@ -512,7 +512,7 @@ def test_folded_real_valve_smoke(tmp_path):
     for lc in res.leaflets.values():
         assert 0.0 < lc.area_mm2 and np.all(np.isfinite(lc.node_gap_mm))
     json.dumps(res.to_dict())
-    assert set(res.result_fields()) >= {"min_coaptation_height_mm", "competent",
+    assert set(res.result_fields()) >= {"min_coaptation_height_mm",
                                         "min_coaptation_height_raw_mm",
                                         "central_coaptation_height_mm", "coaptation_area_mm2",
                                         "regurgitant_orifice_area_mm2"}

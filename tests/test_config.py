@@ -264,7 +264,7 @@ def test_out_that_is_a_file_stops_at_once(tmp_path, caplog, monkeypatch):
     _must_not_run(monkeypatch)
     target = tmp_path / "result.txt"
     target.write_text("keep me")
-    assert main(["run", "--out", str(target)]) == ExitCode.OUTPUT_CONFLICT
+    assert main(["run", "--out", str(target)]) == ExitCode.OUTPUT_NOT_FOLDER
     (err,) = _errors(caplog)
     assert f"--out {target} is a file" in err and "\n" not in err
     assert target.read_text() == "keep me"

@@ -38,6 +38,16 @@ def _picture(path: Path, seed: float) -> None:
     matplotlib.image.imsave(path, np.sin(6 * x + seed) * np.cos(4 * y), cmap="viridis")
 
 
+def _loaded_state(path: Path, nodes: int) -> None:
+    """A loaded_state.npz of ``nodes`` nodes (the arrays run_case writes, stand-in values)."""
+    import numpy as np
+
+    points = np.arange(3.0 * nodes).reshape(nodes, 3)
+    np.savez_compressed(path, positions=points + 1.0, reference=points,
+                        cells=np.array([[0, 1, 2]]), cell_tags=np.array([1]),
+                        contact_forces=np.zeros((nodes, 3)))
+
+
 def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> dict:
     """A case result that depends on the graft size only, written like ``run_case`` writes."""
     g = config.geometry
@@ -51,6 +61,7 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
     if comm.rank == 0:
         for name in ("closed_valve_ventricular.png", "cut_planes.png", "coaptation_map.png"):
             _picture(Path(out_dir) / name, 0.0 if w is None else w + h)
+        _loaded_state(Path(out_dir) / "loaded_state.npz", 100)
     if w is not None and w >= 90:
         raise RuntimeError("stand-in failure for huge grafts")
     area = 1.0 if w is None else (1 + w / 100) * (1 + h / 100)
@@ -140,7 +151,7 @@ def _settings(**kw):
     ("--widths", ["0", "7", "7.0"], ["'7.0'", "twice", "[0, 100] %"]),
     ("--heights", ["13", "abc"], ["'abc'", "not a number", "[0, 100] %"]),
     ("--heights", ["1e6"], ["'1e6'", "[0, 100] %"]),
-    ("--widths", ["nan"], ["'nan'", "[0, 100] %"]),
+    ("--widths", ["nan"], ["'nan'", "[0, 100] %", "give a finite number"]),
     ("--widths", [], ["--widths is empty", "[0, 100] %"]),
     ("--mesh-size", ["40"], ["mesh_size = 40.0", "[0.05, 2.5] mm"]),
     ("--ranks-per-case", ["0"], ["ranks_per_case = 0", ">= 1"]),
@@ -196,19 +207,20 @@ def test_settings_from_toml(tmp_path):
 
 def test_unwritable_output_fails_before_computing(tmp_path):
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.exceptions import OutputNotFolderError, OutputNotWritableError
     from valve_dolfinx.study.runner import run_study
 
     calls = []
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
-    targets = [blocker / "study"]
+    targets = [(blocker / "study", OutputNotFolderError, "is below the file"),
+               (blocker, OutputNotFolderError, "is a file")]
     if os.geteuid() != 0:  # root writes through permissions
         locked = tmp_path / "locked"
         locked.mkdir(mode=0o500)
-        targets.append(locked / "study")
-    for out in targets:
-        with pytest.raises(ParameterError, match="not writable.*choose another --out"):
+        targets.append((locked / "study", OutputNotWritableError, "cannot be created"))
+    for out, error, text in targets:
+        with pytest.raises(error, match=text):
             run_study(_settings(), out, MPI.COMM_SELF,
                       case_function=lambda *a, **kw: calls.append(a) or {})
     assert calls == []
@@ -300,6 +312,87 @@ def test_changed_configuration_is_recomputed(tmp_path):
     assert not any((out / "cases" / ".staging").iterdir())
 
 
+def _case_of(config) -> str:
+    from valve_dolfinx.config import case_name
+
+    return case_name(config.geometry)
+
+
+def test_damaged_cases_are_reported_and_recomputed(tmp_path, caplog, capsys, quiet_cli):
+    """A truncated result.json, a truncated case.json and a deleted loaded_state.npz in a
+    finished study: `report` lists each case with what is wrong and exits with status 9; a
+    sweep recomputes exactly those cases, warning with the file, and the tables are again
+    those of the whole study."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.exceptions import ExitCode
+    from valve_dolfinx.study.runner import run_study
+
+    out, ran = tmp_path / "study", []
+
+    def counting(config, folder, comm, *, start):
+        ran.append(_case_of(config))
+        return stand_in_case(config, folder, comm, start=start)
+
+    settings = _settings(widths_pct=(0, 7, 14))
+    run_study(settings, out, MPI.COMM_SELF, case_function=counting)
+    whole = stable_csv(out / "results.csv")
+    cases = out / "cases"
+    for name, file in (("W0_H0", "result.json"), ("W7_H0", "case.json")):
+        text = (cases / name / file).read_text()
+        (cases / name / file).write_text(text[:len(text) // 2])
+    (cases / "normal" / "loaded_state.npz").unlink()
+    damaged = {"W0_H0": "result.json is not valid JSON", "W7_H0": "case.json is not valid JSON",
+               "normal": "loaded_state.npz is missing"}
+
+    assert main(["report", str(out)]) == ExitCode.STUDY_INCOMPLETE
+    assert "incomplete (3 case(s) without a result" in caplog.text
+    rows = {r["case"]: r for r in json.loads((out / "results.json").read_text())}
+    assert set(rows) == {"normal", "W0_H0", "W7_H0", "W14_H0"}
+    for name, reason in damaged.items():
+        assert rows[name]["status"] == "damaged" and reason in rows[name]["reason"], name
+        assert rows[name]["min_coaptation_height_mm"] is None
+    assert rows["W14_H0"]["status"] == "finished"
+    assert "damaged: normal, W0_H0, W7_H0" in (out / "report.md").read_text()
+    assert "| W0_H0 |" in (out / "report.md").read_text()
+
+    caplog.clear()
+    ran.clear()
+    run_study(settings, out, MPI.COMM_SELF, case_function=counting)
+    assert sorted(ran) == sorted(damaged)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING
+                and "recomputing" in r.getMessage()]
+    for name, reason in damaged.items():
+        assert any(f"cases/{name}: {reason}" in w for w in warnings), (name, warnings)
+    assert main(["report", str(out)]) == 0
+    assert stable_csv(out / "results.csv") == whole
+
+
+def test_a_study_without_its_cases_is_incomplete(tmp_path, caplog, quiet_cli):
+    """`report` on a study with no finished case, or with cases not run yet, writes what it
+    has and exits with status 9; a sweep whose case failed does too, naming it."""
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.exceptions import ExitCode
+    from valve_dolfinx.study.store import prepare_output
+
+    empty = prepare_output(tmp_path / "empty")
+    assert main(["report", str(empty)]) == ExitCode.STUDY_INCOMPLETE
+    assert "no case has finished yet" in caplog.text
+    assert (empty / "report.md").is_file()
+    array = tmp_path / "array"
+    assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(array),
+                                "--case-index", "1"]) == 0
+    caplog.clear()
+    assert main(["report", str(array)]) == ExitCode.STUDY_INCOMPLETE
+    assert "not run yet: normal, W7_H0" in (array / "report.md").read_text()
+    caplog.clear()
+    assert _main_with_stand_in(["sweep", "--widths", "7", "95", "--heights", "0", "--out",
+                                str(tmp_path / "failing"), "--no-progress"]) == \
+        ExitCode.STUDY_INCOMPLETE
+    (error,) = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert "1 case(s) failed: W95_H0" in error
+
+
 def test_claims_are_exclusive_and_stale_ones_are_taken_over(tmp_path):
     from valve_dolfinx.study.store import CaseClaim, prepare_output
 
@@ -317,10 +410,11 @@ def test_claims_are_exclusive_and_stale_ones_are_taken_over(tmp_path):
     second.release()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
 def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
-    """A real signal to a sweep after its first case; the rerun finishes the others without
-    recomputing the first and gives the same tables as an uninterrupted sweep."""
+    """A real signal to a sweep after its first case: SIGTERM and SIGINT end it with status
+    143 and 130, SIGKILL kills it; the rerun finishes the others without recomputing the
+    first and gives the same tables as an uninterrupted sweep."""
     out, run_log = tmp_path / "study", tmp_path / "runs.log"
     env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "1.0"}
     proc = subprocess.Popen(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"),
@@ -332,12 +426,12 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
     assert first.exists(), proc.communicate()[1][-2000:]
     proc.send_signal(sig)
     proc.communicate(timeout=60)
-    assert proc.returncode != 0
+    assert proc.returncode == (-sig if sig == signal.SIGKILL else 128 + sig)
     assert not (out / "cases" / "W0_H0").exists() and not (out / "cases" / "W7_H0").exists()
     assert _runs(run_log) == ["normal", "W0_H0"]  # the second case was in flight
     claims = list((out / "cases" / ".claims").iterdir())
-    # SIGTERM releases the claim on the way out; SIGKILL leaves it, stale, to the rerun
-    assert [c.name for c in claims] == ([] if sig == signal.SIGTERM else ["W0_H0.claim"])
+    # SIGTERM, SIGINT release the claim on the way out; SIGKILL leaves it, stale, to the rerun
+    assert [c.name for c in claims] == (["W0_H0.claim"] if sig == signal.SIGKILL else [])
     record = first.read_text()
 
     _run(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"), run_log)
@@ -408,18 +502,19 @@ def test_case_index_runs_and_report_equal_one_sweep(tmp_path, capsys, caplog, qu
     assert "case index 3 is outside the allowed range [0, 2]" in caplog.text
 
 
-def test_progress_bar_and_plain_lines(tmp_path, capsys, caplog, quiet_cli):
-    """One bar of cases done/total; --no-progress: the per-case log lines without a bar."""
+@pytest.mark.parametrize("terminal,option,bar", [(True, [], True),
+                                                  (True, ["--no-progress"], False),
+                                                  (False, [], False)])
+def test_progress_bar_and_plain_lines(tmp_path, capsys, caplog, quiet_cli, monkeypatch,
+                                      terminal, option, bar):
+    """One bar of cases done/total on a terminal; --no-progress, or a stderr that is no
+    terminal (a log file, a batch job): the per-case log lines without a bar."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)
     with caplog.at_level(logging.INFO, logger="valve_dolfinx.study"):
-        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(tmp_path / "a")]) == 0
+        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(tmp_path), *option]) == 0
     err = capsys.readouterr().err
-    assert "sweep:" in err and "3/3" in err and ("case/s" in err or "s/case" in err)
-    assert sum("min coaptation" in r.getMessage() for r in caplog.records) == 3
-    caplog.clear()
-    with caplog.at_level(logging.INFO, logger="valve_dolfinx.study"):
-        assert _main_with_stand_in(["sweep", *SMALL_GRID, "--out", str(tmp_path / "b"),
-                                    "--no-progress"]) == 0
-    assert "sweep:" not in capsys.readouterr().err
+    drawn = "sweep:" in err and "3/3" in err and ("case/s" in err or "s/case" in err)
+    assert drawn == bar and ("\r" in err) == bar
     assert sum("min coaptation" in r.getMessage() for r in caplog.records) == 3
 
 
@@ -519,30 +614,65 @@ def test_recommendation_when_none_qualifies():
     assert no_normal.best == "W7/H0" and no_normal.shortfall_mm is None
     unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]])
     assert unconverged.target_mm is None and "did not converge" in unconverged.text
+    # the only finite figure is a leaking graft's, above the target: the text gives the
+    # reason of its result.json, and the margin at two decimals
+    leaking = {**_row(14, 0, 3.8, competent=False), "competence_reason": "leaks 0.40 mm²"}
+    above = recommend([_row(None, None, 3.5), leaking])
+    assert above.best == "W14/H0" and above.shortfall_mm == pytest.approx(-0.3)
+    assert ("The best is **W14/H0** (not competent: leaks 0.40 mm²); its height reaches the "
+            "target (margin 0.30 mm).") in above.text
 
 
 # --- run_case itself --------------------------------------------------------------------------
-@pytest.mark.timeout(300)
-def test_real_case_through_the_sweep(tmp_path):
+#: the crossing given to the real case (standing in for the 1.97 mm of W14/H27 at 1.6 mm)
+CROSSING_MM = 2.5
+
+
+@pytest.fixture(scope="module")
+def real_sweep(tmp_path_factory):
     """One real closure through the sweep path: the normal valve on a 2 mm mesh (a minute or
-    less); it may end converged: false, and is recorded either way.  (A study of the cheap
-    symmetric reference cannot be set up: its grafts are not valves of one leaflet.)"""
+    less), its leaflets made to cross by CROSSING_MM, so that it is not competent; the
+    outcome, the study folder and the log records of the case and of the sweep."""
+    import valve_dolfinx.case as case
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.exceptions import ParameterError
     from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path_factory.mktemp("real") / "study"
+    records = []
+    handler = logging.Handler(logging.INFO)
+    handler.emit = records.append
+    library = logging.getLogger("valve_dolfinx")
+    level = library.level
+    library.addHandler(handler)
+    library.setLevel(logging.INFO)
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(case, "leaflet_crossing_mm", lambda state: CROSSING_MM)
+            outcome = run_study(_settings(widths_pct=(0,), wall_time_limit_s=90.0), out,
+                                MPI.COMM_SELF, case_indices=[0], poll_s=0.05)
+    finally:
+        library.removeHandler(handler)
+        library.setLevel(level)
+    return outcome, out, records
+
+
+@pytest.mark.timeout(300)
+def test_real_case_through_the_sweep(real_sweep):
+    """The real case is recorded whether it converged or not, with every file, and fields.vtu
+    that meshio and PyVista read.  (A study of the cheap symmetric reference cannot be set
+    up: its grafts are not valves of one leaflet.)"""
+    from valve_dolfinx.exceptions import ParameterError
     from valve_dolfinx.study.table import SPEC_COLUMNS
 
-    out = tmp_path / "study"
-    settings = _settings(widths_pct=(0,), wall_time_limit_s=90.0)
+    outcome, out, _ = real_sweep
     with pytest.raises(ParameterError, match="symmetric_reference needs the normal valve"):
         _settings(widths_pct=(0,), case={"symmetric_reference": True}).cases()
-    outcome = run_study(settings, out, MPI.COMM_SELF, case_indices=[0])
     assert outcome.computed == ["normal"]
     folder = out / "cases" / "normal"
     record = json.loads((folder / "case.json").read_text())
     row = outcome.report.rows[0]
     assert record["status"] == "finished", record["reason"]
-    for name in ("result.json", "config.toml", "fields.xdmf", "closed_valve_ventricular.png",
+    for name in ("result.json", "config.toml", "fields.vtu", "closed_valve_ventricular.png",
                  "cut_planes.png"):  # the normal valve draws its figures for the panels
         assert (folder / name).is_file(), name
     assert set(SPEC_COLUMNS) <= set(row) and isinstance(row["converged"], bool)
@@ -550,6 +680,56 @@ def test_real_case_through_the_sweep(tmp_path):
     assert (out / "panels" / "normal.png").is_file()
     if row["converged"]:
         assert 2.0 < row["min_coaptation_height_mm"] < 6.0
+    _assert_fields_readable(folder)
+
+
+@pytest.mark.timeout(300)
+def test_competence_agrees_everywhere_when_leaflets_cross(real_sweep):
+    """A case whose leaflets cross is not competent, with the same reason in the case's and
+    the sweep's log lines, result.json, results.csv, report.md and the figure titles."""
+    from valve_dolfinx.plotting import key_numbers
+    from valve_dolfinx.result import competence_text
+    from valve_dolfinx.study.table import read_csv_rows
+
+    _, out, records = real_sweep
+    result = json.loads((out / "cases" / "normal" / "result.json").read_text())
+    assert result["competent"] is False
+    assert result["competence_reason"].endswith(f"leaflets cross {CROSSING_MM:.2f} mm")
+    verdict = competence_text(result)
+    assert verdict == f"not competent ({result['competence_reason']})"
+    lines = [r.getMessage() for r in records if r.name in ("valve_dolfinx.case",
+                                                           "valve_dolfinx.study.runner")]
+    assert len(lines) == 2 and all(verdict in line for line in lines), lines
+    (row,) = read_csv_rows(out / "results.csv")
+    assert row["competent"] == "false" and row["competence_reason"] == result["competence_reason"]
+    assert f"| no ({result['competence_reason']}) |" in (out / "report.md").read_text()
+    assert key_numbers(result).endswith(verdict)
+
+
+def _assert_fields_readable(folder: Path) -> None:
+    """fields.vtu reads with meshio and with PyVista, and holds the solved state: reference
+    points + displacement = the loaded positions of loaded_state.npz, the same contact forces
+    and leaflet tags, 2×2 stress and strain per cell."""
+    import meshio
+    import numpy as np
+    import pyvista
+
+    with np.load(folder / "loaded_state.npz") as state:
+        written = {k: state[k] for k in state.files}
+    n, m = len(written["positions"]), len(written["cells"])
+    mesh = meshio.read(folder / "fields.vtu")
+    assert np.array_equal(mesh.cells_dict["triangle"], written["cells"])
+    assert np.allclose(mesh.points + mesh.point_data["displacement"], written["positions"],
+                       atol=1e-12)
+    assert np.array_equal(mesh.point_data["contact_force"], written["contact_forces"])
+    assert np.array_equal(mesh.cell_data["leaflet"][0], written["cell_tags"])
+    grid = pyvista.read(folder / "fields.vtu")
+    assert (grid.n_points, grid.n_cells) == (n, m)
+    for name, shape in (("stress", (m, 4)), ("strain", (m, 4)), ("area_stretch", (m,))):
+        assert grid.cell_data[name].shape == shape and np.all(np.isfinite(grid.cell_data[name]))
+    assert np.all(grid.cell_data["area_stretch"] > 0.5)
+    assert set(grid.point_data) >= {"displacement", "contact_force", "coaptation_gap"}
+
 
 
 if __name__ == "__main__":  # the CLI with the stand-in case function (subprocess tests)

@@ -5,11 +5,16 @@ The PyPI wheel ``dolfinx-solver-real`` must be imported before ``dolfinx`` and
 Debian, Spack or conda DOLFINx >= 0.10 has no such module; we then import the
 stack directly.  Every module of the package imports DOLFINx/PETSc through
 this one, so the ordering holds no matter which module a user imports first.
+
+PETSc starts without its signal handlers (``-no_signal_handler``): its handler of SIGTERM
+aborts the process, past Python's, where the command line ends cleanly with status 143
+and records nothing unfinished (:mod:`valve_dolfinx.interrupts`).
 """
 
 from __future__ import annotations
 
 import importlib.metadata as _metadata
+import sys
 
 try:  # pragma: no cover - depends on how DOLFINx was installed
     import dolfinx_solver  # noqa: F401  (orders mpi4py ahead of the bindings)
@@ -17,6 +22,11 @@ except ImportError:  # pragma: no cover
     dolfinx_solver = None
 
 from mpi4py import MPI  # noqa: E402
+
+if "petsc4py.PETSc" not in sys.modules:  # not initialised yet by the caller
+    import petsc4py
+
+    petsc4py.init(["-no_signal_handler"])
 from petsc4py import PETSc  # noqa: E402
 
 import dolfinx  # noqa: E402

@@ -7,7 +7,9 @@ bending (step 2: pseudo-transient continuation, or damped BDF2 dynamics as the
 cross-check), then measures coaptation and writes the result, the configuration,
 ParaView fields and figures.  It never raises because a solve failed: a stalled
 or diverged run is reported with ``converged: false`` and where it stopped, and
-whatever was computed is written.  :func:`solve_case` and :func:`analyse_case`
+whatever was computed is written.  An interrupt, or an exception in one of the
+solver's callbacks (:class:`~valve_dolfinx.solvers.callbacks.CallbackGuard`), is
+raised and writes no result.  :func:`solve_case` and :func:`analyse_case`
 are its two halves, for tests and benchmarks that need the live objects.
 """
 
@@ -17,7 +19,7 @@ import logging
 import platform
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +37,7 @@ from valve_dolfinx.mechanics.bending import bending_stiffness_matrix, flexural_r
 from valve_dolfinx.mechanics.boundary_conditions import clamp_edges
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.mechanics.root import RootState, distend_root
-from valve_dolfinx.result import CaseResult
+from valve_dolfinx.result import CaseResult, competence, competence_text
 from valve_dolfinx.solvers.bending_hook import BendingHook
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.dynamics import DampedDynamicsSolver
@@ -172,17 +174,34 @@ def coarse_start(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ValveSt
                       report.wall_time_s)
 
 
+def _geometry_mismatch(valve: ValveMesh | None, config: CaseConfig) -> str | None:
+    """Why a given valve mesh is not ``config.geometry``'s, or None."""
+    if valve is None or valve.parameters == config.geometry:
+        return None
+    differ = [f"{f.name} {getattr(valve.parameters, f.name)!r} (config.geometry: "
+              f"{getattr(config.geometry, f.name)!r})" for f in fields(config.geometry)
+              if getattr(valve.parameters, f.name) != getattr(config.geometry, f.name)]
+    return (f"the valve mesh given is not the configuration's geometry: {', '.join(differ)}; "
+            "pass the configuration with geometry=valve.parameters (what `valve-dolfinx run "
+            "--mesh` does), so that the result records the mesh it solved")
+
+
 def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                progress: Callable[[dict], None] | None = None,
                valve: ValveMesh | None = None,
                start: ValveState | None = None) -> CaseState:
     """Root step and closure solve (no output written).
 
-    The closure starts from ``start``, a loaded valve whose shape is carried onto this
-    case's mesh (:func:`~valve_dolfinx.geometry.transfer.transfer_positions`: another mesh
-    of the same valve, or the normal valve for a graft valve); without one, from the
-    case's equilibrium on a coarse mesh (:func:`coarse_start`), and failing that from the
+    ``valve`` (rank 0's is used) must be the mesh of ``config.geometry``; ParameterError
+    (on every rank) names what differs.  The closure starts from ``start``, a loaded valve
+    whose shape is carried onto this case's mesh
+    (:func:`~valve_dolfinx.geometry.transfer.transfer_positions`: another mesh of the same
+    valve, or the normal valve for a graft valve); without one, from the case's
+    equilibrium on a coarse mesh (:func:`coarse_start`), and failing that from the
     unloaded valve.  The attachment is held at the distended root either way."""
+    mismatch = comm.bcast(_geometry_mismatch(valve, config) if comm.rank == 0 else None)
+    if mismatch:
+        raise ParameterError(mismatch)
     if start is None:
         start = coarse_start(config, comm)
     if start is not None and config.solver != "ptc":
@@ -305,17 +324,24 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
 
     ``valve``: the valve mesh to close (rank 0's is used), e.g. one read with
     :func:`~valve_dolfinx.geometry.valve.load_valve_mesh`; by default it is built from
-    ``config.geometry``, which should describe it either way (the result records it).
+    ``config.geometry``.  A valve given must be ``config.geometry``'s (the result records
+    it): otherwise ParameterError names what differs, before any computation.
+
+    ``out_dir`` is checked before any computation
+    (:func:`~valve_dolfinx.io.check_output_folder`), and a ``result.json`` already in it
+    is removed, so that an unfinished run never leaves an older result beside its files.
 
     Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
     hash), ``config.toml`` (the configuration that ran, reloadable with
-    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.xdmf``/``.h5``
+    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.vtu``
     (displacement, stress, strain, contact force) and the PNG figures.
     """
     from valve_dolfinx import output
 
     t0 = time.perf_counter()
     g = config.geometry
+    if out_dir is not None:
+        output.start_case(Path(out_dir), comm)
     state = solve_case(config, comm, progress, valve=valve, start=start)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
@@ -323,6 +349,9 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
     last = report.history[-1] if report.history else {}
     fields_ = coaptation.result_fields()
     crossing = leaflet_crossing_mm(state)
+    orifice = fields_["regurgitant_orifice_area_mm2"]
+    competent, why = competence(bool(report.converged),
+                                np.nan if orifice is None else orifice, crossing, g.mesh_size)
     result = CaseResult(
         graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
         converged=bool(report.converged),
@@ -330,11 +359,9 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         min_coaptation_height_raw_mm=fields_["min_coaptation_height_raw_mm"],
         central_coaptation_height_mm=fields_["central_coaptation_height_mm"],
         coaptation_area_mm2=fields_["coaptation_area_mm2"],
-        regurgitant_orifice_area_mm2=fields_["regurgitant_orifice_area_mm2"],
-        # a seal is claimed only for an equilibrium whose leaflets do not pass through each
-        # other (crossing lines shorter than one element)
-        competent=(bool(fields_["competent"]) and bool(report.converged)
-                   and crossing < g.mesh_size),
+        regurgitant_orifice_area_mm2=orifice,
+        competent=competent,
+        competence_reason=why,
         root_diameter_mm=state.root.diameter,
         max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
         max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
@@ -365,8 +392,9 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
                           fields_output=fields_output)
         result.wall_time_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
         output.write_result(Path(out_dir), result, comm)
-    log.info("case %s: converged=%s, central coaptation %.3f mm, min %.3f mm, RO area %.3g mm², "
-             "root %.2f mm, %.1f s", case_name(g), result.converged,
+    log.info("case %s: %s, %s, central coaptation %.3f mm, min %.3f mm, RO area %.3g mm², "
+             "root %.2f mm, %.1f s", case_name(g),
+             "converged" if result.converged else "NOT converged", competence_text(result),
              result.central_coaptation_height_mm, result.min_coaptation_height_mm,
              result.regurgitant_orifice_area_mm2, result.root_diameter_mm, result.wall_time_s)
     return result

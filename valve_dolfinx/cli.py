@@ -24,10 +24,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import signal
 import sys
 from pathlib import Path
 
-from valve_dolfinx.exceptions import ExitCode
+from valve_dolfinx.exceptions import ExitCode, StudyIncompleteError
+from valve_dolfinx.interrupts import interrupt_on_signals
 
 __all__ = ["main"]
 
@@ -67,6 +69,9 @@ def _graft_size(parser: argparse.ArgumentParser, args: argparse.Namespace
 
 def _cmd_mesh(args: argparse.Namespace) -> int:
     graft = _graft_size(args.parser, args)  # usage errors before the slow imports
+    from valve_dolfinx.io import check_output_folder
+
+    check_output_folder(args.out)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
     from valve_dolfinx.geometry.valve import build_valve
@@ -92,25 +97,30 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     return 0
 
 
+def _step_text(entry: dict) -> str:
+    """One accepted step of the closure in words."""
+    contacts = f"{entry.get('contacts', 0)} contacts"
+    if "residual_mN" in entry:  # pseudo-transient continuation
+        return (f"step {entry['step']}, Δτ {entry['dt']:.2g}, residual "
+                f"{entry['residual_mN']:.2e} mN, {contacts}")
+    return (f"step {entry['step']}, t = {entry['time']:.3g} s, dt {entry['dt']:.2g} s, "
+            f"increment {entry['increment_mm']:.1e} mm, {contacts}")  # BDF2 dynamics
+
+
 def _progress_bar(comm, enabled: bool = True):
-    """A tqdm status line of the closure on rank 0 (a no-op callback elsewhere, and with
-    ``enabled`` false: ``-q``)."""
+    """A tqdm status line of the closure on rank 0 when stderr is a terminal; otherwise a
+    debug log line per step (``-v``).  Nothing elsewhere, or with ``enabled`` false (``-q``)."""
     if comm.rank != 0 or not enabled:
         return lambda entry: None, lambda: None
+    if not sys.stderr.isatty():
+        return lambda entry: log.debug("closing: %s", _step_text(entry)), lambda: None
     from tqdm import tqdm
 
     bar = tqdm(total=None, desc="closing", dynamic_ncols=True,
                bar_format="{desc} [{elapsed}]")
 
     def update(entry: dict) -> None:
-        contacts = f"{entry.get('contacts', 0)} contacts"
-        if "residual_mN" in entry:  # pseudo-transient continuation
-            text = (f"step {entry['step']}, Δτ {entry['dt']:.2g}, residual "
-                    f"{entry['residual_mN']:.2e} mN, {contacts}")
-        else:  # BDF2 dynamics
-            text = (f"step {entry['step']}, t = {entry['time']:.3g} s, dt {entry['dt']:.2g} s, "
-                    f"increment {entry['increment_mm']:.1e} mm, {contacts}")
-        bar.set_description_str(f"closing: {text}", refresh=True)
+        bar.set_description_str(f"closing: {_step_text(entry)}", refresh=True)
 
     return update, bar.close
 
@@ -147,36 +157,27 @@ def _case_config(args: argparse.Namespace):
     return load_config(args.config, args.overrides, values)
 
 
-def _existing_result(out: Path, config, force: bool) -> dict | None:
-    """The result.json already in ``out`` if it is this case's with the same settings.
+def _stored_result(out: Path, config, force: bool) -> dict | None:
+    """The result.json already in ``out`` if it is this case's, finished and whole.
 
-    Raises ParameterError (before any computation) if ``out`` is a file, or holds the
-    result of a case with other settings (another settings hash) and ``force`` is not
-    given.  The same case with another wall-clock limit is computed again.
+    Before any computation: raises if ``out`` cannot receive the outputs, or holds a
+    finished case with other settings and ``force`` is not given.  A damaged case (a file
+    missing or unreadable) is computed again with a warning naming the file.
     """
-    import json
-
-    from valve_dolfinx.config import settings_hash
     from valve_dolfinx.exceptions import OutputConflictError
-    from valve_dolfinx.result import RESULT_FILE
+    from valve_dolfinx.io import check_output_folder
+    from valve_dolfinx.result import check_case
 
-    if out.exists() and not out.is_dir():
-        raise OutputConflictError(f"--out {out} is a file, not a folder: give a folder for the "
-                             "case's outputs (it is created if missing)")
-    path = out / RESULT_FILE
-    if force or not path.exists():
+    check_output_folder(out)
+    if force:
         return None
-    try:
-        data = json.loads(path.read_text())
-        digest = data.get("settings_hash") or settings_hash(data.get("parameters", {}))
-    except (OSError, ValueError, AttributeError):
-        data, digest = {}, None
-    if digest != config.settings_hash():
-        raise OutputConflictError(f"--out {out} holds the result of another case (other settings); "
-                             "give another folder, or --force to overwrite it")
-    wanted = json.loads(json.dumps(config.to_dict()))
-    same = wanted == {k: v for k, v in data.get("parameters", {}).items() if k in wanted}
-    return data if same else None
+    check = check_case(out, config)
+    if check.state == "other":
+        raise OutputConflictError(f"--out {out} holds the result of another case (other "
+                                  "settings); give another folder, or --force to overwrite it")
+    if check.state == "damaged":
+        log.warning("%s: %s: computing the case again", out, check.reason)
+    return check.result if check.finished else None
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -196,9 +197,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
         valve = load_valve_mesh(args.mesh)  # a missing or broken file stops here
         config = replace(config, geometry=valve.parameters)
-    done = _existing_result(args.out, config, args.force)
+    done = _stored_result(args.out, config, args.force)  # before the mesh is built
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.case import run_case
+    from valve_dolfinx.result import competence_text
 
     comm = MPI.COMM_WORLD
     if done is not None:
@@ -213,7 +215,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         close()
     if comm.rank == 0:
         state = "converged" if result.converged else f"NOT converged ({result.solver_message})"
-        print(f"{state}: central coaptation height {result.central_coaptation_height_mm:.2f} mm, "
+        print(f"{state}, {competence_text(result)}: central coaptation height "
+              f"{result.central_coaptation_height_mm:.2f} mm, "
               f"minimum {result.min_coaptation_height_mm:.2f} mm, regurgitant orifice "
               f"{result.regurgitant_orifice_area_mm2:.2f} mm², root diameter "
               f"{result.root_diameter_mm:.2f} mm; {result.wall_time_s:.0f} s -> {args.out}")
@@ -312,9 +315,9 @@ def _sweep_bar(comm, enabled: bool):
 
 @contextlib.contextmanager
 def _case_progress(comm, enabled: bool):
-    """The tqdm bar of cases done (rank 0, when ``enabled``), the log lines routed above it;
-    yields the progress callback (None without a bar)."""
-    progress, close = _sweep_bar(comm, enabled)
+    """The tqdm bar of cases done (rank 0, when ``enabled`` and stderr is a terminal), the
+    log lines routed above it; yields the progress callback (None without a bar)."""
+    progress, close = _sweep_bar(comm, enabled and sys.stderr.isatty())
     try:
         if progress is None:
             yield None
@@ -351,7 +354,7 @@ def _cmd_nomogram(args: argparse.Namespace) -> int:
 
 def _run_sweep(args: argparse.Namespace, settings) -> int:
     from valve_dolfinx._compat import MPI
-    from valve_dolfinx.study.runner import run_study, study_status, terminate_on_sigterm
+    from valve_dolfinx.study.runner import run_study, study_status
 
     comm = MPI.COMM_WORLD
     _quiet_library(comm, args.verbose, args.quiet)
@@ -365,7 +368,6 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
                 h = "" if case.is_normal else f"{case.height_pct:g}"
                 print(f"{case.index:>5}  {case.name:<{width}} {w:>6} {h:>6}  {state}")
         return 0
-    terminate_on_sigterm()
     indices = None if args.case_index is None else [args.case_index]
     with _case_progress(comm, not args.no_progress and indices is None) as progress:
         outcome = run_study(settings, args.out, comm, case_indices=indices,
@@ -378,6 +380,10 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
             print(f"report: {args.out / 'report.md'}")
             if (args.out / "nomogram.png").is_file():
                 print(f"nomogram: {args.out / 'nomogram.png'}, {args.out / 'nomogram.csv'}")
+    if outcome.failed:
+        raise StudyIncompleteError(f"{len(outcome.failed)} case(s) failed: "
+                                   f"{', '.join(outcome.failed)}; the report gives each reason "
+                                   "(a rerun skips them: delete their folders to retry)")
     return 0
 
 
@@ -389,10 +395,16 @@ def _cmd_report(args: argparse.Namespace) -> int:
     if target is not None:
         check_range("--target-coaptation", target, 0.0, 20.0, low_open=True, unit="mm")
     report = build_report(args.dir, target_mm=target)
-    print(f"{len(report.rows)} case(s)"
-          + (f"; not run yet: {', '.join(report.missing)}" if report.missing else ""))
+    print(f"{len(report.rows)} case(s)" + "".join(
+        f"; {why}: {', '.join(names)}" for why, names in report.unfinished.items()))
     print(report.text)
     print(f"report: {args.dir / 'report.md'}")
+    if not report.complete:
+        held = sum(len(names) for names in report.unfinished.values())
+        raise StudyIncompleteError(
+            f"{args.dir}: the study is incomplete ({held} case(s) without a result; "
+            "report.md lists them and why)" if report.rows else
+            f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out {args.dir}`")
     return 0
 
 
@@ -471,13 +483,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.plan.runner import run_plan
-    from valve_dolfinx.study.runner import terminate_on_sigterm
 
     comm = MPI.COMM_WORLD
     _quiet_library(comm, args.verbose, args.quiet)
     logging.getLogger("valve_dolfinx.plan").setLevel(
         logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
-    terminate_on_sigterm()
     with _case_progress(comm, not args.no_progress) as progress:
         outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
                            wall_time_limit_s=args.wall_time_limit, templates=templates,
@@ -524,11 +534,15 @@ _EXIT_STATUS = """exit status:
   0    success
   1    internal error (a bug): rerun with -v and report the traceback
   2    usage, configuration or parameter error (the message names the option or key)
-  3    the case ran but did not converge (results written with converged: false)
-  4    an input or output file is missing, unreadable or not what it should be
-  5    a solver failed and left no result
-  6    --out is a file or holds another case's results (nothing computed; --force)
-  130  interrupted (Ctrl-C); 128 + N after signal N (143: SIGTERM)
+  3    run: the case ran but did not converge (results written with converged: false)
+  4    an input file is missing, unreadable or not what it should be
+  5    a solver failed, or raised in one of its callbacks: no result written
+  6    --out holds another case's results (nothing computed; run --force overwrites)
+  7    --out, or a folder above it, is a file (nothing computed)
+  8    --out cannot be created or written (nothing computed)
+  9    sweep, report: a case failed, is damaged or has not run (report.md says why)
+  130  interrupted (SIGINT, Ctrl-C): nothing unfinished recorded; rerun to continue
+  143  terminated (SIGTERM): the same
 Under mpirun, an error on any rank ends every rank with that status."""
 
 
@@ -550,7 +564,9 @@ def _one_line(err: BaseException) -> str:
     from valve_dolfinx.exceptions import ValveError
 
     if isinstance(err, KeyboardInterrupt):
-        return "interrupted; rerun the same command to continue (finished results are kept)"
+        name = signal.Signals(getattr(err, "signum", signal.SIGINT)).name
+        return (f"interrupted ({name}); nothing unfinished was recorded: rerun the same "
+                "command to continue (finished results are kept)")
     if isinstance(err, OSError) and not isinstance(err, ValveError) and err.filename:
         text = (f"{err.filename}: {err.strerror or err}; check the path and its permissions")
     else:
@@ -664,7 +680,7 @@ def main(argv: list[str] | None = None) -> int:
         logs = configure_logging(1 if args.verbose else -1 if args.quiet else 0, args.log_file)
     except OSError as err:
         parser.error(f"--log-file {args.log_file}: {err.strerror or err}; give a writable path")
-    with logs:
+    with logs, interrupt_on_signals():
         try:
             return args.func(args)
         except (Exception, KeyboardInterrupt) as err:

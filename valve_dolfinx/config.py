@@ -55,6 +55,7 @@ __all__ = [
     "config_toml",
     "write_config",
     "settings_hash",
+    "wall_clock_limits",
     "canonical_hash",
 ]
 
@@ -645,6 +646,14 @@ def settings_hash(config: Mapping[str, Any]) -> str:
             value = {k: _as_float(v) for k, v in value.items() if k not in _WALL_CLOCK_KEYS}
         data[key] = _as_float(value)
     return canonical_hash(data)
+
+
+def wall_clock_limits(config: Mapping[str, Any]) -> dict[str, float]:
+    """The wall-clock limits (s) of a :meth:`CaseConfig.to_dict` layout, by section: the
+    settings :func:`settings_hash` leaves out."""
+    return {f"{section}.{key}": float(values[key])
+            for section, values in config.items() if isinstance(values, Mapping)
+            for key in _WALL_CLOCK_KEYS if key in values}
 
 
 def _as_float(value: Any) -> Any:

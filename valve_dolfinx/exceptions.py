@@ -1,12 +1,15 @@
 """Named errors with messages that say what was wrong and how to fix it, and the CLI's exit codes.
 
 Every error class carries the exit code the command line ends with when it
-reaches ``valve-dolfinx``; :func:`exit_code` maps any exception to one.
+reaches ``valve-dolfinx``; :func:`exit_code` maps any exception to one.  Each kind
+of output problem has its own class and code, the same in every command that writes
+files (:func:`valve_dolfinx.io.check_output_folder` raises them before any computation).
 """
 
 from __future__ import annotations
 
 import math
+import signal
 from enum import IntEnum
 
 __all__ = [
@@ -18,6 +21,10 @@ __all__ = [
     "InputFileError",
     "SolverError",
     "OutputConflictError",
+    "OutputNotFolderError",
+    "OutputNotWritableError",
+    "StudyIncompleteError",
+    "Interrupted",
     "check_range",
     "exit_code",
 ]
@@ -31,9 +38,13 @@ class ExitCode(IntEnum):
     USAGE = 2  #: a bad command line, configuration or parameter value
     NOT_CONVERGED = 3  #: the case ran but did not converge (results written, converged: false)
     INPUT = 4  #: an input or output file is missing, unreadable or not what it should be
-    SOLVER = 5  #: a solver failed in a way that left no result
-    OUTPUT_CONFLICT = 6  #: the output folder holds something else; nothing was computed
-    INTERRUPTED = 130  #: Ctrl-C (SIGINT); 128 + the signal number for other signals
+    SOLVER = 5  #: a solver failed, or raised in one of its callbacks; no result
+    OUTPUT_CONFLICT = 6  #: the output folder holds another case's results; nothing computed
+    OUTPUT_NOT_FOLDER = 7  #: the output path, or a folder above it, is a file
+    OUTPUT_NOT_WRITABLE = 8  #: the output folder cannot be created or written
+    STUDY_INCOMPLETE = 9  #: a study's case is missing, failed or damaged (the report lists it)
+    INTERRUPTED = 130  #: Ctrl-C (SIGINT): 128 + 2; nothing unfinished is recorded
+    TERMINATED = 143  #: SIGTERM (kill, a batch system's time limit): 128 + 15
 
 
 class ValveError(Exception):
@@ -71,15 +82,45 @@ class SolverError(ValveError, RuntimeError):
 
 
 class OutputConflictError(ValveError, FileExistsError):
-    """The output path is a file, or a folder holding another case's results (``--force``)."""
+    """The output folder holds another case's results (``--force`` overwrites them)."""
 
     exit_code = ExitCode.OUTPUT_CONFLICT
 
 
-def exit_code(err: BaseException) -> ExitCode:
+class OutputNotFolderError(ValveError, NotADirectoryError):
+    """The output path, or a folder above it, is a file."""
+
+    exit_code = ExitCode.OUTPUT_NOT_FOLDER
+
+
+class OutputNotWritableError(ValveError, PermissionError):
+    """The output folder cannot be created or written (permissions, a read-only file system)."""
+
+    exit_code = ExitCode.OUTPUT_NOT_WRITABLE
+
+
+class StudyIncompleteError(ValveError):
+    """A study has cases that are missing, failed or damaged; its report lists them."""
+
+    exit_code = ExitCode.STUDY_INCOMPLETE
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived (:mod:`valve_dolfinx.interrupts`); exit status 128 + signal.
+
+    A ``KeyboardInterrupt``, so nothing that catches ``Exception`` (a study recording a
+    failed case, a figure that could not be drawn) swallows it.
+    """
+
+    def __init__(self, signum: int = signal.SIGINT) -> None:
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+
+def exit_code(err: BaseException) -> int:
     """The exit status for ``err`` reaching the command line."""
     if isinstance(err, KeyboardInterrupt):
-        return ExitCode.INTERRUPTED
+        return 128 + getattr(err, "signum", signal.SIGINT)
     if isinstance(err, ValveError):
         return err.exit_code
     if isinstance(err, OSError):

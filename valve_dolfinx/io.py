@@ -1,4 +1,5 @@
-"""Writing files atomically; JSON results; the valve surface as VTK for ParaView.
+"""An output folder checked before any computation; writing files atomically; JSON results;
+the valve surface as VTK for ParaView.
 
 The valve mesh's own reloadable format is :func:`valve_dolfinx.geometry.valve.save_valve_mesh`.
 """
@@ -15,7 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from valve_dolfinx.exceptions import OutputNotFolderError, OutputNotWritableError
+
 __all__ = [
+    "check_output_folder",
     "atomic_write",
     "write_json",
     "read_json",
@@ -23,6 +27,34 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+
+def check_output_folder(path: str | Path, option: str = "--out") -> Path:
+    """Create the folder ``path`` if it is missing and prove it writable with a temporary
+    file: call it before any computation.  ``option`` is how the user gave it (messages).
+
+    Raises
+    ------
+    OutputNotFolderError
+        If ``path``, or a folder above it, is a file.
+    OutputNotWritableError
+        If ``path`` cannot be created or written (permissions, a read-only file system).
+    """
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
+            pass
+    except (FileExistsError, NotADirectoryError):
+        blocker = next(p for p in (path, *path.parents) if p.exists())
+        where = "is a file" if blocker == path else f"is below the file {blocker}"
+        raise OutputNotFolderError(f"{option} {path} {where}: give a folder for the outputs "
+                                   "(it is created if missing)") from None
+    except OSError as err:
+        raise OutputNotWritableError(
+            f"{option} {path} cannot be created or written ({err.strerror or err}); choose "
+            "another folder, or fix its permissions") from None
+    return path
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:

@@ -1,8 +1,10 @@
-"""Writing a case's outputs: result.json, config.toml, history.csv, ParaView fields, figures.
+"""Writing a case's outputs: result.json, config.toml, history.csv, fields.vtu, figures.
 
 Every file is written atomically (temporary file + rename), so an interrupted
 run never leaves a truncated result behind; ``result.json`` is written last,
-so its presence means the case finished.
+so its presence means the case finished.  :func:`start_case` checks the folder
+before any computation and removes an older ``result.json``; :func:`write_result`
+writes none once the command has received SIGINT or SIGTERM.
 """
 
 from __future__ import annotations
@@ -16,16 +18,31 @@ import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.config import CONFIG_FILE, write_config
-from valve_dolfinx.geometry.distributed import node_to_dof
-from valve_dolfinx.io import atomic_write, write_json
+from valve_dolfinx.interrupts import check_not_interrupted
+from valve_dolfinx.io import atomic_write, check_output_folder, export_valve_vtu, write_json
 from valve_dolfinx.result import POSITIONS_FILE, RESULT_FILE
 
-__all__ = ["write_case", "write_result", "RESULT_FILE"]
+__all__ = ["start_case", "write_case", "write_result", "RESULT_FILE", "FIELDS_FILE"]
 
 log = logging.getLogger(__name__)
 
+#: the fields of a case for ParaView, meshio and PyVista
+FIELDS_FILE = "fields.vtu"
+
+
+def start_case(out: Path, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    """Before computing into ``out``: check that it can receive the outputs (on every
+    rank), and remove a ``result.json`` a finished run left there (rank 0)."""
+    check_output_folder(out)
+    if comm.rank == 0:
+        (out / RESULT_FILE).unlink(missing_ok=True)
+    comm.barrier()
+
 
 def write_result(out: Path, result, comm: MPI.Comm = MPI.COMM_WORLD) -> Path | None:
+    """Write ``result.json``, the case's last file (rank 0); raise ``Interrupted`` instead
+    if the command has received a signal."""
+    check_not_interrupted()
     if comm.rank != 0:
         return None
     return write_json(out / RESULT_FILE, result.to_dict())
@@ -37,7 +54,7 @@ def write_case(out: Path, config, result, state, *, figures: bool = True,
     comm = state.domain.comm
     out.mkdir(parents=True, exist_ok=True)
     if fields_output:
-        _write_fields(out / "fields.xdmf", state)
+        _write_fields(out / FIELDS_FILE, state)
     if comm.rank != 0:
         return
     write_config(out / CONFIG_FILE, config)
@@ -71,42 +88,52 @@ def _write_positions(path: Path, state) -> None:
     atomic_write(path, write)
 
 
-def _nodal_function(V, values: np.ndarray, name: str) -> dolfinx.fem.Function:
-    """P1 function from per-mesh-node values (N, k) in input order."""
-    f = dolfinx.fem.Function(V, name=name)
+def _cell_values(f: dolfinx.fem.Function) -> np.ndarray | None:
+    """The values (M, k) of a DG0 function per valve cell in input order, on rank 0 (None
+    elsewhere; every rank takes part)."""
+    V = f.function_space
     mesh = V.mesh
-    ids = np.asarray(mesh.geometry.input_global_indices)
-    dofs = node_to_dof(V)
+    n_local = mesh.topology.index_map(mesh.topology.dim).size_local
     bs = V.dofmap.index_map_bs
-    f.x.array.reshape(-1, bs)[dofs] = values[ids].reshape(len(ids), bs)
-    return f
+    values = f.x.array.reshape(-1, bs)[V.dofmap.list[:n_local, 0]]
+    index = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[:n_local]
+    parts = mesh.comm.gather((index, values), root=0)
+    if parts is None:
+        return None
+    out = np.empty((sum(len(i) for i, _ in parts), bs))
+    for i, v in parts:
+        out[i] = v
+    return out
+
+
+def _node_gap(state) -> np.ndarray:
+    """Each node's distance to the nearest other leaflet (mm; -1 where undefined)."""
+    valve = state.domain.valve
+    gap = np.full(valve.num_nodes, np.nan)
+    for patch in valve.leaflets:
+        lc = state.coaptation.leaflets.get(patch.name)
+        if lc is not None:
+            gap[patch.nodes] = np.where(np.isnan(gap[patch.nodes]), lc.node_gap_mm,
+                                        np.minimum(gap[patch.nodes], lc.node_gap_mm))
+    return np.nan_to_num(gap, nan=-1.0)
 
 
 def _write_fields(path: Path, state) -> None:
-    """Displacement, contact force, coaptation gap (P1) and stress/strain (DG0) to XDMF."""
-    model, domain = state.model, state.domain
-    mesh = domain.mesh
-    functions = [model.u]
-    functions[0].name = "displacement"
-    functions.append(_nodal_function(model.V, state.contact_forces, "contact_force"))
+    """The solved valve as VTK (``.vtu``, rank 0; every rank takes part): the unloaded
+    surface with its leaflet tags and fibres, displacement, contact force and coaptation
+    gap per node, stress, strain (2×2 in the material axes, row by row) and area stretch
+    per cell."""
+    valve = state.domain.valve
+    cells = {name: _cell_values(f) for name, f in state.model.cell_fields().items()}
+    if state.domain.comm.rank != 0:
+        return
+    point_data = {"displacement": state.positions - valve.points,
+                  "contact_force": state.contact_forces}
     if state.coaptation is not None:
-        gap = np.full(domain.valve.num_nodes, np.nan)
-        for patch in domain.valve.leaflets:
-            lc = state.coaptation.leaflets.get(patch.name)
-            if lc is not None:
-                gap[patch.nodes] = np.where(np.isnan(gap[patch.nodes]), lc.node_gap_mm,
-                                            np.minimum(gap[patch.nodes], lc.node_gap_mm))
-        S = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
-        functions.append(_nodal_function(S, np.nan_to_num(gap, nan=-1.0)[:, None],
-                                         "coaptation_gap"))
-    cell_fields = model.cell_fields()
-    functions += [cell_fields["stress"], cell_fields["strain"], cell_fields["area_stretch"]]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with dolfinx.io.XDMFFile(domain.comm, str(path), "w") as xdmf:
-        xdmf.write_mesh(mesh)
-        xdmf.write_meshtags(domain.cell_tags, mesh.geometry)
-        for f in functions:
-            xdmf.write_function(f)
+        point_data["coaptation_gap"] = _node_gap(state)
+    cell_data = {"stress": cells["stress"], "strain": cells["strain"],
+                 "area_stretch": cells["area_stretch"][:, 0]}
+    export_valve_vtu(valve, path, point_data, cell_data)
 
 
 def _write_figures(out: Path, state, result) -> None:

@@ -162,7 +162,9 @@ class CoaptationResult:
     leaflets: dict[str, LeafletCoaptation]
     threshold_mm: float
     regurgitant_orifice_area_mm2: float
-    competent: bool
+    #: the orifice area is exactly 0 (a case's competence also asks for convergence and
+    #: no crossing leaflets: :func:`valve_dolfinx.result.competence`)
+    sealed: bool
     min_native_height_mm: float
     central_native_height_mm: float
     coaptation_area_mm2: float
@@ -177,7 +179,7 @@ class CoaptationResult:
         return {
             "threshold_mm": _json_float(self.threshold_mm),
             "regurgitant_orifice_area_mm2": _json_float(self.regurgitant_orifice_area_mm2),
-            "competent": bool(self.competent),
+            "sealed": bool(self.sealed),
             "min_native_height_mm": _json_float(self.min_native_height_mm),
             "min_native_height_raw_mm": _json_float(self.min_native_height_raw_mm),
             "nodulus_length_mm": _json_float(self.nodulus_length_mm),
@@ -192,8 +194,7 @@ class CoaptationResult:
         return {"min_coaptation_height_mm": d["min_native_height_mm"],
                 "min_coaptation_height_raw_mm": d["min_native_height_raw_mm"],
                 "central_coaptation_height_mm": d["central_native_height_mm"],
-                **{k: d[k] for k in ("coaptation_area_mm2", "regurgitant_orifice_area_mm2",
-                                     "competent")}}
+                **{k: d[k] for k in ("coaptation_area_mm2", "regurgitant_orifice_area_mm2")}}
 
 
 def _side_mask(x: np.ndarray, midline: float, nodulus: float, side: str) -> np.ndarray:
@@ -462,7 +463,7 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
     orifice
         Compute the regurgitant orifice area (the default).  ``False`` skips it
         -- for constructed surfaces that have no orifice around the z axis --
-        and reports it as NaN (``competent`` is then ``False``).
+        and reports it as NaN (``sealed`` is then ``False``).
     nodulus_length_mm
         Length ``l`` (flat mm along the free edge, centred on the midline) of
         the triple-point tip treated as the nodulus of Arantius: the side
@@ -501,7 +502,7 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
         leaflets=leaflets,
         threshold_mm=threshold,
         regurgitant_orifice_area_mm2=ro_area,
-        competent=ro_area == 0.0,
+        sealed=ro_area == 0.0,
         min_native_height_mm=min((lc.min_height_mm for lc in native), default=math.nan),
         min_native_height_raw_mm=min((lc.min_height_raw_mm for lc in native),
                                      default=math.nan),
@@ -515,5 +516,5 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
              "area %.2f mm², regurgitant orifice %.3f mm² (%s)", result.min_native_height_mm,
              result.min_native_height_raw_mm, result.central_native_height_mm,
              result.coaptation_area_mm2, ro_area,
-             "competent" if result.competent else "incompetent")
+             "sealed" if result.sealed else "leaks")
     return result

@@ -9,6 +9,7 @@ import numpy as np
 
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.geometry.outline import LeafletShape
+from valve_dolfinx.interrupts import reclaim_signals
 
 __all__ = ["FlatLeafletMesh", "mesh_flat_leaflet", "commissure_node_count", "triangle_angles"]
 
@@ -84,6 +85,7 @@ def mesh_flat_leaflet(shape: LeafletShape, mesh_size: float, n_commissure: int |
     initialised_here = not gmsh.isInitialized()
     if initialised_here:
         gmsh.initialize(interruptible=False)
+        reclaim_signals()  # Gmsh installs its own SIGTERM handler
     try:
         return _mesh_with_gmsh(shape, mesh_size, n_commissure)
     finally:

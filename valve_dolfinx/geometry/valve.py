@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -300,7 +301,7 @@ def load_valve_mesh(path: str | Path) -> ValveMesh:
                                          is_graft=info["is_graft"], **kw))
         valve = ValveMesh(**arrays, leaflets=tuple(leaflets),
                           parameters=ValveParameters(**meta["parameters"]))
-    except (KeyError, ValueError, TypeError, OSError) as err:
+    except (KeyError, ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as err:
         raise MeshError(f"{path} is not a valve mesh written by valve_dolfinx ({err}); "
                         "regenerate it with `valve-dolfinx mesh`") from err
     return valve.validate()

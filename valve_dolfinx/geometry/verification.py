@@ -19,6 +19,7 @@ from valve_dolfinx._compat import MPI, dolfinx
 from valve_dolfinx.exceptions import MeshError
 from valve_dolfinx.geometry.distributed import cell_function
 from valve_dolfinx.geometry.domain import MembraneDomain
+from valve_dolfinx.interrupts import reclaim_signals
 
 __all__ = [
     "sphere_domain",
@@ -85,6 +86,7 @@ def _gmsh_surface(build, mesh_size: float) -> tuple[np.ndarray, np.ndarray, np.n
     initialised_here = not gmsh.isInitialized()
     if initialised_here:
         gmsh.initialize(interruptible=False)
+        reclaim_signals()  # Gmsh installs its own SIGTERM handler
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add(f"verification_{id(build)}")

@@ -34,7 +34,7 @@ from pathlib import Path
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import config_from_dict, set_dotted
 from valve_dolfinx.exceptions import OutputConflictError, ParameterError
-from valve_dolfinx.io import write_json
+from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
 from valve_dolfinx.plan.recommendation import GraftSize, PlanRecommendation
@@ -192,10 +192,9 @@ def _from_study(rec, rows: list[dict], member: str) -> PlanRecommendation:
 
 # --- the plan ----------------------------------------------------------------------------
 def _check_folder(out: Path, patient: PatientInput, force: bool) -> None:
-    """Refuse a folder that holds another patient's plan (unless ``force``)."""
-    if out.exists() and not out.is_dir():
-        raise OutputConflictError(f"--out {out} is a file, not a folder: give a folder for "
-                                  "the plan (it is created if missing)")
+    """Refuse a folder that cannot hold the plan (``check_output_folder``), or that holds
+    another patient's plan (unless ``force``)."""
+    check_output_folder(out)
     saved = out / PATIENT_FILE
     if force or not saved.is_file():
         return
@@ -234,7 +233,7 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
 
     Raises
     ------
-    ParameterError, OutputConflictError
+    ParameterError, OutputConflictError, OutputNotFolderError, OutputNotWritableError
         Before any computation: a setting out of range, an unusable ``out``.
     """
     comm = MPI.COMM_WORLD if comm is None else comm

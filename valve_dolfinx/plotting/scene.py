@@ -51,7 +51,13 @@ GAP_RANGE_MM = (0.0, 3.0)
 
 def _pv():
     import pyvista
+    from vtkmodules.vtkCommonCore import vtkLogger
 
+    # VTK logs to stderr past `logging`, in colour: its warnings (such as the missing X
+    # display of an off-screen render, which needs none) only with debug logging (-v)
+    debug = logging.getLogger("valve_dolfinx").isEnabledFor(logging.DEBUG)
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_WARNING if debug
+                                 else vtkLogger.VERBOSITY_ERROR)
     return pyvista
 
 

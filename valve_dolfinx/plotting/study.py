@@ -5,8 +5,9 @@
   (the spread), and the target (the normal valve's, per member) as a line or band;
   grafts not sound in every member hollow.
 * :func:`plot_sizing_map`: the W × H grid as a heat map of the same worst case, each
-  cell with its spread, its margin over the target and the members that leak, cross
-  or did not converge; the recommended (or best) graft framed.
+  cell with its spread, its margin over the target and why it is not competent (its
+  ``competence_reason``; with several members, how many leak, cross or did not
+  converge); the recommended (or best) graft framed.
 * :func:`plot_nomogram`: the recommended graft and its margin against the loaded root
   diameter (:mod:`valve_dolfinx.study.nomogram`).
 * :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
@@ -99,7 +100,7 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     elif targets:
         ax.axhspan(targets[0], targets[-1], color=_TARGET_COLOUR, alpha=0.15, lw=0,
                    label=f"targets {targets[0]:.2f}–{targets[-1]:.2f} mm ({rec.target_source})")
-    ax.plot([], [], "o", mfc="white", mec="0.3", label="not converged or leaking"
+    ax.plot([], [], "o", mfc="white", mec="0.3", label="not competent"
             + (" in some member" if len(rec.members) > 1 else ""))
     if len(rec.members) > 1:
         ax.errorbar([], [], yerr=[], fmt="none", ecolor="0.3", capsize=3,
@@ -122,14 +123,14 @@ def _cell_lines(cell: CellSummary, n: int) -> list[str]:
         lines.append(f"spread {cell.spread_mm:.2f} mm")
     if cell.margin_mm is not None:
         lines.append(f"margin {cell.margin_mm:+.2f} mm")
+    if n == 1:  # why it is not competent, as its result.json says
+        for why in cell.reasons.values():
+            lines += (why or "not competent").split("; ")
+        return lines + (["missing"] if cell.missing else [])
     for what, members in (("leaks", cell.leaking), ("crosses", cell.crossing),
                           ("not converged", cell.unconverged), ("missing", cell.missing)):
-        if not members:
-            continue
-        if what == "leaks" and n == 1:
-            lines.append(f"ROA {cell.largest_orifice_mm2:.2g} mm²")
-        else:
-            lines.append(what if n == 1 else f"{what} {len(members)}/{n}")
+        if members:
+            lines.append(f"{what} {len(members)}/{n}")
     return lines
 
 
@@ -137,8 +138,8 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     """The W × H grid coloured by the worst-case minimum coaptation height; each cell with
     its spread over the members, its margin over the target and its failures.
 
-    Leaking cells are hatched; the recommended cell is framed, or, when there is none,
-    the best one, labelled as short of the target."""
+    Cells that are not competent (in some member) are hatched; the recommended cell is
+    framed, or, when there is none, the best one, labelled as short of the target."""
     cells = rec.cells
     widths = sorted({c.width_pct for c in cells})
     heights = sorted({c.height_pct for c in cells})
@@ -164,7 +165,7 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("worst-case minimum coaptation height (mm)" if n > 1 else
                   "minimum coaptation height (mm)")
-    note = "vermillion hatched: leaks (regurgitant orifice area > 0)"
+    note = "vermillion hatched: not competent (leaks, crosses or not converged)"
     if n > 1:
         note += " in some member"
     for t in targets:
@@ -182,8 +183,8 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         colour = "white" if math.isfinite(value) and value < middle else "black"
         ax.text(j, i, "\n".join(_cell_lines(c, n)), ha="center", va="center",
                 fontsize=8 if n == 1 else 7, color=colour,
-                fontweight="bold" if c.leaking else "normal")
-        if c.leaking:
+                fontweight="bold" if c.incompetent else "normal")
+        if c.incompetent:
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
                                    lw=2.5, hatch="//", alpha=0.8))
         if c.label == framed:

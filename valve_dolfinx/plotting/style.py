@@ -86,9 +86,13 @@ def _mm(value, unit: str = "mm", digits: int = 2) -> str:
 def key_numbers(result) -> str:
     """``min coaptation 1.67 mm · central 2.17 mm · orifice 0.00 mm² · competent``.
 
-    ``result`` is a case result (``result.json`` as a dict, or a ``CaseResult``)
-    or a :class:`~valve_dolfinx.analysis.coaptation.CoaptationResult`.
+    ``result`` is a case result (``result.json`` as a dict, or a ``CaseResult``): its
+    verdict is :func:`~valve_dolfinx.result.competence_text`, the reason included; or a
+    :class:`~valve_dolfinx.analysis.coaptation.CoaptationResult`, which knows only whether
+    the valve is sealed.
     """
+    from valve_dolfinx.result import competence_text
+
     low = _get(result, "min_coaptation_height_mm")
     if low is None:
         low = _get(result, "min_native_height_mm")
@@ -96,10 +100,10 @@ def key_numbers(result) -> str:
     if central is None:
         central = _get(result, "central_native_height_mm")
     orifice = _get(result, "regurgitant_orifice_area_mm2")
-    competent = _get(result, "competent")
-    verdict = "competent" if competent else "not competent"
-    if _get(result, "converged") is False:
-        verdict += " (not converged)"
+    if _get(result, "converged") is None:  # a coaptation analysis, not a case
+        verdict = "sealed" if _get(result, "sealed") else "leaks"
+    else:
+        verdict = competence_text(result)
     return (f"min coaptation {_mm(low)} · central {_mm(central)} · "
             f"orifice {_mm(orifice, 'mm²')} · {verdict}")
 

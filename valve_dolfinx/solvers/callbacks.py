@@ -1,11 +1,16 @@
-"""PETSc callbacks: letting an interrupt through, and Newton solves that cycle.
+"""PETSc callbacks: one guard for all of them, and Newton solves that cycle.
 
-PETSc calls the solvers' Python callbacks (residual, Jacobian, post-step) from C.  An
-exception raised in one comes back from ``TS.solve`` as a ``PETSc.Error`` (code 101),
-which the solvers report as a failed solve.  A Ctrl-C or a ``SystemExit`` is not a
-failed solve: :class:`InterruptGuard` records it in the callback and the solver raises
-it again once ``TS.solve`` has returned, so an interrupted study stops (exit status 130)
-instead of recording the interrupted case as unconverged.
+PETSc calls the solvers' Python callbacks (residual, Jacobian, line-search pre-check,
+initial guess, monitor, post-step) from C.  An exception raised in one comes back from
+``TS.solve`` as a ``PETSc.Error`` (code 101) that has lost it, and reads like a solve
+that failed.  :class:`CallbackGuard` wraps every callback a solver hands to PETSc and
+records the first exception of any kind; the solver calls :meth:`CallbackGuard.reraise`
+once ``TS.solve`` has returned.  A solver's own way of ending a run from a callback (a
+step below its floor) stays a failed solve with its reason; an interrupt is raised again
+as itself (the command ends with 130 or 143 and records nothing); any other exception is
+a :class:`~valve_dolfinx.exceptions.SolverError` that names it, never ``converged: false``.
+Around ``TS.solve`` the guard holds SIGINT and SIGTERM back to the entry of the next
+callback (:func:`~valve_dolfinx.interrupts.deferred_signals`), where it records them.
 
 A Newton solve whose iterates have settled into a cycle (the residual norms repeat
 every second or third iteration) cannot converge any more, but it runs on to
@@ -18,37 +23,78 @@ update, the reversing one halved, the rest of the way back).
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import logging
 from collections import deque
 from collections.abc import Callable
 
 from valve_dolfinx._compat import PETSc
+from valve_dolfinx.exceptions import SolverError
+from valve_dolfinx.interrupts import deferred_signals, raise_pending
 
-__all__ = ["InterruptGuard", "NewtonCycleStop", "NewtonReversalDamping"]
+__all__ = ["CallbackGuard", "NewtonCycleStop", "NewtonReversalDamping"]
+
+log = logging.getLogger(__name__)
 
 
-class InterruptGuard:
-    """Wraps callbacks; :meth:`reraise` raises the interrupt one of them caught."""
+class CallbackGuard(contextlib.AbstractContextManager):
+    """Wraps a solver's PETSc callbacks; :meth:`reraise` deals with what one of them raised.
 
-    def __init__(self) -> None:
+    Parameters
+    ----------
+    stops
+        The exception types the solver raises in a callback to end a run that failed
+        (reported by the solver with its reason, not raised again).
+
+    Use ``with guard: ts.solve(X)`` (signals wait for the next callback) and call
+    :meth:`reraise` after ``TS.solve``, whether it raised or not.
+    """
+
+    def __init__(self, stops: tuple[type[BaseException], ...] = ()) -> None:
+        self.stops = tuple(stops)
         self.caught: BaseException | None = None
+        self.callback = ""
+        self._signals: contextlib.AbstractContextManager | None = None
 
     def wrap(self, callback: Callable) -> Callable:
+        # a monitor is an object: its class names it
+        name = getattr(callback, "__name__", type(callback).__name__)
+
         @functools.wraps(callback)
         def guarded(*args, **kwargs):
             try:
+                raise_pending()  # a signal that arrived while PETSc ran C code
                 return callback(*args, **kwargs)
-            except (KeyboardInterrupt, SystemExit) as interrupt:
-                self.caught = interrupt
+            except BaseException as err:
+                if self.caught is None:
+                    self.caught, self.callback = err, name
                 raise
 
         return guarded
 
-    def reraise(self) -> None:
-        """Raise the caught interrupt, if there is one (and forget it)."""
-        interrupt, self.caught = self.caught, None
-        if interrupt is not None:
-            raise interrupt
+    def __enter__(self) -> CallbackGuard:
+        self._signals = deferred_signals()
+        self._signals.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        signals, self._signals = self._signals, None
+        signals.__exit__(*exc)
+
+    def reraise(self, where: str) -> None:
+        """Raise what a callback raised (and forget it): an interrupt or ``SystemExit`` as
+        it is, another exception as a ``SolverError`` naming it and ``where`` the solve
+        was; nothing for one of the ``stops`` or when no callback raised."""
+        err, self.caught = self.caught, None
+        if err is None or isinstance(err, self.stops):
+            return
+        if not isinstance(err, Exception):
+            raise err
+        log.debug("the PETSc callback %s raised", self.callback, exc_info=err)
+        message = " ".join(str(err).split()) or "(no message)"
+        raise SolverError(f"{type(err).__name__} in the solver's callback {self.callback} "
+                          f"{where}: {message}") from err
 
 
 class NewtonCycleStop:

@@ -45,7 +45,7 @@ from valve_dolfinx._compat import PETSc, dolfinx
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual, owned_bc_dofs
-from valve_dolfinx.solvers.callbacks import InterruptGuard
+from valve_dolfinx.solvers.callbacks import CallbackGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
 from valve_dolfinx.solvers.report import DynamicsReport
@@ -256,7 +256,7 @@ class DampedDynamicsSolver:
         }
         for key, value in {**defaults, **self.params.petsc_options, **self._snes_options}.items():
             opts[f"{prefix}{key}"] = value
-        guard = self._interrupts
+        guard = self._guard
         ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
         ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
@@ -354,7 +354,7 @@ class DampedDynamicsSolver:
         says whether it is the equilibrium and, if not, where it stopped.
         """
         self._progress = progress
-        self._interrupts = InterruptGuard()
+        self._guard = CallbackGuard(stops=(_Stalled,))
         self._t0 = time.perf_counter()
         self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
         self._last_displacement = self.coupling.displacements(self.U)
@@ -362,9 +362,11 @@ class DampedDynamicsSolver:
         ts = self._make_ts()
         X = self.U.x.petsc_vec.copy()
         try:
-            ts.solve(X)
+            with self._guard:  # a signal waits for the next callback
+                ts.solve(X)
         except PETSc.Error as err:
-            self._interrupts.reraise()  # Ctrl-C is not a failed solve
+            # an interrupt or an error in a callback is not a failed solve
+            self._guard.reraise(f"at t = {ts.getTime():.4g} s, step {ts.getStepNumber()}")
             if not self.report.reason:
                 self.report.reason = (f"PETSc error {err.ierr} at t = {ts.getTime():.4g} s, "
                                       f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")

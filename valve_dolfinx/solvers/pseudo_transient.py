@@ -66,7 +66,7 @@ from valve_dolfinx.solvers.assembly import (
     owned_bc_dofs,
 )
 from valve_dolfinx.solvers.callbacks import (
-    InterruptGuard,
+    CallbackGuard,
     NewtonCycleStop,
     NewtonReversalDamping,
 )
@@ -289,7 +289,7 @@ class PseudoTransientSolver:
         opts = PETSc.Options()
         for key, value in {**options, **p.petsc_options}.items():
             opts[f"{prefix}{key}"] = value
-        guard = self._interrupts
+        guard = self._guard
         ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
         ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
@@ -384,7 +384,7 @@ class PseudoTransientSolver:
         whether it is the equilibrium and, if not, where and why it stopped.
         """
         self._progress = progress
-        self._interrupts = InterruptGuard()
+        self._guard = CallbackGuard(stops=(_Stop,))
         self._cycles = NewtonCycleStop(self.params.newton_cycle_tolerance)
         self._reversals = NewtonReversalDamping(self.params.newton_reversal_damping)
         self._t0 = time.perf_counter()
@@ -398,9 +398,11 @@ class PseudoTransientSolver:
         ts = self._make_ts()
         X = self.u.x.petsc_vec.copy()
         try:
-            ts.solve(X)
+            with self._guard:  # a signal waits for the next callback
+                ts.solve(X)
         except (PETSc.Error, MeshError, _Stop) as err:
-            self._interrupts.reraise()  # Ctrl-C is not a failed solve
+            # an interrupt or an error in a callback is not a failed solve
+            self._guard.reraise(f"at step {ts.getStepNumber()}, Δτ = {ts.getTimeStep():.3g}")
             if not self.report.reason:
                 self.report.reason = (f"{type(err).__name__} at step {ts.getStepNumber()}, "
                                       f"Δτ = {ts.getTimeStep():.3g}: {err}")

@@ -112,7 +112,8 @@ def parse_percentages(option: str, values: Iterable[Any] | None, what: str) -> t
             raise ParameterError(f"{option}: {item!r} is not a number; give graft {what} "
                                  f"enlargements in per cent within {allowed}, {example}") from None
         if not math.isfinite(value) or not 0.0 <= value <= MAX_GRAFT_PCT:
-            reason = GRAFT_TOO_LARGE if value > MAX_GRAFT_PCT else GRAFT_TOO_SMALL
+            reason = ("give a finite number" if math.isnan(value) else
+                      GRAFT_TOO_LARGE if value > MAX_GRAFT_PCT else GRAFT_TOO_SMALL)
             raise ParameterError(f"{option}: {item!r} is outside the allowed range {allowed} "
                                  f"(graft {what} enlargement in per cent of the native "
                                  f"leaflet): {reason}")

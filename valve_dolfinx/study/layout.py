@@ -38,7 +38,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from valve_dolfinx.config import canonical_hash
+from valve_dolfinx.config import canonical_hash, settings_hash
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.study.axes import PATH_KEY, StudyAxis, axis_label, value_text
 from valve_dolfinx.study.paths import START_FROM_NORMAL, StudyPath, study_paths
@@ -76,15 +76,17 @@ def case_name(width_pct: float | None, height_pct: float | None) -> str:
 
 
 def case_digest(config: Mapping[str, Any], start: str | None = None) -> str:
-    """The identity of a case: SHA-256 of its configuration (``CaseConfig.to_dict()``) as
-    canonical JSON, and of its start's digest when it starts from another case's state.
+    """The identity of a case: its settings hash (:func:`valve_dolfinx.config.settings_hash`
+    of ``CaseConfig.to_dict()``, the ``settings_hash`` of its ``result.json``), combined
+    with its start's digest when it starts from another case's state.
 
-    Unlike ``CaseConfig.settings_hash`` it includes the wall-clock limits: a case that ran
-    out of time is recomputed when the limit is raised.
+    The wall-clock limits are not part of it: the resume check
+    (:func:`valve_dolfinx.result.check_case`) recomputes a case that did not converge
+    when its limit changes.
     """
     if start is None:
-        return canonical_hash(config)
-    return canonical_hash({"config": config, "start_from": start})
+        return settings_hash(config)
+    return canonical_hash({"settings": settings_hash(config), "start_from": start})
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from valve_dolfinx.result import leaflets_cross
+
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
            "flat_area_ratio"]
 
@@ -59,11 +61,12 @@ def _number(row: Mapping | None, key: str) -> float:
 
 
 def _crosses(row: Mapping) -> bool:
-    """Leaflet surfaces cross along at least one element (``competent``'s rule)."""
+    """Leaflet surfaces cross along at least one element (``competent``'s rule,
+    :func:`valve_dolfinx.result.leaflets_cross`)."""
     mesh = _number(row, "mesh_size_mm")
     if math.isnan(mesh):
         mesh = _number((row.get("parameters") or {}).get("geometry"), "mesh_size")
-    return _number(row, "leaflet_intersection_mm") >= mesh  # False if either is NaN
+    return leaflets_cross(_number(row, "leaflet_intersection_mm"), mesh)
 
 
 @dataclass
@@ -80,6 +83,8 @@ class CellSummary:
     leaking: list[str] = field(default_factory=list)
     crossing: list[str] = field(default_factory=list)
     incompetent: list[str] = field(default_factory=list)
+    #: why each member in ``incompetent`` is not competent (its ``competence_reason``)
+    reasons: dict[str, str] = field(default_factory=dict)
     largest_orifice_mm2: float | None = None
     longest_crossing_mm: float | None = None
     worst_height_mm: float | None = None
@@ -132,6 +137,7 @@ def _summarise(width: float, height: float, rows: Mapping[str, Mapping | None],
             cell.longest_crossing_mm = max(crossing, cell.longest_crossing_mm or 0.0)
         if not row.get("competent"):
             cell.incompetent.append(member)
+            cell.reasons[member] = row.get("competence_reason") or ""
         target = targets.get(member)
         if target is not None and math.isfinite(value):
             cell.margins_mm[member] = value - target
@@ -287,13 +293,13 @@ def _member(label: str | None) -> str:
 def _quality(cell: CellSummary) -> str:
     n = len(cell.members)
     if n == 1:
-        if cell.sound or not cell.converged:
-            return "converged and sealed" if cell.sound else "not converged"
-        faults = [what for what, members in (("leaking", cell.leaking),
-                                             ("with leaflets crossing", cell.crossing)) if members]
-        return f"converged but {' and '.join(faults) or 'not sealed'}"
+        if cell.sound or cell.missing:
+            return "converged and competent" if cell.sound else "not computed"
+        why = next(iter(cell.reasons.values()), "") or (
+            "not converged" if cell.unconverged else "")
+        return f"not competent: {why}" if why else "not competent"
     if cell.sound:
-        return f"converged and sealed in all {n} members"
+        return f"converged and competent in all {n} members"
     parts = [f"{what} in {len(members)} of {n} members" for what, members in (
         ("not computed", cell.missing), ("not converged", cell.unconverged),
         ("leaking", cell.leaking), ("leaflets crossing", cell.crossing)) if members]

@@ -25,6 +25,7 @@ from valve_dolfinx.plotting.study import (
     plot_coaptation_vs_width,
     plot_sizing_map,
 )
+from valve_dolfinx.result import competence_text
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
@@ -47,7 +48,10 @@ class StudyReport:
     """What :func:`build_report` wrote and found.
 
     ``recommendations`` holds one :class:`Recommendation` per comparison value (one in a
-    study that varies nothing), in the order of ``layout.comparisons``.
+    study that varies nothing), in the order of ``layout.comparisons``.  ``missing`` are
+    the study's cases with no folder yet; :attr:`unfinished` lists them with the cases that
+    failed or whose files are damaged (the table says why): a study with any of them, or
+    without any case, is not :attr:`complete`.
     """
 
     out: Path
@@ -56,6 +60,18 @@ class StudyReport:
     recommendations: list[Recommendation]
     missing: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
+
+    @property
+    def unfinished(self) -> dict[str, list[str]]:
+        """The cases that hold no result, by why: ``failed``, ``damaged``, ``not run yet``."""
+        groups = {status: [r["case"] for r in self.rows if r.get("status") == status]
+                  for status in ("failed", "damaged")}
+        groups["not run yet"] = list(self.missing)
+        return {why: names for why, names in groups.items() if names}
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.rows) and not self.unfinished
 
     @property
     def text(self) -> str:
@@ -89,8 +105,8 @@ def _settings_from_rows(rows: list[dict]) -> StudySettings | None:
 def member_tables(layout: StudyLayout, comparison: int, rows: list[dict]
                   ) -> dict[str, list[dict]]:
     """``{member label: rows}`` of one comparison value: each member's normal valve and
-    grafts, from the rows at hand (a case not finished yet is left out)."""
-    by_name = {r["case"]: r for r in rows}
+    grafts, from the rows at hand (a case not finished yet, or damaged, is left out)."""
+    by_name = {r["case"]: r for r in rows if r.get("status") != "damaged"}
     return {member: [by_name[name] for name in cases.values() if name in by_name]
             for member, cases in layout.member_cases(comparison).items()}
 
@@ -123,6 +139,13 @@ def _fmt(value, digits: int = 2) -> str:
     return str(value)
 
 
+def _competence(row: dict) -> str:
+    """``yes``, or ``no (leaks 0.40 mm²)`` with the case's reason; ``–`` without a result."""
+    if row.get("competent") is None:
+        return "–"
+    return "yes" if row["competent"] else competence_text(row).replace("not competent", "no")
+
+
 def _table(rows: list[dict]) -> list[str]:
     head = ("case", "W %", "H %", "converged", "competent", "min h (mm)", "central h (mm)",
             "area (mm²)", "ROA (mm²)", "root d (mm)", "wall (s)", "reason")
@@ -132,7 +155,7 @@ def _table(rows: list[dict]) -> list[str]:
         if len(reason) > 90:
             reason = reason[:87] + "..."
         cells = (r["case"], _fmt(r.get("graft_width_pct"), 0), _fmt(r.get("graft_height_pct"), 0),
-                 _fmt(r.get("converged")), _fmt(r.get("competent")),
+                 _fmt(r.get("converged")), _competence(r),
                  _fmt(r.get("min_coaptation_height_mm")),
                  _fmt(r.get("central_coaptation_height_mm")), _fmt(r.get("coaptation_area_mm2"), 1),
                  _fmt(r.get("regurgitant_orifice_area_mm2"), 3), _fmt(r.get("root_diameter_mm")),
@@ -158,7 +181,8 @@ def _worst_case_table(rec: Recommendation) -> list[str]:
 
 
 def _what_was_run(out: Path, rows: list[dict], layout: StudyLayout | None,
-                  settings: StudySettings | None, missing: list[str]) -> list[str]:
+                  settings: StudySettings | None, unfinished: dict[str, list[str]]
+                  ) -> list[str]:
     first = rows[0] if rows else {}
     params = first.get("parameters") or {}
     mesh = first.get("mesh_size_mm", (params.get("geometry") or {}).get("mesh_size"))
@@ -180,7 +204,7 @@ def _what_was_run(out: Path, rows: list[dict], layout: StudyLayout | None,
                      f"comparison value(s), {len(layout.cases)} cases")
     lines += [f"- mesh: target edge length {_fmt(mesh)} mm",
               f"- cases: {len(rows)} in the table, {converged} converged"
-              + (f"; not run yet: {', '.join(missing)}" if missing else ""),
+              + "".join(f"; {why}: {', '.join(names)}" for why, names in unfinished.items()),
               f"- compute time: {compute:.0f} rank·s summed over the cases"]
     for run in _sweeps(out)[-3:]:
         lines.append(f"- sweep run {run.get('started', '?')}: {run.get('n_ranks')} ranks, "
@@ -201,7 +225,7 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
              "Normal valve and pericardial grafts of the non-coronary leaflet, closed under "
              f"{_fmt(params.get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
              "## What was run", "",
-             *_what_was_run(out, rows, report.layout, settings, report.missing), "",
+             *_what_was_run(out, rows, report.layout, settings, report.unfinished), "",
              "## Recommendation", ""]
     if not report.recommendations:
         lines += ["No cases yet.", ""]
@@ -289,7 +313,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None,
         "recommendations": [rec.to_dict() for rec in report.recommendations],
-        "cases": len(rows), "missing": report.missing}))
+        "cases": len(rows), "missing": report.missing, "unfinished": report.unfinished}))
     for rec in report.recommendations:
         head = axis_label(rec.comparison.items())
         suffix = figure_suffix(rec)

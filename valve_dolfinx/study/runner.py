@@ -26,11 +26,15 @@ is finished or being computed.
 
 Resuming
 --------
-A finished case carries the hash of its configuration (``case.json``); a
-rerun skips it if the hash is unchanged and recomputes it otherwise.  A case
-is written atomically when it finishes (staging folder renamed into place),
-so killing a sweep loses only the cases in flight.  A case that raises or
-does not converge is recorded with its reason and the sweep goes on.
+A finished case records its identity (``case.json``'s ``config_hash``, the
+settings hash) and the size of every file it wrote; a rerun skips it if
+:func:`~valve_dolfinx.result.check_case` finds it whole with an unchanged
+identity, and recomputes it otherwise (a damaged case with a warning naming the
+file).  A case is written atomically when it finishes (staging folder renamed
+into place), so killing a sweep loses only the cases in flight.  A case that
+raises or does not converge is recorded with its reason and the sweep goes on;
+an interrupt (SIGINT, SIGTERM) stops the sweep, records nothing for the cases
+in flight and releases their claims.
 
 Progress
 --------
@@ -42,13 +46,11 @@ bar from them).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import math
 import os
 import shutil
-import signal
 import socket
 import threading
 import time
@@ -58,8 +60,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from valve_dolfinx._compat import MPI
-from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.io import write_json
+from valve_dolfinx.result import competence_text
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
 from valve_dolfinx.study.layout import StudyCase, StudyLayout
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
@@ -69,10 +72,9 @@ from valve_dolfinx.study.store import (
     CaseClaim,
     ClaimHeartbeat,
     case_dir,
+    check_study_case,
     commit_case,
-    finished_record,
     prepare_output,
-    read_record,
     staging_dir,
 )
 
@@ -85,7 +87,6 @@ __all__ = [
     "run_study",
     "run_closure_case",
     "study_status",
-    "terminate_on_sigterm",
 ]
 
 log = logging.getLogger(__name__)
@@ -145,7 +146,8 @@ def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: flo
     from valve_dolfinx.result import CaseResult
 
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
-                        converged=False, n_ranks=n_ranks, wall_time_s=wall,
+                        converged=False, competence_reason="the case failed",
+                        n_ranks=n_ranks, wall_time_s=wall,
                         solver_message=error, parameters=config.to_dict(),
                         versions=package_versions(), settings_hash=config.settings_hash(),
                         version=__version__, git_commit=git_commit()).to_dict()
@@ -167,11 +169,7 @@ def case_line(name: str, row: dict, done: int | None = None, total: int | None =
     if row.get("error"):
         return f"{count}{name}: FAILED ({row['error']})"
     state = "converged" if row.get("converged") else "NOT converged"
-    roa = row.get("regurgitant_orifice_area_mm2")
-    seal = ("sealed" if row.get("competent") else
-            f"leaks (orifice {num('regurgitant_orifice_area_mm2', '.3g')} mm²)"
-            if isinstance(roa, int | float) and roa > 0 else "not competent")
-    return (f"{count}{name}: {state}, {seal}, min coaptation "
+    return (f"{count}{name}: {state}, {competence_text(row)}, min coaptation "
             f"{num('min_coaptation_height_mm', '.2f')} mm, central "
             f"{num('central_coaptation_height_mm', '.2f')} mm, area "
             f"{num('coaptation_area_mm2', '.0f')} mm², {num('wall_time_s', '.0f')} s")
@@ -180,11 +178,11 @@ def case_line(name: str, row: dict, done: int | None = None, total: int | None =
 class _Monitor:
     """Rank 0's watcher of the case folders: one log line and one progress event per case."""
 
-    def __init__(self, out: Path, cases: list[StudyCase], hashes: dict[str, str],
+    def __init__(self, out: Path, cases: list[StudyCase], layout: StudyLayout,
                  progress: ProgressCallback | None, poll_s: float) -> None:
-        self.out, self.cases, self.hashes = out, cases, hashes
+        self.out, self.cases, self.layout = out, cases, layout
         self.progress, self.poll_s = progress, poll_s
-        self.done = {c.name for c in cases if finished_record(out, c.name, hashes[c.name])}
+        self.done = {c.name for c in cases if self._finished(c.name) is not None}
         self.initial = len(self.done)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="study-monitor")
@@ -201,17 +199,19 @@ class _Monitor:
         while not self._stop.wait(self.poll_s):
             self.scan()
 
+    def _finished(self, name: str) -> dict | None:
+        """The result of case ``name`` if its folder holds it finished and whole."""
+        check = _check(self.out, self.layout, name)
+        return check.result if check.finished else None
+
     def scan(self) -> None:
         for case in self.cases:
             if case.name in self.done:
                 continue
-            if finished_record(self.out, case.name, self.hashes[case.name]) is None:
+            row = self._finished(case.name)
+            if row is None:
                 continue
             self.done.add(case.name)
-            try:
-                row = json.loads((case_dir(self.out, case.name) / RESULT_FILE).read_text())
-            except (OSError, json.JSONDecodeError):
-                row = {}
             log.info("%s", case_line(case.name, row, len(self.done), len(self.cases)))
             if self.progress:
                 self.progress({"event": "case", "case": case.name, "row": row,
@@ -234,23 +234,33 @@ class SweepOutcome:
     computed: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
     report: StudyReport | None = None
+    #: the cases of the selection recorded as failed (they raised): the study is incomplete
+    failed: list[str] = field(default_factory=list)
 
 
-def _decide(out: Path, case: StudyCase, digest: str, beat: ClaimHeartbeat
+def _check(out: Path, layout: StudyLayout, name: str):
+    """The resume check of case ``name`` (:func:`~valve_dolfinx.result.check_case`)."""
+    return check_study_case(out, name, layout.configs[name], layout.digests[name])
+
+
+def _decide(out: Path, case: StudyCase, layout: StudyLayout, beat: ClaimHeartbeat
             ) -> tuple[CaseClaim | None, Path | None]:
     """Leader: claim the case if it is unfinished and unclaimed; its staging folder."""
-    if finished_record(out, case.name, digest):
+    if _check(out, layout, case.name).finished:
         return None, None
     claim = CaseClaim.for_case(out, case.name)
     if not claim.acquire():
         log.debug("%s is being computed by another process", case.name)
         return None, None
-    if finished_record(out, case.name, digest):  # finished between the test and the claim
+    check = _check(out, layout, case.name)
+    if check.finished:  # finished between the test and the claim
         claim.release()
         return None, None
-    old = read_record(case_dir(out, case.name))
-    if old is not None:
-        log.info("%s: configuration changed since it was computed: recomputing", case.name)
+    if check.state == "damaged":
+        log.warning("%s: %s: recomputing", case_dir(out, case.name), check.reason)
+    elif check.state != "empty":
+        log.info("%s: configuration changed since it was computed (%s): recomputing",
+                 case.name, check.reason)
     beat.add(claim)
     return claim, staging_dir(out, case.name)
 
@@ -302,10 +312,10 @@ class _Scheduler:
         self.beat, self.poll_s = beat, poll_s
 
     def _finished(self, name: str) -> bool:
-        return finished_record(self.out, name, self.layout.digests[name]) is not None
+        return _check(self.out, self.layout, name).finished
 
     def _claim(self, case: StudyCase) -> tuple[StudyCase, CaseClaim, Path] | None:
-        claim, staging = _decide(self.out, case, self.layout.digests[case.name], self.beat)
+        claim, staging = _decide(self.out, case, self.layout, self.beat)
         return None if claim is None else (case, claim, staging)
 
     def next(self) -> tuple[StudyCase, CaseClaim, Path] | None:
@@ -417,7 +427,12 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     Raises
     ------
     ParameterError
-        Before any computation, for settings that cannot run or an unwritable ``out``.
+        Before any computation, for settings that cannot run.
+    OutputNotFolderError, OutputNotWritableError
+        Before any computation, for an ``out`` that cannot be created or written.
+    Interrupted
+        On SIGINT or SIGTERM (under :func:`~valve_dolfinx.interrupts.interrupt_on_signals`):
+        the cases in flight are not recorded and their claims are released.
     """
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(out)
@@ -441,13 +456,13 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             if case_indices is None or not (out / SETTINGS_FILE).is_file():
                 write_json(out / SETTINGS_FILE, {"settings": settings.to_dict(),
                                                  "written_at": started})
-        except ParameterError as err:
-            error = str(err)
+        except ValveError as err:
+            error = err
     error = comm.bcast(error, root=0)
     if error:
-        raise ParameterError(error)
+        raise error
     group = _split(comm, settings.ranks_per_case)
-    monitor = _Monitor(out, todo, layout.digests, progress, poll_s) if comm.rank == 0 else None
+    monitor = _Monitor(out, todo, layout, progress, poll_s) if comm.rank == 0 else None
     if monitor:
         monitor.start()
     try:
@@ -459,6 +474,8 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             monitor.stop()
         group.Free()
     outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
+    states = comm.bcast(_states(out, layout, todo) if comm.rank == 0 else None)
+    outcome.failed = [case.name for case, state in states if state == "failed"]
     if comm.rank == 0:
         entry = {"started": started, "finished": _now(), "elapsed_s": outcome.elapsed_s,
                  "n_ranks": comm.size, "ranks_per_case": settings.ranks_per_case,
@@ -471,31 +488,23 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     return outcome
 
 
-def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
-    """Each case and its state in ``out``: finished, failed, changed, running or pending."""
-    out = Path(out)
-    layout = settings.layout()
+def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
+            ) -> list[tuple[StudyCase, str]]:
     status = []
-    for case in layout.cases:
-        record = read_record(case_dir(out, case.name))
-        claim = CaseClaim.for_case(out, case.name).path
-        if record is not None and record.get("config_hash") == layout.digests[case.name]:
-            state = record.get("status", "finished")
-        elif claim.exists():
+    for case in cases:
+        check = _check(out, layout, case.name)
+        if check.finished:
+            state = check.record.get("status", "finished")
+        elif CaseClaim.for_case(out, case.name).path.exists():
             state = "running"
-        elif record is not None:
-            state = "changed"
         else:
-            state = "pending"
+            state = {"empty": "pending", "damaged": "damaged"}.get(check.state, "changed")
         status.append((case, state))
     return status
 
 
-def terminate_on_sigterm() -> None:
-    """Turn SIGTERM (``kill``, Slurm's time limit) into SystemExit, so claims and staging
-    folders of the cases in flight are cleaned up; call from the main thread of a CLI."""
-    def handler(signum, frame):
-        raise SystemExit(128 + signum)
-
-    with contextlib.suppress(ValueError):  # not the main thread
-        signal.signal(signal.SIGTERM, handler)
+def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
+    """Each case and its state in ``out``: finished, failed, damaged, changed, running or
+    pending."""
+    layout = settings.layout()
+    return _states(Path(out), layout, layout.cases)

@@ -10,10 +10,13 @@ Layout of a study folder ``DIR``::
 
 A case is computed in a staging folder and renamed into ``cases/<name>`` when
 it is complete, so ``cases/<name>`` is either absent or whole: a sweep that is
-killed loses only the cases in flight.  ``case.json`` holds the identity of
-the case configuration that produced it
-(:func:`valve_dolfinx.study.layout.case_digest`, its ``config_hash``); a rerun
-skips finished cases with an unchanged hash and recomputes the others.
+killed loses only the cases in flight.  ``case.json`` records the identity of
+the case (:func:`valve_dolfinx.study.layout.case_digest`, its ``config_hash``:
+the settings hash, and the start's identity for a warm start) and the size of
+every file the case wrote; a rerun skips the cases that
+:func:`~valve_dolfinx.result.check_case` finds finished, whole and with an
+unchanged identity, and recomputes the others (a damaged case with a warning
+naming the file).
 
 Before a case is computed, its claim file is created with ``O_CREAT | O_EXCL``
 (atomic, also on NFS v3+), so two sweeps on the same folder -- two MPI rank
@@ -31,15 +34,15 @@ import logging
 import os
 import shutil
 import socket
-import tempfile
 import threading
 import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from valve_dolfinx.exceptions import ParameterError
-from valve_dolfinx.io import write_json
+from valve_dolfinx.interrupts import check_not_interrupted
+from valve_dolfinx.io import check_output_folder, write_json
+from valve_dolfinx.result import RECORD_FILE, RESULT_FILE, CaseCheck, check_case
 
 __all__ = [
     "CASES_DIR",
@@ -49,8 +52,7 @@ __all__ = [
     "CaseClaim",
     "ClaimHeartbeat",
     "case_dir",
-    "read_record",
-    "finished_record",
+    "check_study_case",
     "prepare_output",
     "staging_dir",
     "commit_case",
@@ -59,8 +61,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 CASES_DIR = "cases"
-RECORD_FILE = "case.json"
-RESULT_FILE = "result.json"
 SETTINGS_FILE = "study.json"
 _CLAIMS = ".claims"
 _STAGING = ".staging"
@@ -75,43 +75,24 @@ def case_dir(out: Path, name: str) -> Path:
     return Path(out) / CASES_DIR / name
 
 
-def read_record(folder: Path) -> dict | None:
-    """The study's record ``case.json`` of a case folder, or None if absent or unreadable."""
-    try:
-        return json.loads((Path(folder) / RECORD_FILE).read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
-
-
-def finished_record(out: Path, name: str, digest: str) -> dict | None:
-    """The record of case ``name`` if it finished with the configuration hash ``digest``."""
-    folder = case_dir(out, name)
-    record = read_record(folder)
-    if record is None or record.get("config_hash") != digest:
-        return None
-    if not (folder / RESULT_FILE).is_file():
-        return None
-    return record
+def check_study_case(out: Path, name: str, config=None, digest: str | None = None
+                     ) -> CaseCheck:
+    """:func:`~valve_dolfinx.result.check_case` of the case folder ``name`` of a study, whose
+    identity is ``digest`` (:func:`~valve_dolfinx.study.layout.case_digest`)."""
+    return check_case(case_dir(out, name), config, record=True, digest=digest)
 
 
 def prepare_output(out: Path) -> Path:
-    """Create the study folder and prove it writable, before any computation.
+    """Check the study folder, then create it and its subfolders, before any computation.
 
     Raises
     ------
-    ParameterError
+    OutputNotFolderError, OutputNotWritableError
         If the folder cannot be created or written, naming it and the fix.
     """
-    out = Path(out)
-    try:
-        for sub in ("", CASES_DIR, f"{CASES_DIR}/{_CLAIMS}", f"{CASES_DIR}/{_STAGING}"):
-            (out / sub).mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=out / CASES_DIR / _STAGING, prefix=".probe-"):
-            pass
-    except OSError as err:
-        reason = err.strerror or type(err).__name__
-        raise ParameterError(f"output folder {str(out)!r} is not writable ({reason}); choose "
-                             "another --out, or fix its permissions") from None
+    out = check_output_folder(out)
+    for sub in ("", CASES_DIR, f"{CASES_DIR}/{_CLAIMS}", f"{CASES_DIR}/{_STAGING}"):
+        check_output_folder(out / sub).mkdir(parents=True, exist_ok=True)
     return out
 
 
@@ -262,10 +243,15 @@ def staging_dir(out: Path, name: str) -> Path:
 def commit_case(out: Path, name: str, staging: Path, record: dict) -> Path:
     """Write the record into ``staging`` and rename it to ``cases/<name>`` (replacing an old one).
 
-    The record is written last inside the staging folder and the folder renamed
-    in one step, so readers see the old case, no case, or the new case whole.
+    The record lists every file of the case with its size (``files``).  It is written
+    last inside the staging folder and the folder renamed in one step, so readers see
+    the old case, no case, or the new case whole.  Nothing is committed once the command
+    has received SIGINT or SIGTERM.
     """
-    write_json(staging / RECORD_FILE, record)
+    files = {str(p.relative_to(staging)): p.stat().st_size
+             for p in sorted(staging.rglob("*")) if p.is_file()}
+    write_json(staging / RECORD_FILE, {**record, "files": files})
+    check_not_interrupted()
     final = case_dir(out, name)
     if final.exists():
         trash = Path(out) / CASES_DIR / _TRASH / f"{name}@{uuid.uuid4().hex[:8]}"

@@ -5,7 +5,9 @@ study's bookkeeping (case name, its axis values, status, reason, configuration
 hash).  The SPEC §7 columns come first, then the case name, one column per axis
 key (``root.loaded_diameter``, ...) and ``path`` (a list where the case serves
 several values, as the normal valve serves every path), then the rest of the
-bookkeeping, then every other field of the result in its own order.
+bookkeeping, then every other field of the result in its own order.  A case
+folder whose files are damaged (:func:`~valve_dolfinx.result.check_case`) is a
+row with status ``damaged`` and the reason, its result fields empty.
 ``results.json`` keeps the nested fields (per-leaflet numbers, parameters,
 versions) as they are; ``results.csv`` flattens them into
 dotted column names (``parameters.geometry.mesh_size``), so both hold the
@@ -19,13 +21,14 @@ import io
 import json
 import logging
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
-from valve_dolfinx.study.store import CASES_DIR, RECORD_FILE, RESULT_FILE, read_record
+from valve_dolfinx.study.store import CASES_DIR, check_study_case
 
 __all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables", "write_csv",
            "read_csv_rows"]
@@ -46,6 +49,10 @@ def _sort_key(row: dict) -> tuple:
     return (*size, row["case"])
 
 
+#: a graft case's folder name: its size, then any axis values (``W14_H13__path=2``)
+_GRAFT_NAME = re.compile(r"W(\d+(?:\.\d+)?)_H(\d+(?:\.\d+)?)(?:__.*)?")
+
+
 def _reason(record: dict, result: dict) -> str:
     if record.get("status") == "failed":
         return str(record.get("reason") or result.get("error") or "failed")
@@ -55,32 +62,49 @@ def _reason(record: dict, result: dict) -> str:
 
 
 def case_rows(out: Path, order: Sequence[str] | None = None) -> list[dict]:
-    """Rows of every finished or failed case under ``out/cases``.
+    """Rows of every case folder under ``out/cases``.
 
     In the order of the case names ``order`` (a study's cases), then any other case
-    folder; without ``order``, the normal valve first, then by W and H.  A folder
-    without ``case.json`` (not made by a sweep) or without ``result.json`` is skipped
-    with a warning.
+    folder; without ``order``, the normal valve first, then by W and H.  A case whose
+    files are missing, unreadable or disagree is a row with status ``damaged`` and the
+    reason; a folder whose name is no case's is skipped with a warning.
     """
     rows = []
     root = Path(out) / CASES_DIR
     for folder in sorted(root.iterdir()) if root.is_dir() else []:
         if folder.name.startswith(".") or not folder.is_dir():
             continue
-        record = read_record(folder)
-        try:
-            result = json.loads((folder / RESULT_FILE).read_text())
-        except (OSError, json.JSONDecodeError):
-            result = None
-        if record is None or result is None:
-            log.warning("skipping %s: no %s or %s", folder, RECORD_FILE, RESULT_FILE)
+        size = _graft_size(folder.name)
+        if size is None:
+            log.warning("skipping %s: not a case folder of a study", folder)
             continue
-        rows.append(_row(folder.name, record, result))
+        check = check_study_case(out, folder.name)
+        if check.finished:
+            rows.append(_row(folder.name, check.record, check.result))
+            continue
+        reason = check.reason or "no result.json or case.json"
+        log.warning("%s: %s", folder, reason)
+        rows.append(_damaged_row(folder.name, size, reason))
     rows.sort(key=_sort_key)
     if order is not None:
         place = {name: i for i, name in enumerate(order)}
         rows.sort(key=lambda row: place.get(row["case"], len(place)))
     return rows
+
+
+def _graft_size(name: str) -> tuple[float | None, float | None] | None:
+    """(W, H) of a case folder's name, (None, None) for a normal valve, None for others."""
+    if name == NORMAL_CASE or name.startswith(f"{NORMAL_CASE}__"):
+        return None, None
+    match = _GRAFT_NAME.fullmatch(name)
+    return (float(match[1]), float(match[2])) if match else None
+
+
+def _damaged_row(name: str, size: tuple, reason: str) -> dict:
+    row: dict[str, Any] = dict.fromkeys(SPEC_COLUMNS)
+    row["graft_width_pct"], row["graft_height_pct"] = size
+    row.update(case=name, status="damaged", reason=reason, config_hash=None)
+    return row
 
 
 def _row(name: str, record: dict, result: dict) -> dict:
