@@ -201,7 +201,8 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     figures = PlanFigures(sizing_map=_existing(out / "sizing_map.png"),
                           closed_aortic=_existing(case / "closed_valve_aortic.png"),
                           closed_ventricular=_existing(case / "closed_valve_ventricular.png"),
-                          closed_member=member_words(layout.members[member]))
+                          closed_member=f"root {patient.root_diameter_mm:.1f} mm, path "
+                                        f"{layout.paths[0].number}")
     rows = report.rows
     first = rows[0] if rows else {}
     run = RunInfo(versions=first.get("versions") or {},
