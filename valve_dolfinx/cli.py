@@ -536,9 +536,8 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--graft-fibre-angle", type=float, default=None, metavar="DEG",
                    help="the graft's fibre direction from its free edge (default 0: parallel)")
     p.add_argument("--paths", type=int, default=None, metavar="N",
-                   help="solve every graft along the first N numerical paths (1 conformal, 2 "
-                   "billowed, 3 billowed outwards); the recommendation takes the worst "
-                   "(default 2)")
+                   help="solve every graft along the first N of the study's numerical paths "
+                   "(docs/study.md, Paths); the recommendation takes the worst (default 2)")
     p.add_argument("--label", default=None, help="plan name printed on the template and the "
                    "report (no identifying data needed)")
     p.add_argument("--template", action="append", default=[], metavar="W/H",
