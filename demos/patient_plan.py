@@ -14,18 +14,21 @@
 #   `PatientInput`, written to and read back from `PATIENT.toml`;
 # - check in closed form whether the two native leaflets left can reach the centre of
 #   this root at all, before anything is computed;
-# - run the plan with `run_plan`: the study of the grafts on this patient's valve, the
-#   recommendation with its margin, the recommended graft drawn at true size (SVG and
-#   PDF with a 50 mm calibration bar) and the one-page report `plan.pdf`.
+# - run the plan with `run_plan`: the study of the grafts on this patient's valve over the
+#   root diameters D − U, D, D + U and two numerical paths (the *members*), the graft that
+#   qualifies in every member with its margin and the member that limits it, that graft
+#   drawn at true size (SVG and PDF with a 50 mm calibration bar) and the one-page report
+#   `plan.pdf`;
+# - rebuild the plan's files from its case folders, as `valve-dolfinx report DIR` does.
 #
 # The worked patient: a 22 mm root (± 1 mm) and an excised leaflet with a 22 mm free edge
 # and a 13 mm height.  The native leaflets of the model are the SPEC §1 outline scaled
 # to that leaflet: wrapped on a cylinder of 3L/π = 21.0 mm, sewn into a root held at the
 # measured 22 mm.  A graft W/H is that leaflet enlarged by W across and H in height.
 #
-# Run: `python demos/patient_plan.py [--out results/patient_plan] [--mesh-size 0.8]`, or
-# `mpirun -n 2 python demos/patient_plan.py`.  The same plan from the command line:
-# `valve-dolfinx plan PATIENT.toml --out DIR`.
+# Run: `python demos/patient_plan.py [--out results/patient_plan] [--mesh-size 0.8]
+# [--paths 2]`, or `mpirun -n 2 python demos/patient_plan.py`.  The same plan from the
+# command line: `valve-dolfinx plan PATIENT.toml --out DIR`.
 
 # %%
 from __future__ import annotations
@@ -38,8 +41,13 @@ from valve_dolfinx._compat import MPI
 from valve_dolfinx.logs import configure_logging
 from valve_dolfinx.plan.patient import PatientInput, patient_toml, read_patient, write_patient
 from valve_dolfinx.plan.reach import free_edge_reach
-from valve_dolfinx.plan.runner import plan_study_settings, run_plan
+from valve_dolfinx.plan.runner import plan_study_settings, rebuild_plan, run_plan
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT
+
+
+def _mm(value: float | None) -> str:
+    """A length in mm, or a dash when no member gave one."""
+    return "–" if value is None else f"{value:.2f} mm"
 
 
 def main(argv: list[str] | None = None):
@@ -49,6 +57,8 @@ def main(argv: list[str] | None = None):
                         help="triangle edge length in mm (default: the case default, 0.8)")
     parser.add_argument("--widths", type=float, nargs="+", default=list(STUDY_WIDTHS_PCT))
     parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
+    parser.add_argument("--paths", type=int, default=2,
+                        help="numerical paths every graft is solved along (default 2)")
     args = parser.parse_args(argv)
     configure_logging()
     comm = MPI.COMM_WORLD
@@ -65,17 +75,20 @@ def main(argv: list[str] | None = None):
     patient = PatientInput(root_diameter_mm=22.0, root_uncertainty_mm=1.0,
                            leaflet_free_edge_mm=22.0, leaflet_height_mm=13.0,
                            graft_widths_pct=tuple(args.widths),
-                           graft_heights_pct=tuple(args.heights), label="worked patient")
+                           graft_heights_pct=tuple(args.heights), paths=args.paths,
+                           label="worked patient")
     if comm.rank == 0:
         path = write_patient(args.out / "worked_patient.toml", patient)
         print(patient_toml(patient))
         print(f"{path} read back gives the same inputs: {read_patient(path) == patient}")
     settings = plan_study_settings(patient, args.mesh_size)  # every case setting, checked
+    layout = settings.layout()
     shape = patient.native_shape
     if comm.rank == 0:
         print(f"native leaflets: free edge {shape.free_edge_length:.2f} mm, height "
-              f"{shape.height:.2f} mm, wrapped on {shape.root_diameter:.2f} mm (3L/π); "
-              f"{len(settings.cases())} cases per root diameter")
+              f"{shape.height:.2f} mm, wrapped on {shape.root_diameter:.2f} mm (3L/π)")
+        print(f"{len(layout.members)} members, {len(layout.cases)} cases: "
+              + "; ".join(member.label for member in layout.members))
 
     # %% [markdown]
     # ## Can these leaflets close this root at all?
@@ -95,10 +108,14 @@ def main(argv: list[str] | None = None):
     # %% [markdown]
     # ## The plan
     # `run_plan` runs the study of the grafts on this valve (resumable: a rerun skips the
-    # cases already done), recommends the smallest graft that converges, seals and
-    # reaches the normal valve's coaptation, draws it at true size and writes the report.
-    # Today the study solves the measured diameter along one numerical path; the members
-    # over the diameter's uncertainty and more paths come with the robust-sizing study.
+    # cases already done).  Every graft is solved in every member: at each root diameter
+    # of the uncertainty (the normal valve once per diameter, its height that member's
+    # target) and along each numerical path (a loaded valve can have several resting
+    # states, and the path decides which one a solve reaches).  The recommendation is the
+    # smallest graft that converges, seals and reaches the target in every member; its
+    # margin is the least over the members, and the member where it is taken limits it.
+    # A diameter the native leaflets cannot span is not computed (the bound above): no
+    # graft would then be robust, and the answer says so.
 
     # %%
     library = logging.getLogger("valve_dolfinx")
@@ -117,11 +134,27 @@ def main(argv: list[str] | None = None):
 
     # %%
     if comm.rank == 0:
-        print(outcome.recommendation.headline())
+        rec = outcome.recommendation
+        print(rec.headline())
+        for graft in rec.grafts:
+            print(f"  {graft.graft.label}: lowest minimum coaptation "
+                  f"{_mm(graft.worst_height_mm)}, margin {_mm(graft.margin_mm)} in "
+                  f"{graft.limiting_member}; {graft.state}")
         for template in outcome.templates:
             print(f"template {template.graft.label}: {template.cut_width_mm:.1f} x "
                   f"{template.cut_height_mm:.1f} mm cut piece -> {template.pdf}")
         print(f"report: {args.out / 'plan.pdf'}")
+
+    # %% [markdown]
+    # ## Rebuilding the plan from its cases
+    # The plan folder holds the inputs (`patient.toml`) and every case; the plan's files
+    # follow from them.  `rebuild_plan` (what `valve-dolfinx report DIR` runs on a plan
+    # folder) rewrites the report, the templates and `summary.json` without computing.
+
+    # %%
+    if comm.rank == 0:
+        rebuilt = rebuild_plan(args.out)
+        print(f"rebuilt from the case folders: {rebuilt.recommendation == rec}")
     return outcome
 
 

@@ -62,7 +62,7 @@ def test_defaults_are_the_spec_leaflet_exactly():
     PatientInput(root_diameter_mm=23.4, root_uncertainty_mm=0.7, leaflet_free_edge_mm=22.1,
                  leaflet_height_mm=13.3, pressure_mmhg=90.0, graft_widths_pct=(0, 7.5),
                  graft_heights_pct=(13,), target_coaptation_mm=2.5,
-                 graft_fibre_angle_deg=-15.0, label='plan "7" ± 1'),
+                 graft_fibre_angle_deg=-15.0, paths=3, label='plan "7" ± 1'),
 ])
 def test_patient_file_round_trip(tmp_path, patient):
     path = write_patient(tmp_path / "patient.toml", patient)
@@ -76,12 +76,13 @@ def test_patient_file_round_trip(tmp_path, patient):
 def test_the_default_leaflet_gives_the_default_mesh_exactly():
     """A plan without a measured leaflet (or with the SPEC §1 leaflet's exact dimensions)
     builds the valve of the default geometry: same points, cells and flat coordinates."""
-    from valve_dolfinx.config import config_from_dict
     from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, build_valve
+    from valve_dolfinx.plan.runner import plan_study_settings
 
     patient = PatientInput(root_diameter_mm=20.0, leaflet_free_edge_mm=FREE_EDGE_MM,
                            leaflet_height_mm=HEIGHT_MM)
-    config = config_from_dict(patient.case_settings())
+    layout = plan_study_settings(patient).layout()
+    config = layout.configs["normal__root.loaded_diameter=20"]
     assert config.geometry.mesh_size == DEFAULT_MESH_SIZE
     planned, default = build_valve(config.geometry), build_valve()
     for name in ("points", "cells", "flat", "fibres", "edges"):
@@ -392,25 +393,57 @@ def test_a_recommendation_has_one_answer():
 
 
 # --- the plan, end to end on a stand-in study ---------------------------------------------
-#: minimum coaptation height of each case of the stand-in study (mm)
+#: minimum coaptation height of each case of the stand-in study at a 22 mm root, path 1 (mm)
 STAND_IN = {None: 2.0, (7.0, 13.0): 1.8, (14.0, 13.0): 2.3}
 
 
-def stand_in_case(config, out_dir: Path, comm) -> dict:
-    """A case result from the table above, with the two closed-valve pictures a case writes."""
+def path_number(config) -> int:
+    """The study's numerical path of a configuration: the last of ``PATHS`` whose settings
+    it holds (path 1 sets nothing)."""
+    from valve_dolfinx.config import get_dotted
+    from valve_dolfinx.study.paths import PATHS
+
+    data = config.to_dict()
+    return next(p.number for p in reversed(PATHS)
+                if all(get_dotted(data, k) == v for k, v in p.overrides.items()))
+
+
+def stand_in_height(size, diameter: float, path: int) -> float:
+    """The stand-in's minimum coaptation height: the normal valve loses 0.2 mm per mm of
+    root, a graft 0.25 mm, and 0.1 mm per path after the first."""
+    if size is None:
+        return STAND_IN[None] - 0.2 * (diameter - 22.0)
+    return STAND_IN[size] - 0.25 * (diameter - 22.0) - 0.1 * (path - 1)
+
+
+def margin(size, diameter: float, path: int, target: float | None = None) -> float:
+    """A graft's height minus its member's target (the normal valve's, or ``target``)."""
+    reference = stand_in_height(None, diameter, 1) if target is None else target
+    return stand_in_height(size, diameter, path) - reference
+
+
+def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> dict:
+    """A case result of :func:`stand_in_height`, with the two closed-valve pictures a case
+    writes, each of a grey level of its own (the case's index in ``_SHADES``)."""
     import matplotlib.image
 
     g = config.geometry
     key = None if g.graft_width_pct is None else (g.graft_width_pct, g.graft_height_pct)
+    d = config.root.loaded_diameter
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in ("closed_valve_aortic.png", "closed_valve_ventricular.png"):
         matplotlib.image.imsave(out_dir / name, np.full((8, 8), 0.5), cmap="gray")
     return {"graft_width_pct": g.graft_width_pct, "graft_height_pct": g.graft_height_pct,
-            "converged": True, "competent": True, "min_coaptation_height_mm": STAND_IN[key],
-            "regurgitant_orifice_area_mm2": 0.0, "root_diameter_mm": config.root.loaded_diameter,
+            "converged": True, "competent": True,
+            "min_coaptation_height_mm": stand_in_height(key, d, path_number(config)),
+            "regurgitant_orifice_area_mm2": 0.0, "root_diameter_mm": d,
             "mesh_size_mm": g.mesh_size, "n_ranks": comm.size, "wall_time_s": 0.01,
             "parameters": config.to_dict(), "versions": {"valve_dolfinx": "test"}}
+
+
+def no_case(*args, **kwargs):
+    raise AssertionError("a case was computed")
 
 
 def _patient(**changes) -> PatientInput:
@@ -419,55 +452,180 @@ def _patient(**changes) -> PatientInput:
     return PatientInput(**{**data, **changes})
 
 
-def test_a_plan_writes_its_answer_template_and_report(tmp_path):
+def _words(diameter: float, path: int) -> str:
+    from valve_dolfinx.study.paths import PATHS
+
+    return f"root {diameter:.1f} mm, {PATHS[path - 1].label}"
+
+
+def _case_names(plan: Path) -> list[str]:
+    return sorted(p.name for p in (plan / "study" / "cases").iterdir()
+                  if p.is_dir() and not p.name.startswith("."))
+
+
+def _plan_files(out: Path) -> dict[str, bytes]:
+    names = ("plan.md", "plan.pdf", "summary.json", "template_W14_H13.svg",
+             "template_W14_H13.pdf", "template_W14_H13.png", "template_W21_H27.pdf")
+    return {name: (out / name).read_bytes() for name in names}
+
+
+def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
+    """D ± U = 21, 22, 23 mm and two paths: six members, the normal valve once per diameter
+    and its height each member's target; W14/H13 qualifies in all six with its smallest
+    margin at 23 mm along path 2 (worked out by :func:`margin`), W7/H13 in none."""
     from valve_dolfinx.plan.runner import run_plan
 
     patient = _patient()
-    outcome = run_plan(patient, tmp_path / "plan", MPI.COMM_SELF, mesh_size_mm=2.0,
+    assert patient.paths == 2
+    out = tmp_path / "plan"
+    outcome = run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0,
                        templates=[GraftSize(21, 27)], case_function=stand_in_case)
     rec = outcome.recommendation
+    members = [(d, p) for d in (21.0, 22.0, 23.0) for p in (1, 2)]
+    assert rec.members == tuple(_words(d, p) for d, p in members)
+    assert rec.targets_mm == {_words(d, p): pytest.approx(stand_in_height(None, d, 1))
+                              for d, p in members}
+    assert rec.target_mm is None and rec.target_source == "the normal valve's at the same root"
+    margins = {m: margin((14.0, 13.0), *m) for m in members}
+    worst = min(margins, key=margins.get)
+    assert worst == (23.0, 2) and margins[worst] > 0
+    assert max(margin((7.0, 13.0), *m) for m in members) < 0
     assert rec.graft == GraftSize(14.0, 13.0)
-    assert rec.margin_mm == pytest.approx(2.3 - 2.0, abs=1e-12)
-    assert rec.limiting_member == "root 22.0 mm, conformal placement"
-    out = tmp_path / "plan"
+    assert rec.margin_mm == pytest.approx(margins[worst], abs=1e-12)
+    assert rec.limiting_member == _words(*worst)
+    assert [g.qualifies for g in rec.grafts] == [False, True]
+    assert rec.grafts[1].spread_mm == pytest.approx(
+        stand_in_height((14.0, 13.0), 21.0, 1) - stand_in_height((14.0, 13.0), 23.0, 2))
+    names = _case_names(out)
+    assert len(names) == 3 + 2 * 3 * 2 and "normal__root.loaded_diameter=23" in names
+    assert "W14_H13__root.loaded_diameter=23__path=2" in names
+
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["recommendation"]["graft"]["label"] == "W14/H13"
-    assert summary["reach"]["can_seal"] is True
-    assert summary["run"]["cases"] == 3 and summary["run"]["converged"] == 3
-    assert summary["run"]["wall_time_s"] == pytest.approx(3 * 0.01)
+    answer = summary["recommendation"]
+    assert answer["graft"]["label"] == "W14/H13"
+    assert answer["margin_mm"] == pytest.approx(margins[worst], abs=1e-12)
+    assert answer["limiting_member"] == _words(23.0, 2) and len(answer["members"]) == 6
+    assert summary["reach"]["can_seal"] is True and summary["patient"]["paths"] == 2
+    assert summary["run"]["cases"] == 15 and summary["run"]["converged"] == 15
+    assert summary["run"]["wall_time_s"] == pytest.approx(15 * 0.01)
     assert summary["run"]["mesh_size_mm"] == 2.0
     dims = {t["graft"]: t for t in summary["templates"]}
     assert set(dims) == {"W14/H13", "W21/H27"}
+    assert dims["W14/H13"]["free_edge_mm"] == pytest.approx(22.0 * 1.14, rel=1e-12)
+    assert dims["W14/H13"]["height_mm"] == pytest.approx(13.0 * 1.13, rel=1e-12)
     assert dims["W14/H13"]["cut_width_mm"] == pytest.approx(22.0 * 1.14 + 2.0, rel=1e-12)
     assert dims["W14/H13"]["cut_height_mm"] == pytest.approx(13.0 * 1.13 + 1.0, rel=1e-12)
-    for name in ("plan.md", "plan.pdf", "template_W14_H13.svg", "template_W14_H13.pdf",
-                 "template_W21_H27.pdf", "study/sizing_map.png"):
+    for name in ("template_W14_H13.svg", "template_W21_H27.svg", "study/sizing_map.png"):
         assert (out / name).is_file(), name
     assert read_patient(out / "patient.toml") == patient
-    assert "Recommended graft W14/H13" in _pdf_text(out / "plan.pdf")
-    # a rerun with the same inputs is accepted; another patient in the folder is refused
-    run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=stand_in_case)
+    # the closed valve shown is the recommended graft's at the measured diameter, path 1
+    markdown = (out / "plan.md").read_text()
+    assert "(study/cases/W14_H13__root.loaded_diameter=22/closed_valve_aortic.png)" in markdown
+    assert "(study/cases/W14_H13__root.loaded_diameter=22/closed_valve_ventricular.png)" in (
+        markdown)
+    assert f"| W14/H13 | {stand_in_height((14.0, 13.0), 23.0, 2):.2f} |" in markdown
+    text = _pdf_text(out / "plan.pdf")
+    for words in ("Recommended graft W14/H13", "in all 6 members", _words(23.0, 2),
+                  "worst case of each graft over its 6 members"):
+        assert words in text, words
+
+
+def test_a_rerun_resumes_and_report_rebuilds_the_plan(tmp_path, capsys, quiet_cli):
+    """A rerun with the same inputs computes nothing and writes the same plan; `report DIR`
+    rebuilds plan.md, plan.pdf, the templates and summary.json from the case folders (the
+    templates already in the folder among them); another patient in the folder is refused."""
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.plan.runner import run_plan
+
+    patient, out = _patient(), tmp_path / "plan"
+    run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, templates=[GraftSize(21, 27)],
+             case_function=stand_in_case)
+    summary = json.loads((out / "summary.json").read_text())
+    run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=no_case)
+    assert json.loads((out / "summary.json").read_text()) == summary
+    written = _plan_files(out)
+    for name in written:
+        if name != "template_W21_H27.svg":
+            (out / name).unlink()
+    (out / "study" / "sizing_map.png").unlink()
+    assert main(["report", str(out)]) == 0
+    assert "Recommended graft W14/H13" in capsys.readouterr().out
+    assert json.loads((out / "summary.json").read_text()) == summary
+    assert (out / "plan.md").read_text() == written["plan.md"].decode()
+    for name in written:
+        assert (out / name).stat().st_size > 100, name
+    assert (out / "study" / "sizing_map.png").is_file()
+    assert main(["report", str(out), "--target-coaptation", "2"]) == 2
     other = _patient(root_diameter_mm=23.0)
     with pytest.raises(OutputConflictError, match="other inputs"):
         run_plan(other, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=stand_in_case)
 
 
+def test_report_on_a_plan_whose_study_does_not_match_its_patient(tmp_path, caplog, quiet_cli):
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.plan.runner import run_plan
+
+    out = tmp_path / "plan"
+    run_plan(_patient(), out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=stand_in_case)
+    write_patient(out / "patient.toml", _patient(paths=1))
+    assert main(["report", str(out)]) == 4
+    assert "run with other settings than" in caplog.text and "valve-dolfinx plan" in caplog.text
+
+
 def test_a_plan_names_the_closest_graft_when_none_qualifies(tmp_path):
+    """A given target of 2.5 mm: W14/H13 is the closest, short by its worst member's
+    distance to the target (23 mm, path 2)."""
     from valve_dolfinx.plan.runner import run_plan
 
     outcome = run_plan(_patient(target_coaptation_mm=2.5), tmp_path, MPI.COMM_SELF,
                        mesh_size_mm=2.0, case_function=stand_in_case)
     rec = outcome.recommendation
     assert rec.graft is None and rec.closest == GraftSize(14.0, 13.0)
-    assert rec.shortfall_mm == pytest.approx(0.2, abs=1e-12)
+    assert rec.target_mm == 2.5 and set(rec.targets_mm.values()) == {2.5}
+    assert rec.shortfall_mm == pytest.approx(-margin((14.0, 13.0), 23.0, 2, 2.5), abs=1e-12)
+    assert rec.limiting_member == _words(23.0, 2)
     assert (tmp_path / "template_W14_H13.pdf").is_file()
+    assert "No graft on the grid is robust" in rec.headline()
 
 
-def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path):
+def test_diameters_beyond_the_leaflets_reach_are_not_computed(tmp_path):
+    """A 25.5 ± 1 mm root with a 22 mm free edge: 26.5 mm is beyond the closed-form reach,
+    24.5 and 25.5 mm are not.  Only those two are computed; no graft is robust over the
+    uncertainty, and W14/H13, which qualifies in the four members computed, is named the
+    closest with its margin there."""
     from valve_dolfinx.plan.runner import run_plan
 
-    def no_case(*args):
-        raise AssertionError("a case was computed")
+    assert not free_edge_reach(22.0, 26.5, 80.0).can_seal
+    assert free_edge_reach(22.0, 25.5, 80.0).can_seal
+    patient = _patient(root_diameter_mm=25.5)
+    outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
+                       case_function=stand_in_case)
+    rec = outcome.recommendation
+    assert rec.unsealable_roots_mm == (26.5,)
+    assert rec.unsealable_reason == free_edge_reach(22.0, 26.5, 80.0).sentence()
+    assert rec.members == tuple(_words(d, p) for d in (24.5, 25.5) for p in (1, 2))
+    names = _case_names(tmp_path)
+    assert len(names) == 2 + 2 * 2 * 2 and not any("26.5" in n for n in names)
+    assert rec.graft is None and rec.closest == GraftSize(14.0, 13.0)
+    assert rec.shortfall_mm is None
+    assert rec.margin_mm == pytest.approx(margin((14.0, 13.0), 25.5, 2), abs=1e-12)
+    assert rec.limiting_member == _words(25.5, 2)
+    headline = rec.headline()
+    assert headline.startswith("No graft on the grid is robust over the root's uncertainty")
+    assert "cannot seal a 26.5 mm root whatever the graft" in headline
+    assert "In the 4 members computed, W14/H13" in headline
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["recommendation"]["unsealable_roots_mm"] == [26.5]
+    assert summary["recommendation"]["closest"]["label"] == "W14/H13"
+    text = _pdf_text(tmp_path / "plan.pdf")
+    assert "Not computed: the 26.5 mm root" in text
+    assert "The root's upper bound, 26.5 mm, is beyond that" in text
+
+
+def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path, capsys,
+                                                                      quiet_cli):
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.plan.runner import run_plan
 
     patient = _patient(root_diameter_mm=30.0, leaflet_free_edge_mm=20.0)
     outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
@@ -478,6 +636,29 @@ def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["recommendation"]["cannot_seal"].startswith("The native leaflets cannot")
     assert "cannot seal this 30.0 mm root" in _pdf_text(tmp_path / "plan.pdf")
+    (tmp_path / "summary.json").unlink()
+    assert main(["report", str(tmp_path)]) == 0
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+
+
+@pytest.mark.mpi
+def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory):
+    """On COMM_WORLD (1 or 2 ranks) the stand-in plan writes the summary of a serial plan."""
+    from valve_dolfinx.plan.runner import run_plan
+
+    comm = MPI.COMM_WORLD
+    root = Path(comm.bcast(str(tmp_path_factory.mktemp("plan")) if comm.rank == 0 else None))
+    patient = _patient()
+    world = run_plan(patient, root / "world", comm, mesh_size_mm=2.0,
+                     case_function=stand_in_case)
+    assert world.recommendation.graft == GraftSize(14.0, 13.0)  # on every rank
+    if comm.rank == 0:
+        run_plan(patient, root / "serial", MPI.COMM_SELF, mesh_size_mm=2.0,
+                 case_function=stand_in_case)
+        summaries = [json.loads((root / f / "summary.json").read_text())
+                     for f in ("world", "serial")]
+        assert summaries[0] == summaries[1]
+        assert summaries[0]["run"]["cases"] == 15
 
 
 # --- the command line --------------------------------------------------------------------
@@ -491,6 +672,8 @@ def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path)
     (["--root-diameter", "22", "--widths", "-5"], "graft_widths_pct"),
     (["--root-diameter", "22", "--template", "14"], "--template '14'"),
     (["--root-diameter", "22", "--mesh-size", "3.0"], "mesh_size"),
+    (["--root-diameter", "22", "--paths", "4"], "paths (--paths)"),
+    (["--root-diameter", "22", "--paths", "0"], "paths (--paths)"),
     ([], "root_diameter_mm is missing"),
 ])
 def test_cli_plan_stops_on_bad_input_before_any_computation(tmp_path, caplog, args, expected):

@@ -10,7 +10,8 @@ sweep   the graft sizing study: the normal valve and every graft of a width x he
         (resumable, spread over MPI ranks; --list / --case-index for job arrays)
 nomogram  a sweep over loaded root diameters: the recommended graft against the
         diameter (nomogram.png, nomogram.csv)
-report  rebuild a study folder's tables, figures, recommendations and report.md
+report  rebuild a study folder's tables, figures, recommendations and report.md, or a
+        plan folder's plan.md, plan.pdf, templates and summary.json
 plan    one patient's repair from the measured root and leaflet: the recommended graft,
         its template at true size (SVG, PDF) and a one-page report (plan.md, plan.pdf)
 config  print the case configuration as TOML, every setting with its unit and meaning
@@ -389,11 +390,15 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from valve_dolfinx.exceptions import check_range
-    from valve_dolfinx.study.report import build_report
+    from valve_dolfinx.plan.patient import PATIENT_FILE
 
     target = args.target_coaptation
+    if (args.dir / PATIENT_FILE).is_file():
+        return _report_plan(args)
     if target is not None:
         check_range("--target-coaptation", target, 0.0, 20.0, low_open=True, unit="mm")
+    from valve_dolfinx.study.report import build_report
+
     report = build_report(args.dir, target_mm=target)
     print(f"{len(report.rows)} case(s)" + "".join(
         f"; {why}: {', '.join(names)}" for why, names in report.unfinished.items()))
@@ -406,6 +411,27 @@ def _cmd_report(args: argparse.Namespace) -> int:
             "report.md lists them and why)" if report.rows else
             f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out {args.dir}`")
     return 0
+
+
+def _report_plan(args: argparse.Namespace) -> int:
+    """``report DIR`` on a plan folder: its plan rebuilt from patient.toml and the cases."""
+    from valve_dolfinx.exceptions import ParameterError
+    from valve_dolfinx.plan.runner import rebuild_plan
+
+    if args.target_coaptation is not None:
+        raise ParameterError(f"--target-coaptation: {args.dir} is a plan; its target is "
+                             "target_coaptation_mm in its patient.toml (rerun `valve-dolfinx "
+                             "plan` with --target-coaptation to change it)")
+    _print_plan(rebuild_plan(args.dir))
+    return 0
+
+
+def _print_plan(outcome) -> None:
+    """The plan's answer and its files, as ``plan`` and ``report`` print them."""
+    print(outcome.recommendation.headline())
+    print(f"plan: {outcome.out / 'plan.pdf'}, {outcome.out / 'plan.md'}")
+    for template in outcome.templates:
+        print(f"template {template.graft.label}: {template.pdf} (print at 100 %)")
 
 
 def _add_grid_args(p: argparse.ArgumentParser) -> None:
@@ -460,7 +486,8 @@ _PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root
                   "leaflet_height": "leaflet_height_mm", "pressure": "pressure_mmhg",
                   "widths": "graft_widths_pct", "heights": "graft_heights_pct",
                   "target_coaptation": "target_coaptation_mm",
-                  "graft_fibre_angle": "graft_fibre_angle_deg", "label": "label"}
+                  "graft_fibre_angle": "graft_fibre_angle_deg", "paths": "paths",
+                  "label": "label"}
 
 
 def _patient(args: argparse.Namespace):
@@ -493,10 +520,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
                            wall_time_limit_s=args.wall_time_limit, templates=templates,
                            force=args.force, progress=progress)
     if comm.rank == 0:
-        print(outcome.recommendation.headline())
-        print(f"plan: {args.out / 'plan.pdf'}, {args.out / 'plan.md'}")
-        for template in outcome.templates:
-            print(f"template {template.graft.label}: {template.pdf} (print at 100 %)")
+        _print_plan(outcome)
     return 0
 
 
@@ -522,6 +546,9 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
                    "valve's at the same root)")
     p.add_argument("--graft-fibre-angle", type=float, default=None, metavar="DEG",
                    help="the graft's fibre direction from its free edge (default 0: parallel)")
+    p.add_argument("--paths", type=int, default=None, metavar="N",
+                   help="solve every graft along the first N of the study's numerical paths "
+                   "(docs/study.md, Paths); the recommendation takes the worst (default 2)")
     p.add_argument("--label", default=None, help="plan name printed on the template and the "
                    "report (no identifying data needed)")
     p.add_argument("--template", action="append", default=[], metavar="W/H",
@@ -651,8 +678,10 @@ def main(argv: list[str] | None = None) -> int:
     _add_sweep_args(p, "results/nomogram", 2)
     p.set_defaults(func=_cmd_nomogram, parser=p, vary=[])  # the diameters are the comparison
 
-    p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report")
-    p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`")
+    p = sub.add_parser("report", help="rebuild a study folder's tables, figures and report, "
+                       "or a plan folder's plan, templates and summary")
+    p.add_argument("dir", type=Path, help="study folder written by `valve-dolfinx sweep`, or "
+                   "plan folder written by `valve-dolfinx plan`")
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's, or the study's)")

@@ -6,7 +6,8 @@ A plan takes what the surgeon measures before cutting the graft:
 * the excised non-coronary leaflet's free-edge length and midline height, measured
   flat (optional: the SPEC §1 leaflet by default);
 * optionally the diastolic pressure, the graft grid, the target coaptation height, the
-  graft's fibre angle and a label printed on the template and the report.
+  graft's fibre angle, the number of numerical paths each graft is solved along and a
+  label printed on the template and the report.
 
 Every length carries its unit in its key (``root_diameter_mm``), in ``PATIENT.toml`` as
 in :class:`PatientInput`; the same values come from ``valve-dolfinx plan`` flags
@@ -30,6 +31,7 @@ from valve_dolfinx.exceptions import ConfigurationError, InputFileError, Paramet
 from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, parse_percentages
+from valve_dolfinx.study.paths import study_paths
 
 __all__ = [
     "DEFAULT_LEAFLET",
@@ -97,6 +99,8 @@ FIELDS: dict[str, Field] = {
     "graft_fibre_angle_deg": Field(
         "--graft-fibre-angle", "deg", "fibre direction of the graft from its free edge",
         -90.0, 90.0, why="0 lays the fibres parallel to the free edge"),
+    "paths": Field("--paths", "", "numerical paths every graft is solved along (the first N "
+                   "of the study's; the recommendation takes the worst)"),
 }
 #: keys whose value is a length, pressure or angle
 _NUMBERS = ("root_diameter_mm", "root_uncertainty_mm", "leaflet_free_edge_mm",
@@ -124,6 +128,7 @@ class PatientInput:
     graft_heights_pct: tuple[float, ...] = STUDY_HEIGHTS_PCT
     target_coaptation_mm: float | None = None
     graft_fibre_angle_deg: float = 0.0
+    paths: int = 2
     label: str = "patient"
 
     def __post_init__(self) -> None:
@@ -135,6 +140,10 @@ class PatientInput:
             set_(self, key, _checked_number(key, value))
         for key, what in (("graft_widths_pct", "width"), ("graft_heights_pct", "height")):
             set_(self, key, parse_percentages(_name(key), getattr(self, key), what))
+        try:
+            study_paths(self.paths)
+        except ParameterError as err:
+            raise ParameterError(f"{_name('paths')}: {err}") from None
         label = self.label
         if not isinstance(label, str) or not label.strip() or len(label) > _LABEL_LENGTH \
                 or not label.isprintable():
@@ -161,14 +170,14 @@ class PatientInput:
 
     def case_settings(self) -> dict:
         """Case settings in the ``CaseConfig.to_dict()`` layout: the measured leaflet, the
-        root prescribed at the measured diameter, the pressure and the graft's fibres."""
+        pressure and the graft's fibres.  The root is prescribed at each of
+        :attr:`root_diameters_mm` by the plan's study (``root.loaded_diameter``)."""
         shape = self.native_shape
         return {"pressure_mmhg": self.pressure_mmhg,
                 "geometry": {"root_diameter": shape.root_diameter,
                              "gamma_deg": shape.gamma_deg,
                              "commissure_height": shape.commissure_height,
-                             "graft_fibre_angle_deg": self.graft_fibre_angle_deg},
-                "root": {"loaded_diameter": self.root_diameter_mm}}
+                             "graft_fibre_angle_deg": self.graft_fibre_angle_deg}}
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -259,6 +268,8 @@ def _toml_value(value: Any) -> str:
         return json.dumps(value, ensure_ascii=False)
     if isinstance(value, tuple | list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
     if isinstance(value, float) and not math.isfinite(value):
         raise ParameterError(f"cannot write {value!r} to a patient file")
     return repr(float(value))

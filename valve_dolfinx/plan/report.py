@@ -23,6 +23,7 @@ from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
 from valve_dolfinx.plan.recommendation import PlanRecommendation
 from valve_dolfinx.plotting.style import OKABE_ITO
+from valve_dolfinx.study.paths import study_paths
 
 __all__ = ["PLAN_MD", "PLAN_PDF", "PlanFigures", "RunInfo", "input_lines", "reach_text",
            "write_plan_report"]
@@ -93,6 +94,7 @@ def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
         ("graft grid", f"W {', '.join(f'{w:g}' for w in patient.graft_widths_pct)} %; "
          f"H {', '.join(f'{h:g}' for h in patient.graft_heights_pct)} %"),
         ("graft fibres", f"{patient.graft_fibre_angle_deg:g}° from the free edge"),
+        ("numerical paths", ", ".join(p.label for p in study_paths(patient.paths))),
         ("target coaptation", target),
     ]
 
@@ -103,7 +105,7 @@ def reach_text(patient: PatientInput, reach: FreeEdgeReach) -> str:
     upper = max(patient.root_diameters_mm)
     if upper > reach.largest_root_mm:
         text += (f" The root's upper bound, {upper:.1f} mm, is beyond that: no graft can be "
-                 "robust over the measurement's uncertainty.")
+                 "robust over the measurement's uncertainty, and that root is not computed.")
     return text
 
 
@@ -113,15 +115,58 @@ def _kind(rec: PlanRecommendation) -> str:
     return "graft" if rec.graft is not None else "closest"
 
 
+def _targets(rec: PlanRecommendation) -> str:
+    """The targets when they differ between members: their range."""
+    values = [t for t in rec.targets_mm.values() if t is not None]
+    if rec.target_mm is not None or not values:
+        return ""
+    return (f"Targets: {rec.target_source}, {min(values):.2f}–{max(values):.2f} mm over the "
+            "members.")
+
+
 def _details(rec: PlanRecommendation) -> list[str]:
-    """What stands behind the headline: target, members, margin."""
+    """What stands behind the headline: members, targets, margin, what was not computed."""
     out = []
     if rec.members:
         out.append(f"Members (each solved on its own): {'; '.join(rec.members)}.")
-    if rec.graft is not None and rec.limiting_member:
+    if _targets(rec):
+        out.append(_targets(rec))
+    if rec.margin_mm is not None and rec.limiting_member:
         out.append(f"Smallest margin over the target: {rec.margin_mm:.2f} mm, in "
                    f"{rec.limiting_member}.")
+    if rec.unsealable_roots_mm:
+        roots = " and ".join(f"{d:.1f}" for d in rec.unsealable_roots_mm)
+        out.append(f"Not computed: the {roots} mm root, beyond what the native free edges "
+                   "can span (below).")
     return out
+
+
+def _number(value: float | None, signed: bool = False) -> str:
+    if value is None:
+        return "–"
+    return f"{value:+.2f}" if signed else f"{value:.2f}"
+
+
+def _grafts_table(rec: PlanRecommendation) -> list[str]:
+    """Every graft's worst case over the members, and each member's target (plan.md)."""
+    if not rec.grafts:
+        return []
+    lines = ["## Every graft over the members", "",
+             "| graft | worst min. coaptation (mm) | spread (mm) | margin (mm) | limiting member "
+             "| over the members | qualifies |", "|---|---|---|---|---|---|---|"]
+    for g in rec.grafts:
+        lines.append(f"| {g.graft.label} | {_number(g.worst_height_mm)} | "
+                     f"{_number(g.spread_mm)} | {_number(g.margin_mm, signed=True)} | "
+                     f"{g.limiting_member or '–'} | {g.state} | {'yes' if g.qualifies else 'no'} |")
+    lines += ["", "| member | target (mm) |", "|---|---|",
+              *(f"| {m} | {_number(t)} |" for m, t in rec.targets_mm.items()), ""]
+    return lines
+
+
+def _shown(rec: PlanRecommendation, figures: PlanFigures) -> str:
+    """The graft and member the closed-valve pictures show ("W14/H13, root 22.0 mm, ...")."""
+    return ", ".join(x for x in (rec.template_graft.label if rec.template_graft else "",
+                                 figures.closed_member) if x)
 
 
 # --- plan.md ---------------------------------------------------------------------------------
@@ -147,8 +192,11 @@ def _markdown(patient: PatientInput, rec: PlanRecommendation, reach: FreeEdgeRea
     lines += ["## Pictures", ""]
     lines += image(figures.template, "graft template")
     lines += image(figures.sizing_map, "sizing map (worst case over the members)")
-    lines += image(figures.closed_aortic, "closed valve seen from the aorta")
-    lines += image(figures.closed_ventricular, "closed valve seen from the ventricle")
+    shown = _shown(rec, figures)
+    shown = f" ({shown})" if shown else ""
+    lines += image(figures.closed_aortic, f"closed valve seen from the aorta{shown}")
+    lines += image(figures.closed_ventricular, f"closed valve seen from the ventricle{shown}")
+    lines += _grafts_table(rec)
     lines += ["## What was run", "", *(f"- {line}" for line in run.lines()), "",
               "## Limitations", "", limitations, ""]
     return "\n".join(lines)
@@ -222,11 +270,12 @@ def _pictures(fig, rec: PlanRecommendation, figures: PlanFigures, top: float,
               height: float) -> None:
     """The sizing map on the left, the closed valve from the aorta and from the ventricle
     stacked on the right, in a row ``height`` mm high below ``top``."""
-    which = ", ".join(x for x in (rec.template_graft.label if rec.template_graft else "",
-                                  figures.closed_member) if x)
+    which = _shown(rec, figures)
     which = f"\n{which}" if which else ""
-    _picture(fig, (12, top - height, 116, height), figures.sizing_map,
-             "Sizing map: minimum coaptation height per graft", "not made")
+    n = len(rec.members)
+    caption = ("Sizing map: minimum coaptation height per graft" if n < 2 else
+               f"Sizing map: worst case of each graft over its {n} members")
+    _picture(fig, (12, top - height, 116, height), figures.sizing_map, caption, "not made")
     half = 0.5 * (height - 10.0)
     _picture(fig, (134, top - half, 64, half), figures.closed_aortic,
              f"Closed valve from the aorta{which}", "not made")

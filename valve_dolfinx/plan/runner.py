@@ -7,9 +7,14 @@
 2. checks in closed form whether the native leaflets can span the measured root at all
    (:mod:`valve_dolfinx.plan.reach`); if not, that is the answer and nothing is computed;
 3. runs the plan's study, :func:`run_plan_study` -- the one function that decides which
-   cases are solved and turns their results into a :class:`PlanRecommendation`;
+   cases are solved -- over the members (the root diameters D − U, D, D + U within the
+   leaflets' reach, the numerical paths), and turns its worst-case recommendation into a
+   :class:`PlanRecommendation` (:func:`plan_study_answer`);
 4. draws the template of the recommended (or closest) graft and of any graft asked for;
 5. writes ``plan.md``, ``plan.pdf`` and ``summary.json``.
+
+:func:`rebuild_plan` (``valve-dolfinx report DIR``) does 4 and 5 again from the case
+folders and ``patient.toml``, computing nothing.
 
 Layout of a plan folder ``DIR``::
 
@@ -30,19 +35,28 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import config_from_dict, set_dotted
-from valve_dolfinx.exceptions import OutputConflictError, ParameterError
+from valve_dolfinx.exceptions import InputFileError, OutputConflictError, ParameterError
 from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
-from valve_dolfinx.plan.recommendation import GraftSize, PlanRecommendation
+from valve_dolfinx.plan.recommendation import GraftSize, GraftWorstCase, PlanRecommendation
 from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
 from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
 from valve_dolfinx.study.grid import StudySettings
+from valve_dolfinx.study.recommend import NORMAL_TARGET, cell_state
+from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
 
-__all__ = ["LIMITATIONS", "STUDY_DIR", "PlanOutcome", "PlanStudy", "plan_study_settings",
+if TYPE_CHECKING:
+    from valve_dolfinx.study.layout import Member
+    from valve_dolfinx.study.recommend import Recommendation
+    from valve_dolfinx.study.report import StudyReport
+
+__all__ = ["LIMITATIONS", "ROOT_KEY", "STUDY_DIR", "PlanOutcome", "PlanStudy", "member_words",
+           "plan_study_answer", "plan_study_settings", "reachable_roots", "rebuild_plan",
            "run_plan", "run_plan_study"]
 
 log = logging.getLogger(__name__)
@@ -52,13 +66,13 @@ STUDY_DIR = "study"
 SUMMARY_FILE = "summary.json"
 #: what the answer does not cover, printed on the report
 LIMITATIONS = (
-    "An idealised valve: a cylindrical root prescribed at the measured diameter, the three "
-    "leaflets scaled from the one measured leaflet, published tissue laws for the leaflets "
-    "and the glutaraldehyde-fixed pericardium, one static closure under diastolic pressure "
-    "(no flow, no opening, no remodelling or ageing of the graft); coaptation heights are "
-    "resolved to about 0.3 mm at the default mesh.")
-#: the numerical path every case of today's study takes (the case default)
-_PATH = "conformal placement"
+    "An idealised valve: a cylindrical root prescribed at the measured diameter (± its "
+    "uncertainty), the three leaflets scaled from the one measured leaflet, published tissue "
+    "laws for the leaflets and the glutaraldehyde-fixed pericardium, one static closure "
+    "under diastolic pressure (no flow, no opening, no remodelling or ageing of the graft); "
+    "coaptation heights are resolved to about 0.3 mm at the default mesh.")
+#: the case setting the plan's uncertainty axis sets: the loaded root diameter (mm)
+ROOT_KEY = "root.loaded_diameter"
 
 
 @dataclass
@@ -83,9 +97,25 @@ class PlanOutcome:
     elapsed_s: float = 0.0
 
 
+def reachable_roots(patient: PatientInput) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The root diameters of the plan (D − U, D, D + U) the native free edges can span,
+    and those they cannot (:func:`~valve_dolfinx.plan.reach.free_edge_reach`)."""
+    within, beyond = [], []
+    for diameter in patient.root_diameters_mm:
+        reach = free_edge_reach(patient.leaflet_free_edge_mm, diameter, patient.pressure_mmhg)
+        (within if reach.can_seal else beyond).append(diameter)
+    return tuple(within), tuple(beyond)
+
+
 def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None,
                         wall_time_limit_s: float | None = None) -> StudySettings:
     """The study settings of a plan, every case setting validated (no DOLFINx imported).
+
+    The case settings are the patient's valve (:meth:`PatientInput.case_settings`); the
+    loaded root diameter is an uncertainty axis over the plan's diameters that the native
+    leaflets can span (:func:`reachable_roots`), and every graft is solved along the
+    patient's number of numerical paths.  (A plan whose measured root they cannot span
+    runs no study; its settings then only check the inputs.)
 
     Raises
     ------
@@ -93,36 +123,34 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
         A mesh size the measured leaflet cannot take (its commissures must carry two
         edges), a grid value or a setting out of range -- before any computation.
     """
-    settings = StudySettings(widths_pct=patient.graft_widths_pct,
-                             heights_pct=patient.graft_heights_pct,
-                             mesh_size_mm=mesh_size_mm, wall_time_limit_s=wall_time_limit_s,
-                             target_coaptation_mm=patient.target_coaptation_mm,
-                             panel_cases=(), case=patient.case_settings())
     data = patient.case_settings()
     if mesh_size_mm is not None:
         set_dotted(data, "geometry.mesh_size", mesh_size_mm)
     config_from_dict(data, source="the plan's case settings")
-    return settings
+    diameters = reachable_roots(patient)[0] or (patient.root_diameter_mm,)
+    return StudySettings(widths_pct=patient.graft_widths_pct,
+                         heights_pct=patient.graft_heights_pct,
+                         mesh_size_mm=mesh_size_mm, wall_time_limit_s=wall_time_limit_s,
+                         target_coaptation_mm=patient.target_coaptation_mm,
+                         panel_cases=(), case=patient.case_settings(),
+                         uncertain={ROOT_KEY: list(diameters)}, paths=patient.paths)
 
 
-# --- the plan's study: the one part that the robust-sizing machinery replaces -------------
+# --- the plan's study ----------------------------------------------------------------------
 def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
                    comm: MPI.Comm, *, case_function: Callable | None = None,
                    progress: Callable[[dict], None] | None = None) -> PlanStudy | None:
     """Solve the plan's cases into ``out`` and turn them into the plan's answer.
 
-    This is the single place where the plan decides what to compute and how a
-    recommendation follows from it; everything around it (the reach check, the
-    templates, the report) only reads the :class:`PlanStudy` it returns.
-
-    Today it runs one member: the study of :func:`valve_dolfinx.study.runner.run_study`
-    (the normal valve and every graft of the grid) at the measured root diameter, along
-    the cases' default numerical path, and recommends with
-    :func:`valve_dolfinx.study.recommend.recommend` (the target: the normal valve's
-    minimum coaptation height, or the patient's).  The uncertainty members -- the root
-    diameters D − U, D, D + U and more than one path, with the recommendation taken on
-    each graft's worst member -- come with the robust-sizing study (``--uncertain``,
-    ``--paths``); the body of this function is where they go.
+    This is the single place where the plan decides what to compute; everything around
+    it (the reach check, the templates, the report) only reads the :class:`PlanStudy`
+    it returns.  The study (:func:`valve_dolfinx.study.runner.run_study` with
+    :func:`plan_study_settings`) solves the normal valve and every graft of the grid in
+    every *member*: each root diameter D − U, D, D + U that the native leaflets can span,
+    along each of the patient's numerical paths (the normal valve once per diameter).  A
+    diameter beyond their reach is not computed: no graft seals it
+    (:mod:`valve_dolfinx.plan.reach`), so no graft is robust over the uncertainty, and the
+    answer says so (:func:`plan_study_answer`).
 
     Parameters
     ----------
@@ -147,43 +175,73 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
     outcome = run_study(settings, out, comm, case_function=case_function, progress=progress)
     if comm.rank != 0:
         return None
-    report = outcome.report
-    member = f"root {patient.root_diameter_mm:.1f} mm, {_PATH}"
-    recommendation = _from_study(report.recommendation, report.rows, member)
+    return plan_study_answer(patient, outcome.report)
+
+
+def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
+    """The plan's answer, pictures and run from its study's report (what ``build_report``
+    of the study folder finds): the worst-case recommendation over the members mapped onto
+    :class:`PlanRecommendation`, the worst-case sizing map, the closed valve of the
+    recommended (or closest) graft at the measured diameter along the first path."""
+    layout = report.layout
+    words = {member.label: member_words(member) for member in layout.members}
+    beyond = reachable_roots(patient)[1]
+    reason = ""
+    if beyond:
+        reason = free_edge_reach(patient.leaflet_free_edge_mm, beyond[-1],
+                                 patient.pressure_mmhg).sentence()
+    recommendation = _from_worst_case(report.recommendations[0], words, beyond, reason)
+    out = report.out
     shown = recommendation.template_graft
-    case = out / "cases" / (shown.stem if shown is not None else "normal")
+    member = next(i for i, m in enumerate(layout.members)
+                  if dict(m.values)[ROOT_KEY] == patient.root_diameter_mm
+                  and m.path == layout.paths[0])
+    name = layout.slots.get((0, member, None if shown is None else tuple(shown)))
+    case = out / CASES_DIR / (name or "")
     figures = PlanFigures(sizing_map=_existing(out / "sizing_map.png"),
                           closed_aortic=_existing(case / "closed_valve_aortic.png"),
                           closed_ventricular=_existing(case / "closed_valve_ventricular.png"),
-                          closed_member=f"root {patient.root_diameter_mm:.1f} mm")
+                          closed_member=f"root {patient.root_diameter_mm:.1f} mm, path "
+                                        f"{layout.paths[0].number}")
     rows = report.rows
     first = rows[0] if rows else {}
     run = RunInfo(versions=first.get("versions") or {},
-                  mesh_size_mm=first.get("mesh_size_mm", settings.mesh_size_mm),
+                  mesh_size_mm=next(iter(layout.configs.values())).geometry.mesh_size,
                   cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
                   wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
     return PlanStudy(recommendation, figures, run, out)
+
+
+def member_words(member: Member) -> str:
+    """A member of the plan's study as the report names it: ``root 22.0 mm, path 1 (...)``."""
+    return f"root {dict(member.values)[ROOT_KEY]:.1f} mm, {member.path.label}"
 
 
 def _existing(path: Path) -> Path | None:
     return path if path.is_file() else None
 
 
-def _from_study(rec, rows: list[dict], member: str) -> PlanRecommendation:
-    """The plan's answer from a one-member study's :class:`~valve_dolfinx.study.recommend.
-    Recommendation` (its cases named ``W<w>/H<h>``)."""
-    sizes = {}
-    for row in rows:
-        if row.get("graft_width_pct") is not None:
-            size = GraftSize(float(row["graft_width_pct"]), float(row["graft_height_pct"]))
-            sizes[size.label] = size
+def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[float, ...],
+                     reason: str) -> PlanRecommendation:
+    """The plan's answer from the study's worst-case :class:`~valve_dolfinx.study.recommend.
+    Recommendation` (members named in ``words``; ``beyond``: the root diameters not
+    computed, which no graft seals)."""
+    sizes = {c.label: GraftSize(c.width_pct, c.height_pct) for c in rec.cells}
+    limiting = words.get(rec.limiting_member) if rec.limiting_member else None
+    grafts = tuple(GraftWorstCase(sizes[c.label], c.worst_height_mm, c.spread_mm, c.margin_mm,
+                                  words.get(c.limiting_member), c.qualifies, cell_state(c))
+                   for c in rec.cells)
     source = ("the normal valve's at the same root" if rec.target_source.startswith(
-        "the normal valve") else rec.target_source)
-    common = dict(target_mm=rec.target_mm, target_source=source, members=(member,))
+        NORMAL_TARGET) else "given in the plan's inputs")
+    common = dict(target_mm=rec.target_mm, target_source=source,
+                  members=tuple(words[m] for m in rec.members),
+                  targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
+                  unsealable_roots_mm=beyond, unsealable_reason=reason,
+                  limiting_member=limiting)
     if rec.recommended is not None:
-        return PlanRecommendation(graft=sizes[rec.recommended],
-                                  margin_mm=rec.recommended_height_mm - rec.target_mm,
-                                  limiting_member=member, **common)
+        chosen = sizes[rec.recommended]
+        answer = {"closest": chosen} if beyond else {"graft": chosen}
+        return PlanRecommendation(**answer, margin_mm=rec.margin_mm, **common)
     if rec.best is not None:
         return PlanRecommendation(closest=sizes[rec.best], shortfall_mm=rec.shortfall_mm,
                                   **common)
@@ -225,7 +283,8 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
     mesh_size_mm, wall_time_limit_s
         The cases' mesh and wall-clock limit (default: the case defaults).
     templates
-        Grafts to draw besides the recommended (or closest) one.
+        Grafts to draw besides the recommended (or closest) one (and those whose templates
+        are in ``out`` already, which are redrawn).
     force
         Replace the plan of other inputs in ``out``.
     case_function, progress
@@ -266,15 +325,65 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
     return outcome
 
 
+def rebuild_plan(out: str | Path) -> PlanOutcome:
+    """Rewrite a plan folder's templates, ``plan.md``, ``plan.pdf`` and ``summary.json`` from
+    ``patient.toml`` and the case folders of its study, computing nothing (serial).
+
+    The templates drawn are the recommended (or closest) graft's and every template
+    already in the folder (those of ``--template``), as :func:`run_plan` draws them.
+
+    Raises
+    ------
+    InputFileError
+        ``out`` holds no ``patient.toml``, or its study folder is missing or was run with
+        other settings than ``patient.toml`` gives (rerun ``valve-dolfinx plan``).
+    """
+    from valve_dolfinx.study.report import build_report, read_settings
+
+    out = Path(out)
+    patient = read_patient(out / PATIENT_FILE)
+    reach = free_edge_reach(patient.leaflet_free_edge_mm, patient.root_diameter_mm,
+                            patient.pressure_mmhg)
+    rerun = (f"run `valve-dolfinx plan {out / PATIENT_FILE} --out {out}` (it resumes the "
+             "study)")
+    study = None
+    if reach.can_seal:
+        folder = out / STUDY_DIR
+        saved = read_settings(folder) if (folder / CASES_DIR).is_dir() else None
+        if saved is None:
+            raise InputFileError(f"{folder}: no study with its {SETTINGS_FILE} and "
+                                 f"{CASES_DIR}/ folder; {rerun}")
+        expected = plan_study_settings(patient, saved.mesh_size_mm, saved.wall_time_limit_s)
+        if saved != expected:
+            raise InputFileError(f"{folder / SETTINGS_FILE}: the study was run with other "
+                                 f"settings than {out / PATIENT_FILE} gives; {rerun}")
+        study = plan_study_answer(patient, build_report(folder, saved))
+    return _write_plan(out, patient, reach, study, ())
+
+
+def _drawn_templates(out: Path) -> list[GraftSize]:
+    """The grafts whose templates are in ``out`` (``template_W<w>_H<h>.svg``)."""
+    grafts = []
+    for svg in sorted(out.glob("template_*.svg")):
+        try:
+            grafts.append(GraftSize.parse(svg.stem.removeprefix("template_")))
+        except ParameterError:
+            log.debug("%s: not a template name, left alone", svg)
+    return grafts
+
+
 def _write_plan(out: Path, patient: PatientInput, reach: FreeEdgeReach,
                 study: PlanStudy | None, extra: Sequence[GraftSize]) -> PlanOutcome:
-    """Templates, plan.md, plan.pdf and summary.json (rank 0)."""
+    """Templates, plan.md, plan.pdf and summary.json (rank 0): the templates of the
+    recommended (or closest) graft, of ``extra`` and of every graft already drawn in
+    ``out``."""
     if study is None:
         recommendation = PlanRecommendation(cannot_seal=reach.sentence())
         figures, run = PlanFigures(), RunInfo()
     else:
         recommendation, figures, run = study.recommendation, study.figures, study.run
-    grafts = [g for g in (recommendation.template_graft, *extra) if g is not None]
+    grafts = [g for g in (recommendation.template_graft, *extra, *_drawn_templates(out))
+              if g is not None]
     line = (f"Measured leaflet: free edge {patient.leaflet_free_edge_mm:.1f} mm, height "
             f"{patient.leaflet_height_mm:.1f} mm; root {patient.root_diameter_mm:.1f} ± "
             f"{patient.root_uncertainty_mm:.1f} mm")

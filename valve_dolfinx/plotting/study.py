@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -153,7 +154,8 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     grid = np.full((len(heights), len(widths)), np.nan)
     for c in cells:
         grid[heights.index(c.height_pct), widths.index(c.width_pct)] = _worst(c)
-    fig = new_figure(1.5 * len(widths) + 3.2, (1.1 if n == 1 else 1.35) * len(heights) + 2.4)
+    width_in = 1.5 * len(widths) + 3.2
+    fig = new_figure(width_in, (1.1 if n == 1 else 1.35) * len(heights) + 2.4)
     ax = fig.add_subplot()
     cmap = colormaps[SEQUENTIAL_CMAP].with_extremes(bad="0.85")
     targets = _targets(rec)
@@ -202,6 +204,8 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     if n > 1:
         note += ("\nper cell: the lowest member's height, the spread over the members and the "
                  "least margin over the member's target")
+    # a narrow grid's figure takes the notes on more lines (about 13 characters an inch)
+    note = "\n".join(textwrap.fill(line, int(13 * width_in)) for line in note.split("\n"))
     ax.set_title(_title(rec, "Graft sizing map", title) + f"\n{note}", fontsize=9)
     return save_figure(fig, path, dpi=130)
 

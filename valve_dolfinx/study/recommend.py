@@ -42,7 +42,7 @@ from typing import Any
 from valve_dolfinx.result import leaflets_cross
 
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
-           "flat_area_ratio"]
+           "flat_area_ratio", "cell_state"]
 
 FIGURE = "min_coaptation_height_mm"
 #: the normal valve's figure, as the target says where it comes from
@@ -290,7 +290,9 @@ def _member(label: str | None) -> str:
     return f"`{label}`" if label else "its member"
 
 
-def _quality(cell: CellSummary) -> str:
+def cell_state(cell: CellSummary) -> str:
+    """How a graft fared over its members, in words ("converged and sealed in all 6
+    members", "leaking in 2 of 6 members")."""
     n = len(cell.members)
     if n == 1:
         if cell.sound or cell.missing:
@@ -338,7 +340,7 @@ def _best_text(rec: Recommendation, best: CellSummary | None) -> str:
         where = "" if n == 1 else f" in {len(missing_target)} of {n} members"
         return (f"No target ({rec.target_source}{where}: the normal valve was not run or did "
                 f"not converge; give --target-coaptation). The best graft is **{best.label}** "
-                f"({_quality(best)}): {best.worst_height_mm:.2f} mm at worst.")
+                f"({cell_state(best)}): {best.worst_height_mm:.2f} mm at worst.")
     short = rec.shortfall_mm
     d = _digits(abs(short))
     limit = best.limiting_member
@@ -347,16 +349,16 @@ def _best_text(rec: Recommendation, best: CellSummary | None) -> str:
         return (f"No graft on the grid {'is robust' if n > 1 else 'qualifies'}: none "
                 f"converges, seals and reaches the target minimum coaptation height "
                 f"({rec.target_source}){' in every one of its members' if n > 1 else ''}. "
-                f"The best is **{best.label}** ({_quality(best)}); its height reaches the "
+                f"The best is **{best.label}** ({cell_state(best)}); its height reaches the "
                 f"target{where} (margin {-short:.{d}f} mm).")
     if n == 1:
         return (f"No graft on the grid converges, seals and reaches the target minimum "
                 f"coaptation height {rec.target_mm:.{d}f} mm ({rec.target_source}). The best "
-                f"is **{best.label}** ({_quality(best)}) with {best.worst_height_mm:.{d}f} mm, "
+                f"is **{best.label}** ({cell_state(best)}) with {best.worst_height_mm:.{d}f} mm, "
                 f"{short:.{d}f} mm short.")
     return (f"No graft on the grid is robust: none converges, seals and reaches the target "
             f"minimum coaptation height ({rec.target_source}) in every one of its {n} members. "
-            f"The best is **{best.label}** ({_quality(best)}), {short:.{d}f} mm short in "
+            f"The best is **{best.label}** ({cell_state(best)}), {short:.{d}f} mm short in "
             f"{_member(limit)} ({best.heights_mm[limit]:.{d}f} mm against "
             f"{rec.targets_mm[limit]:.{d}f} mm).")
 
