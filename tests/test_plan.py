@@ -397,15 +397,19 @@ def test_a_recommendation_has_one_answer():
 STAND_IN = {None: 2.0, (7.0, 13.0): 1.8, (14.0, 13.0): 2.3}
 
 
-def path_number(config) -> int:
-    """The study's numerical path of a configuration: the last of ``PATHS`` whose settings
-    it holds (path 1 sets nothing)."""
+def path_number(config, start: Path | None) -> int:
+    """The study's numerical path of a graft's case: the path that starts from another
+    case's state if it has a start, else the most specific of the other paths whose
+    settings it holds."""
     from valve_dolfinx.config import get_dotted
     from valve_dolfinx.study.paths import PATHS
 
+    if start is not None:
+        return next(p.number for p in PATHS if p.start is not None)
     data = config.to_dict()
-    return next(p.number for p in reversed(PATHS)
-                if all(get_dotted(data, k) == v for k, v in p.overrides.items()))
+    held = [p for p in PATHS if p.start is None
+            and all(get_dotted(data, k) == v for k, v in p.overrides.items())]
+    return max(held, key=lambda p: len(p.overrides)).number
 
 
 def stand_in_height(size, diameter: float, path: int) -> float:
@@ -436,7 +440,7 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
         matplotlib.image.imsave(out_dir / name, np.full((8, 8), 0.5), cmap="gray")
     return {"graft_width_pct": g.graft_width_pct, "graft_height_pct": g.graft_height_pct,
             "converged": True, "competent": True,
-            "min_coaptation_height_mm": stand_in_height(key, d, path_number(config)),
+            "min_coaptation_height_mm": stand_in_height(key, d, path_number(config, start)),
             "regurgitant_orifice_area_mm2": 0.0, "root_diameter_mm": d,
             "mesh_size_mm": g.mesh_size, "n_ranks": comm.size, "wall_time_s": 0.01,
             "parameters": config.to_dict(), "versions": {"valve_dolfinx": "test"}}

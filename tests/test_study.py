@@ -429,14 +429,15 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
     proc.communicate(timeout=60)
     assert proc.returncode == (-sig if sig == signal.SIGKILL else 128 + sig)
     assert not (out / "cases" / "W0_H0").exists() and not (out / "cases" / "W7_H0").exists()
-    assert _runs(run_log) == ["normal", "W0_H0"]  # the second case was in flight
+    # the second case was in flight: the larger graft first
+    assert _runs(run_log) == ["normal", "W7_H0"]
     claims = list((out / "cases" / ".claims").iterdir())
     # SIGTERM, SIGINT release the claim on the way out; SIGKILL leaves it, stale, to the rerun
-    assert [c.name for c in claims] == (["W0_H0.claim"] if sig == signal.SIGKILL else [])
+    assert [c.name for c in claims] == (["W7_H0.claim"] if sig == signal.SIGKILL else [])
     record = first.read_text()
 
     _run(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"), run_log)
-    assert _runs(run_log) == ["normal", "W0_H0", "W0_H0", "W7_H0"]
+    assert _runs(run_log) == ["normal", "W7_H0", "W7_H0", "W0_H0"]
     assert first.read_text() == record  # untouched
     assert not list((out / "cases" / ".claims").iterdir())
     assert not list((out / "cases" / ".staging").iterdir())
