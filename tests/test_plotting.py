@@ -163,3 +163,21 @@ def test_drawn_orifice_matches_the_reported_area(leaking_case):
     corners = orifice_rectangles(diagnostics).reshape(-1, 2)
     assert np.hypot(*corners.T).max() <= diagnostics["radius_mm"] + 2 * diagnostics["pixel_mm"]
     assert corners[:, 1].max() < 0.5
+
+
+@pytest.mark.slow
+def test_closed_views_drawn_from_a_case_folder_are_the_case_own(leaking_case, tmp_path):
+    """A case that drew no figures gets its closed views from its loaded state: the same
+    pictures run_case draws (identical pixels: the same positions, valve and orifice)."""
+    import matplotlib.image
+
+    from valve_dolfinx.plotting import draw_closed_views
+
+    out, _, _ = leaking_case
+    aortic, ventricular = draw_closed_views(out, tmp_path)
+    assert (aortic.name, ventricular.name) == (f"{out.name}_aortic.png",
+                                               f"{out.name}_ventricular.png")
+    for drawn, own in ((aortic, "closed_valve_aortic.png"),
+                       (ventricular, "closed_valve_ventricular.png")):
+        a, b = matplotlib.image.imread(drawn), matplotlib.image.imread(out / own)
+        assert a.shape == b.shape and np.array_equal(a, b)

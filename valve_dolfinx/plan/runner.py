@@ -48,7 +48,7 @@ from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
 from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
 from valve_dolfinx.study.grid import StudySettings
 from valve_dolfinx.study.recommend import NORMAL_TARGET, cell_state
-from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
+from valve_dolfinx.study.store import CASES_DIR, RESULT_FILE, SETTINGS_FILE
 
 if TYPE_CHECKING:
     from valve_dolfinx.study.layout import Member
@@ -197,10 +197,9 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
                   if dict(m.values)[ROOT_KEY] == patient.root_diameter_mm
                   and m.path == layout.paths[0])
     name = layout.slots.get((0, member, None if shown is None else tuple(shown)))
-    case = out / CASES_DIR / (name or "")
+    aortic, ventricular = _closed_views(out / CASES_DIR / name if name else None, out)
     figures = PlanFigures(sizing_map=_existing(out / "sizing_map.png"),
-                          closed_aortic=_existing(case / "closed_valve_aortic.png"),
-                          closed_ventricular=_existing(case / "closed_valve_ventricular.png"),
+                          closed_aortic=aortic, closed_ventricular=ventricular,
                           closed_member=f"root {patient.root_diameter_mm:.1f} mm, path "
                                         f"{layout.paths[0].number}")
     rows = report.rows
@@ -219,6 +218,20 @@ def member_words(member: Member) -> str:
 
 def _existing(path: Path) -> Path | None:
     return path if path.is_file() else None
+
+
+def _closed_views(case: Path | None, out: Path) -> tuple[Path | None, Path | None]:
+    """The closed valve of a case from the aorta and the ventricle: the case's own
+    figures, or drawn from its loaded state into ``out`` (a study's cases draw none)."""
+    if case is None or not (case / RESULT_FILE).is_file():
+        return None, None
+    own = _existing(case / "closed_valve_aortic.png"), _existing(
+        case / "closed_valve_ventricular.png")
+    if all(own):
+        return own
+    from valve_dolfinx.plotting import draw_closed_views
+
+    return draw_closed_views(case, out)
 
 
 def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[float, ...],

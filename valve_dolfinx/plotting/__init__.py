@@ -18,7 +18,12 @@ PyVista's global settings.
 
 from __future__ import annotations
 
-from valve_dolfinx.plotting.case import CASE_FIGURES, case_label, write_case_figures
+from valve_dolfinx.plotting.case import (
+    CASE_FIGURES,
+    case_label,
+    draw_closed_views,
+    write_case_figures,
+)
 from valve_dolfinx.plotting.flat import leaflet_outline, plot_coaptation_map, plot_flat_leaflet
 from valve_dolfinx.plotting.orifice import (
     draw_orifice,
@@ -64,6 +69,7 @@ __all__ = [
     "PANEL_IMAGES",
     "axial_cuts",
     "case_label",
+    "draw_closed_views",
     "draw_orifice",
     "key_numbers",
     "leaflet_colour",

@@ -20,7 +20,7 @@ from valve_dolfinx.plotting.scene import plot_gap_3d, plot_valve_3d
 from valve_dolfinx.plotting.sections import plot_cross_sections, plot_cut_planes
 from valve_dolfinx.plotting.style import key_numbers
 
-__all__ = ["CASE_FIGURES", "case_label", "write_case_figures"]
+__all__ = ["CASE_FIGURES", "case_label", "draw_closed_views", "write_case_figures"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,13 @@ CASE_FIGURES = {
 
 def _get(result, key: str):
     return result.get(key) if isinstance(result, Mapping) else getattr(result, key, None)
+
+
+def _closed(result) -> str:
+    """``closed under 80 mmHg`` (the pressure of the case's parameters)."""
+    pressure = (_get(result, "parameters") or {}).get("pressure_mmhg")
+    return "closed" + (f" under {pressure:g} mmHg" if isinstance(pressure, int | float)
+                       and math.isfinite(pressure) else "")
 
 
 def case_label(result) -> str:
@@ -64,7 +71,6 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     """
     out = Path(out)
     name = case_label(result) + (" (one leaflet and its mirror images)" if mirrored else "")
-    pressure = (_get(result, "parameters") or {}).get("pressure_mmhg")
     numbers = key_numbers(result)
     orifice = getattr(coaptation, "orifice", None) if coaptation is not None else None
     written = []
@@ -72,8 +78,7 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     def title(what: str) -> str:
         return f"{name}: {what}\n{numbers}"
 
-    closed = "closed" + (f" under {pressure:g} mmHg" if isinstance(pressure, int | float)
-                         and math.isfinite(pressure) else "")
+    closed = _closed(result)
     for file, view, what in (("closed_valve.png", "iso", f"{closed}, oblique from the aorta"),
                              ("closed_valve_aortic.png", "aortic", f"{closed}, from the aorta"),
                              ("closed_valve_ventricular.png", "ventricular",
@@ -99,3 +104,26 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     for path in written:
         log.debug("wrote %s", path)
     return written
+
+
+def draw_closed_views(case_folder: str | Path, out: str | Path) -> tuple[Path, Path]:
+    """The closed valve of a finished case folder seen from the aorta and from the
+    ventricle (with its regurgitant orifice), drawn from its loaded state into ``out``
+    as ``<case>_aortic.png`` and ``<case>_ventricular.png``: for a case that drew no
+    figures of its own (a study draws only its panel cases')."""
+    from valve_dolfinx.analysis import analyse_coaptation
+    from valve_dolfinx.result import load_case
+
+    case = load_case(case_folder)
+    coaptation = analyse_coaptation(case.positions, case.valve,
+                                    threshold_mm=case.config.coaptation_threshold_mm)
+    name = case_label(case.result)
+    numbers = key_numbers(case.result)
+    written = []
+    for view, what in (("aortic", "from the aorta"), ("ventricular", "from the ventricle")):
+        path = Path(out) / f"{Path(case_folder).name}_{view}.png"
+        plot_valve_3d(case.positions, case.valve, path, view=view,
+                      title=f"{name}: {_closed(case.result)}, {what}\n{numbers}",
+                      orifice=coaptation.orifice)
+        written.append(path)
+    return written[0], written[1]
