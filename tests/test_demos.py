@@ -59,8 +59,7 @@ def test_patient_plan_demo(tmp_path):
     assert summary["run"]["cases"] == 9
     assert summary["templates"][0]["cut_width_mm"] == pytest.approx(22.0 * 1.14 + 2.0)
     for name in ("plan.pdf", "plan.md", "template_W14_H13.pdf", "template_W14_H13.svg",
-                 "worked_patient.toml", "study/cases/W14_H13__root.loaded_diameter=22/"
-                 "closed_valve_aortic.png"):
+                 "worked_patient.toml", "study/W14_H13__root.loaded_diameter=22_aortic.png"):
         assert (tmp_path / name).stat().st_size > 500, name
 
 

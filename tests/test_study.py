@@ -454,8 +454,10 @@ def test_serial_and_mpi_sweeps_agree(tmp_path):
     serial = _reference_sweep(tmp_path / "serial")
     for k in (1, 2):
         out, log = tmp_path / f"mpi{k}", tmp_path / f"mpi{k}.log"
+        # the grafts start from the normal valve (path 1): the other group waits for it, so
+        # a case lasts longer than the scheduler's 1 s poll
         proc = _run(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--ranks-per-case", str(k),
-                               mpi=2), log, sleep=0.3)
+                               mpi=2), log, sleep=1.5)
         runs = [line.split() for line in log.read_text().splitlines()]
         assert sorted(r[0] for r in runs) == ["W0_H0", "W7_H0", "normal"]
         assert len({r[1] for r in runs}) == (2 if k == 1 else 1)  # both groups took cases
