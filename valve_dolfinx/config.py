@@ -306,8 +306,9 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "crossing_width": ("mm", "width of the barrier's quadratic onset"),
     },
     "pseudo_transient": {
-        "coarse_mesh_mm": ("mm", "a finer case first comes to rest on a mesh of this size "
-                           "and starts from there (0: from the unloaded valve)"),
+        "coarse_mesh_mm": ("mm", "a valve without a graft on a finer mesh first comes to rest "
+                           "on a mesh of this size and starts from there (0: from the "
+                           "unloaded valve)"),
         "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
         "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
         "pressure_ramp_steps": ("", "pseudo-time steps over which the pressure rises to its "

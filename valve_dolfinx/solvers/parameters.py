@@ -91,10 +91,10 @@ class PseudoTransientParameters:
         (0, the default: the target from the first step).  Where the loaded valve
         has more than one equilibrium the path selects one (docs/numerics.md, §2).
     coarse_mesh_mm
-        A case on a finer mesh first comes to rest on a mesh of this size (mm), and its own
-        mesh starts from that equilibrium (:func:`valve_dolfinx.case.coarse_start`): the
-        long approach of the open leaflets to closure costs a fraction there.  0: every
-        case starts from the unloaded valve.
+        A valve without a graft on a finer mesh first comes to rest on a mesh of this size
+        (mm), and its own mesh starts from that equilibrium
+        (:func:`valve_dolfinx.case.coarse_start`): the long approach of the open leaflets
+        to closure costs a fraction there.  0: from the unloaded valve.
     petsc_options
         Extra PETSc options (without prefix) for the TS/SNES/KSP.
     """
