@@ -129,14 +129,14 @@ def test_bad_file_names_the_key(tmp_path, text, named):
 
 @pytest.mark.parametrize("text,named", [
     ("[contact]\ntaper = 0.5\n", "unknown key 'contact.taper' (every case takes 0.5)"),
-    ("[native_material]\nname = \"native_leaflet\"\n",
-     "unknown key 'native_material.name' (every case takes 'native_leaflet')"),
+    ("[native_material]\nname = \"native_leaflet\"\n", "unknown key 'native_material.name'"),
     ("[pseudo_transient]\ndt_initial = 0.05\n", "unknown key 'pseudo_transient.dt_initial'"),
     ("quadrature_degree = 1\n", "unknown key 'quadrature_degree'"),
 ])
 def test_a_key_an_earlier_version_wrote_is_refused_with_the_fix(tmp_path, text, named):
     """A config.toml of an earlier version holds settings since fixed or removed: the error
-    names the key, what every case takes where it is fixed, and says to delete the line."""
+    names the key, the number every case takes where it is fixed, and says to delete the
+    line."""
     path = tmp_path / "old.toml"
     path.write_text(text)
     with pytest.raises(ParameterError) as err:
@@ -144,6 +144,19 @@ def test_a_key_an_earlier_version_wrote_is_refused_with_the_fix(tmp_path, text, 
     assert named in str(err.value)
     assert "not a setting of this version" in str(err.value)
     assert "delete the line" in str(err.value)
+
+
+def test_every_key_an_earlier_version_wrote_is_named_at_once(tmp_path):
+    """The whole configuration an earlier version wrote: one error names every key that is
+    not a setting now, so that one edit fixes the file."""
+    text = config_toml().replace("[contact]\n", "[contact]\ntaper = 0.5\npairing = \"two_pass\"\n")
+    path = tmp_path / "old.toml"
+    path.write_text("quadrature_degree = 1\n" + text)
+    with pytest.raises(ParameterError) as err:
+        load_config(path)
+    assert ("unknown keys 'quadrature_degree', 'contact.taper' (every case takes 0.5), "
+            "'contact.pairing'; they are not settings") in str(err.value)
+    assert "delete those lines" in str(err.value)
 
 
 def test_cli_bad_configuration_stops_before_computing(tmp_path, caplog, monkeypatch):

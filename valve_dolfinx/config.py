@@ -534,11 +534,11 @@ def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> 
     """
     defaults = CaseConfig()
     known = {f.name: f for f in fields(CaseConfig)}
+    unknown = _unknown_keys(data, defaults)
+    if unknown:
+        raise ParameterError(f"{source}: {_unknown_message(unknown)}")
     kw: dict[str, Any] = {}
     for key, value in data.items():
-        if key not in known:
-            raise ParameterError(f"{source}: unknown key {key!r}; {_NOT_A_SETTING_HINT}; "
-                                 f"allowed keys are {', '.join(sorted(known))}")
         if key in _SECTIONS:
             kw[key] = _section(key, value, getattr(defaults, key), source)
         else:
@@ -559,12 +559,6 @@ def _section(name: str, value: Any, default: Any, source: str) -> Any:
     known = {f.name: f for f in fields(default) if f.name in _setting_names(default)}
     changes = {}
     for key, item in value.items():
-        if key not in known:
-            fixed = (f" (every case takes {getattr(default, key)!r})"
-                     if key in default.__dataclass_fields__ else "")
-            raise ParameterError(f"{source}: unknown key '{name}.{key}'{fixed}; "
-                                 f"{_NOT_A_SETTING_HINT}; allowed keys of [{name}] are "
-                                 f"{', '.join(known)}")
         changes[key] = _checked_value(f"{name}.{key}", item, known[key].type, source)
     try:
         return replace(default, **changes)
@@ -572,10 +566,39 @@ def _section(name: str, value: Any, default: Any, source: str) -> Any:
         raise ParameterError(f"{source}: {_dotted_message(name, known, str(err))}") from None
 
 
-#: what an unknown key says beyond its name: files of earlier versions hold more keys
-_NOT_A_SETTING_HINT = ("it is not a setting of this version (a file written by an earlier "
-                       "version may hold keys that are now fixed numbers of the model or "
-                       "were removed): delete the line")
+def _unknown_keys(data: Mapping[str, Any], defaults: CaseConfig
+                  ) -> list[tuple[str, str, list[str]]]:
+    """Every key of ``data`` that is not a setting: ``(dotted key, the number every case takes
+    if it is a fixed number of its parameter set (else ""), the settings of its table)``."""
+    top = [f.name for f in fields(CaseConfig)]
+    unknown = [(key, "", sorted(top)) for key in data if key not in top]
+    for name in _SECTIONS:
+        value, default = data.get(name), getattr(defaults, name)
+        if not isinstance(value, Mapping):
+            continue
+        settings = _setting_names(default)
+        for key in value:
+            if key not in settings:
+                fixed = getattr(default, key, None)
+                fixed = (f" (every case takes {fixed!r})" if isinstance(fixed, int | float)
+                         and not isinstance(fixed, bool) else "")
+                unknown.append((f"{name}.{key}", fixed, settings))
+    return unknown
+
+
+def _unknown_message(unknown: list[tuple[str, str, list[str]]]) -> str:
+    """What the keys that are not settings are, and the fix: a file of an earlier version
+    can hold many (all are named at once)."""
+    named = ", ".join(f"{key!r}{fixed}" for key, fixed, _ in unknown)
+    earlier = ("(a file written by an earlier version may hold keys that are now fixed "
+               "numbers of the model or were removed)")
+    if len(unknown) > 1:
+        return (f"unknown keys {named}; they are not settings of this version {earlier}: "
+                "delete those lines (`valve-dolfinx config` prints every setting)")
+    key, _, settings = unknown[0]
+    table = f" of [{key.split('.')[0]}]" if "." in key else ""
+    return (f"unknown key {named}; it is not a setting of this version {earlier}: delete the "
+            f"line; allowed keys{table} are {', '.join(settings)}")
 
 
 def _dotted_message(section: str, keys: Iterable[str], message: str) -> str:
