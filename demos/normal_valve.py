@@ -86,7 +86,6 @@ if comm.rank == 0:
 case = load_case(out)
 ran, valve, positions = case.config, case.valve, case.positions
 coaptation = analyse_coaptation(positions, valve, threshold_mm=ran.coaptation_threshold_mm,
-                                pixel_mm=ran.orifice_pixel_mm,
                                 nodulus_length_mm=ran.nodulus_length_mm)
 
 

@@ -212,13 +212,12 @@ def test_solver_failure_in_a_run_is_one_line(tmp_path, capsys, monkeypatch):
     from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 
     def broken_solve(self, progress=None):
-        raise SolverError("SNES diverged at step 1 (DIVERGED_LINE_SEARCH): residual 30.3 mN; "
-                          "rerun with a smaller pseudo_transient.dt_initial")
+        raise SolverError("SNES diverged at step 1 (DIVERGED_LINE_SEARCH): residual 30.3 mN")
 
     monkeypatch.setattr(PseudoTransientSolver, "solve", broken_solve)
     code = main(["run", "--mesh-size", "1.6", "--out", str(tmp_path / "case")])
     assert code == ExitCode.SOLVER
-    _assert_one_error_line(capsys.readouterr().err, "SNES diverged", "dt_initial")
+    _assert_one_error_line(capsys.readouterr().err, "SNES diverged", "DIVERGED_LINE_SEARCH")
 
 
 def test_unconverged_run_exits_3_with_files_readable_under_umask_022(tmp_path):

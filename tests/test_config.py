@@ -22,6 +22,7 @@ from valve_dolfinx.config import (
     config_toml,
     describe,
     load_config,
+    setting_keys,
     settings_hash,
 )
 from valve_dolfinx.exceptions import ExitCode, ParameterError
@@ -60,8 +61,10 @@ def test_printed_defaults_load_as_the_defaults(tmp_path, capsys):
     (tmp_path / "case.toml").write_text(text)
     assert load_config(tmp_path / "case.toml") == CaseConfig()
     settings = [line for line in text.splitlines() if line and not line.startswith(("#", "["))]
-    assert len(settings) > 60
-    assert all("  # " in line for line in settings)  # every key with its unit and meaning
+    unset = [line for line in text.splitlines() if line.startswith("# ") and " = (unset)" in line]
+    # every setting written once (the unset ones as comments), with its unit and meaning
+    assert len(settings) + len(unset) == len(setting_keys(CaseConfig().to_dict()))
+    assert all("  # " in line for line in settings + unset)
     assert "pressure_mmhg = 80.0  # mmHg; " in text and "mesh_size = 0.8  # mm; " in text
 
 
@@ -111,7 +114,8 @@ def test_overrides_and_flags_apply_in_order(tmp_path):
     ("[graft_material]\nc = -1\n", "graft_material.c = -1"),
     ("[root]\nloaded_diameter = 5\n", "root.loaded_diameter = 5"),
     ("[pseudo_transient]\nresidual_tolerance = 0\n", "pseudo_transient.residual_tolerance = 0"),
-    ("[dynamics]\nmax_steps = \"many\"\n", "dynamics.max_steps = 'many' must be a int"),
+    ("[pseudo_transient]\nmax_steps = \"many\"\n",
+     "pseudo_transient.max_steps = 'many' must be a int"),
     ("geometry = 3\n", "geometry must be a table"),
     ("pressure_mmhg = \n", "is not valid TOML"),
 ])
@@ -121,6 +125,38 @@ def test_bad_file_names_the_key(tmp_path, text, named):
     with pytest.raises(ParameterError) as err:
         load_config(path)
     assert named in str(err.value) and str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("text,named", [
+    ("[contact]\ntaper = 0.5\n", "unknown key 'contact.taper' (every case takes 0.5)"),
+    ("[native_material]\nname = \"native_leaflet\"\n", "unknown key 'native_material.name'"),
+    ("[pseudo_transient]\ndt_initial = 0.05\n", "unknown key 'pseudo_transient.dt_initial'"),
+    ("quadrature_degree = 1\n", "unknown key 'quadrature_degree'"),
+])
+def test_a_key_an_earlier_version_wrote_is_refused_with_the_fix(tmp_path, text, named):
+    """A config.toml of an earlier version holds settings since fixed or removed: the error
+    names the key, the number every case takes where it is fixed, and says to delete the
+    line."""
+    path = tmp_path / "old.toml"
+    path.write_text(text)
+    with pytest.raises(ParameterError) as err:
+        load_config(path)
+    assert named in str(err.value)
+    assert "not a setting of this version" in str(err.value)
+    assert "delete the line" in str(err.value)
+
+
+def test_every_key_an_earlier_version_wrote_is_named_at_once(tmp_path):
+    """The whole configuration an earlier version wrote: one error names every key that is
+    not a setting now, so that one edit fixes the file."""
+    text = config_toml().replace("[contact]\n", "[contact]\ntaper = 0.5\npairing = \"two_pass\"\n")
+    path = tmp_path / "old.toml"
+    path.write_text("quadrature_degree = 1\n" + text)
+    with pytest.raises(ParameterError) as err:
+        load_config(path)
+    assert ("unknown keys 'quadrature_degree', 'contact.taper' (every case takes 0.5), "
+            "'contact.pairing'; they are not settings") in str(err.value)
+    assert "delete those lines" in str(err.value)
 
 
 def test_cli_bad_configuration_stops_before_computing(tmp_path, caplog, monkeypatch):

@@ -30,10 +30,14 @@ K, H = 10.0, 0.1
 SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
 SQUARE_TRIANGLES = np.array([[0, 1, 2], [0, 2, 3]])      # normals +z
 
-#: The law exactly as SPEC §5 states it (no taper), every node tested against every body
-#: at full weight: the semantics these unit tests check.  The taper and the pairing
-#: options are tested at the end of this file and in test_contact_law.py.
-LITERAL = ContactParameters(taper=0.0, pairing="two_pass", blend_distance=1e-6)
+#: The SPEC §5 law on zero-thickness sheets: no contact layer, no barrier against crossing
+#: mid-surfaces (the valve's, ContactParameters' defaults, add both), a 0.2 mm penetration
+#: window and a 0.01 mm blending width.
+SPEC_LAW = ContactParameters(thickness=0.0, crossing_stiffness=0.0, penetration_depth=0.2,
+                             blend_distance=0.01)
+#: The law exactly as SPEC §5 states it (no taper, next to no blending): the semantics these
+#: unit tests check.  The taper is tested at the end of this file and in test_contact_law.py.
+LITERAL = replace(SPEC_LAW, taper=0.0, blend_distance=1e-6)
 
 
 def spec_force(d: float, F: float, taper: float = 0.0) -> float:
@@ -124,15 +128,11 @@ def test_node_beyond_cutoff_or_off_the_triangles_is_free():
         assert res.max_penetration == 0.0 and res.total_force == 0.0
 
 
-def test_magnitude_driving_force_uses_the_full_external_force():
+def test_driving_force_is_the_normal_part_of_the_external_force():
     x, f_ext = node_over_square(0.05)
     f_ext[4] = [0.3, 0.0, -0.4]                              # |f_ext| = 0.5, normal part 0.4
     normal = SurfaceContact(SQUARE_TRIANGLES, 5, LITERAL).evaluate(x, f_ext)
-    magnitude = SurfaceContact(SQUARE_TRIANGLES, 5, ContactParameters(
-        driving_force="magnitude", taper=0.0, pairing="two_pass", blend_distance=1e-6))
     assert normal.forces[4, 2] == pytest.approx(spec_force(0.05, 0.4), rel=1e-13)
-    assert magnitude.evaluate(x, f_ext).forces[4, 2] == pytest.approx(spec_force(0.05, 0.5),
-                                                                      rel=1e-13)
 
 
 def test_node_above_shared_edge_contacts_its_body_once():
@@ -144,20 +144,21 @@ def test_node_above_shared_edge_contacts_its_body_once():
 
 
 def test_node_between_two_bodies_touches_both():
-    # square of body 7 at z = 0 (normal +z), of body 3 at z = 0.1 (normal -z), node at z = 0.04
-    top = SQUARE + [0.0, 0.0, 0.1]
+    """Square of body 7 at z = 0 (normal +z), of body 3 at z = 0.03 (normal -z); the node,
+    last accepted at z = 0.02 between them, is at z = 0.04: pushed down onto body 7 by
+    0.5 mN, and 0.01 mm through body 3 from below, which its pressure force does not push
+    it into (F at the floor): the penalty alone pushes it back."""
+    top = SQUARE + [0.0, 0.0, 0.03]
     x = np.vstack([SQUARE, top, [[0.4, 0.1, 0.04]]])
     triangles = np.vstack([SQUARE_TRIANGLES, SQUARE_TRIANGLES[:, ::-1] + 4])
     f_ext = np.zeros_like(x)
     f_ext[8] = [0.0, 0.0, -0.5]
-    params = ContactParameters(driving_force="magnitude", taper=0.0, pairing="two_pass",
-                               blend_distance=1e-6)   # F = 0.5 mN against both
-    contact = SurfaceContact(triangles, 9, params, triangle_body=np.array([7, 7, 3, 3]))
-    contact.update_history(x)
+    contact = SurfaceContact(triangles, 9, LITERAL, triangle_body=np.array([7, 7, 3, 3]))
+    contact.update_history(x - [0.0, 0.0, 0.02] * (np.arange(9) == 8)[:, None])
     res = contact.evaluate(x, f_ext)
     assert res.n_active == 2
     assert sorted(res.pairs[:, 1].tolist()) == [0, 2]       # triangles over (0.4, 0.1)
-    up, down = spec_force(0.04, 0.5), spec_force(0.06, 0.5)
+    up, down = spec_force(0.04, 0.5), spec_force(-0.01, LITERAL.min_driving_force)
     assert res.forces[8, 2] == pytest.approx(up - down, rel=1e-12)
     assert res.forces[:4, 2].sum() == pytest.approx(-up, rel=1e-12)
     assert res.forces[4:8, 2].sum() == pytest.approx(down, rel=1e-12)
@@ -501,7 +502,7 @@ def test_matches_brute_force_reference_on_three_sheets(taper):
     x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=3)
     x_prev = x.copy()
     x = x + np.random.default_rng(4).normal(scale=0.02, size=x.shape)
-    params = ContactParameters(taper=taper, pairing="two_pass")  # default blending ε
+    params = replace(SPEC_LAW, taper=taper)
     contact = SurfaceContact(triangles, len(x), params, triangle_body=body)
     contact.update_history(x_prev)
     res = contact.evaluate(x, f_ext)
@@ -517,7 +518,7 @@ def test_matches_brute_force_reference_on_three_sheets(taper):
 def test_plane_contact_law_and_jacobian():
     x = np.array([[0.0, 0.0, 0.05], [1.0, 0.0, -0.3], [2.0, 0.0, 0.05], [3.0, 0.0, 0.5]])
     f_ext = np.array([[0.0, 0.0, -0.6], [0.0, 0.0, -0.6], [0.0, 0.0, 0.6], [0.0, 0.0, -0.6]])
-    plane = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 2.0]])   # normalised to +z
+    plane = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 2.0]], SPEC_LAW)   # normalised to +z
     res = plane.evaluate(x, f_ext)
     f0 = 0.6 * math.exp(-K * 0.05 / 0.6)
     assert res.forces[0, 2] == pytest.approx(f0, rel=1e-13)
@@ -534,7 +535,7 @@ def test_plane_contact_law_and_jacobian():
 def test_plane_contact_node_subsets_and_two_planes():
     x = np.array([[0.05, 0.5, 0.05]])                          # in a corner of two walls
     f_ext = np.array([[-1.0, 0.0, -1.0]])
-    planes = PlaneContact([[0, 0, 0], [0, 0, 0]], [[0, 0, 1], [1, 0, 0]])
+    planes = PlaneContact([[0, 0, 0], [0, 0, 0]], [[0, 0, 1], [1, 0, 0]], SPEC_LAW)
     res = planes.evaluate(x, f_ext)
     np.testing.assert_allclose(res.forces[0], [spec_force(0.05, 1.0), 0, spec_force(0.05, 1.0)],
                                rtol=1e-13)
@@ -543,15 +544,15 @@ def test_plane_contact_node_subsets_and_two_planes():
 
 def test_symmetry_plane_acts_like_the_mirror_image_sheet():
     """A node δ from a symmetry plane feels the law at d = 2δ − t_c: the distance to its
-    mirror image, as from a neighbouring sheet (SPEC §4 reference); Jacobian by FD.
-    One-pass pairing: the node's own row only; two-pass: also the image's reactions, 2×."""
-    params = ContactParameters(thickness=0.25, taper=0.0, pairing="one_pass")
+    mirror image, as from a neighbouring sheet (SPEC §4 reference), twice: its own row and
+    the image's reaction, as every pair of sheets is tested both ways; Jacobian by FD."""
+    params = replace(SPEC_LAW, thickness=0.25, taper=0.0)
     x = np.array([[0.3, 0.0, 0.16], [1.0, 0.0, 0.05]])   # 2δ − t = 0.07 and −0.15
     f_ext = np.array([[0.0, 0.0, -2.0], [0.0, 0.0, -2.0]])
     plane = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], params, mirror=True)
     res = plane.evaluate(x, f_ext)
-    assert res.forces[0, 2] == pytest.approx(spec_force(2 * 0.16 - 0.25, 2.0), rel=1e-12)
-    assert res.forces[1, 2] == pytest.approx(spec_force(2 * 0.05 - 0.25, 2.0), rel=1e-12)
+    assert res.forces[0, 2] == pytest.approx(2 * spec_force(2 * 0.16 - 0.25, 2.0), rel=1e-12)
+    assert res.forces[1, 2] == pytest.approx(2 * spec_force(2 * 0.05 - 0.25, 2.0), rel=1e-12)
     assert res.max_crossing == 0.0   # mid-surfaces 0.1 mm apart: not crossed
     J = dense_jacobian(res, 2)
     step = 1e-7
@@ -563,11 +564,6 @@ def test_symmetry_plane_acts_like_the_mirror_image_sheet():
     wall = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], params)
     assert wall.evaluate(x, f_ext).forces[0, 2] == pytest.approx(
         spec_force(0.16 - 0.125, 2.0), rel=1e-12)
-    two_pass = PlaneContact([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]],
-                            replace(params, pairing="two_pass"), mirror=True)
-    both = two_pass.evaluate(x, f_ext)
-    np.testing.assert_allclose(both.forces, 2 * res.forces, rtol=1e-13)
-    np.testing.assert_allclose(dense_jacobian(both, 2), 2 * J, rtol=1e-13)
 
 
 # -- input checks --------------------------------------------------------------------------
@@ -587,13 +583,12 @@ def test_bad_inputs_raise_named_errors():
         PlaneContact([[0, 0, 0]], [[0, 0, 0]])
 
 
-@pytest.mark.parametrize("pairing,expected_factor", [("one_pass", 1.0), ("two_pass", 2.0)])
-def test_pairing_of_two_pressed_sheets(pairing, expected_factor):
+def test_two_pressed_sheets_count_their_pair_twice():
     """Two sheets touching (d = 0), each pushed onto the other by its pressure force F.
 
-    One-pass: only the lower body's nodes are tested, the upper sheet gets their
-    reactions: it is pushed back by exactly ΣF (its own pressure load) -- contact at
-    d = 0 is an equilibrium.  Two-pass counts the pair twice (2ΣF).
+    Every node is tested against the other body's triangles: A's nodes on B and B's nodes
+    under A each push with F, so A is pushed back by 2ΣF (its own nodes' forces and the
+    reactions of B's) and the sheets rest where each pass carries half the load.
     """
     xa, ta = grid_sheet(6, 6, 0.25)
     xb, tb = grid_sheet(8, 8, 0.25)
@@ -605,15 +600,14 @@ def test_pairing_of_two_pressed_sheets(pairing, expected_factor):
     f_ext = np.zeros_like(x)
     f_ext[: len(xa), 2] = -F  # A is pushed down onto B ...
     f_ext[len(xa):, 2] = +F   # ... and B up onto A (A's nodes come from above B: n = +z)
-    contact = SurfaceContact(triangles, len(x), ContactParameters(pairing=pairing),
-                             triangle_body=body)
+    contact = SurfaceContact(triangles, len(x), SPEC_LAW, triangle_body=body)
     contact.update_history(x + np.r_[np.zeros((len(xa), 3)) + [0, 0, 0.01],
                                      np.zeros((len(xb), 3))])  # A was above B
     res = contact.evaluate(x, f_ext)
     on_b = res.forces[len(xa):, 2].sum()
     on_a = res.forces[: len(xa), 2].sum()
-    # A's 49 nodes sit exactly on B (and, in two-pass, B's nodes under A sit on A)
-    assert on_a == pytest.approx(expected_factor * F * len(xa), rel=1e-12)
+    # A's 49 nodes sit exactly on B, and B's nodes under A sit on A
+    assert on_a == pytest.approx(2 * F * len(xa), rel=1e-12)
     assert on_a + on_b == pytest.approx(0.0, abs=1e-9)  # action = reaction
 
 
@@ -631,7 +625,7 @@ def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
     f_ext = f_ext + rng.normal(scale=0.2, size=f_ext.shape)
     x_prev = x.copy()
     x = x + rng.normal(scale=0.02, size=x.shape)
-    params = ContactParameters(taper=0.5, blend_distance=0.02, thickness=thickness)
+    params = replace(SPEC_LAW, blend_distance=0.02, thickness=thickness)
     contact = SurfaceContact(triangles, len(x), params, triangle_body=body)
     contact.update_history(x_prev)
     res = contact.evaluate(x, f_ext)
@@ -650,7 +644,7 @@ def test_forces_only_evaluation_gives_the_same_forces_and_diagnostics():
     x, triangles, body, f_ext = stacked_sheets(cells=6, spacing=0.3, seed=3)
     x_prev = x.copy()
     x = x + np.random.default_rng(4).normal(scale=0.02, size=x.shape)
-    contact = SurfaceContact(triangles, len(x), ContactParameters(thickness=0.1),
+    contact = SurfaceContact(triangles, len(x), replace(SPEC_LAW, thickness=0.1),
                              triangle_body=body)
     contact.update_history(x_prev)
     full = contact.evaluate(x, f_ext)
@@ -679,8 +673,8 @@ def test_a_deep_row_fading_out_hands_over_smoothly():
     triangles = np.array([[0, 1, 2], [3, 4, 5]])
     f_ext = np.zeros_like(x)
     f_ext[6, 2] = -1.0                                              # F = 1 mN into both
-    contact = SurfaceContact(triangles, len(x), ContactParameters(penetration_depth=1.0,
-                                                                  blend_distance=0.05))
+    contact = SurfaceContact(triangles, len(x), replace(SPEC_LAW, penetration_depth=1.0,
+                                                        blend_distance=0.05))
     beyond = np.concatenate([np.geomspace(1e-9, 1e-3, 60), np.linspace(1e-3, 1.0, 400)[1:]])
     positions = -1.0 + beyond                                       # the band is x in (-1, 0)
     force = []
@@ -747,7 +741,7 @@ def test_edge_row_fades_in_as_the_projection_leaves_the_triangle():
     makes Newton cycle on a graft node near a free edge) and the Jacobian, fade
     included, matches central differences on a tilted square.
     """
-    params = ContactParameters(taper=0.5, pairing="two_pass", blend_distance=0.05)
+    params = replace(SPEC_LAW, blend_distance=0.05)
     contact = SurfaceContact(SQUARE_TRIANGLES, 5, params)
     delta = 1e-7
     inside, f_ext = node_over_square(0.08, xy=(1.0 - delta, 0.5))
@@ -784,7 +778,7 @@ def test_search_finds_every_pair_of_the_fade_bands_corners_and_all():
     x = np.concatenate([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.15, 0.0]], grid,
                         grid * [1.0, 1.0, -1.0]])
     triangles = np.array([[0, 1, 2]])
-    contact = SurfaceContact(triangles, len(x), ContactParameters(), boundary_band=1.0)
+    contact = SurfaceContact(triangles, len(x), SPEC_LAW, boundary_band=1.0)
     xt = np.ascontiguousarray(x.T)
     frames = TriangleFrames.at(xt, triangles)
     nodes = np.arange(3, len(x))

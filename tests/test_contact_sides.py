@@ -15,8 +15,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from valve_dolfinx.config import VALVE_CONTACT as VALVE
-from valve_dolfinx.contact import SurfaceContact
+from valve_dolfinx.contact import ContactParameters, SurfaceContact
 from valve_dolfinx.contact.exclusions import adjacent_triangles
 from valve_dolfinx.contact.sides import SideMemory, nearest_inside
 
@@ -27,7 +26,7 @@ BODY = np.array([0, 0])
 XY = (2.6, 1.0)  # inside one triangle, 1.1 mm from the other (no blending)
 PUSH = 0.8  # mN
 #: the valve's contact settings with the literal SPEC law (no taper of the cut-off)
-VALVE_CONTACT = replace(VALVE, taper=0.0)
+VALVE_CONTACT = ContactParameters(taper=0.0)
 
 
 def contact(flipped: bool) -> SurfaceContact:

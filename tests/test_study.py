@@ -183,7 +183,8 @@ def test_settings_from_toml(tmp_path):
 
     path = tmp_path / "study.toml"
     path.write_text('pressure_mmhg = 90\n[study]\nwidths = [14, 0]\nheights = "0, 27"\n'
-                    'mesh_size = 1.5\npanel_cases = ["W14_H27"]\n[dynamics]\nmax_steps = 77\n')
+                    'mesh_size = 1.5\npanel_cases = ["W14_H27"]\n'
+                    '[pseudo_transient]\nmax_steps = 77\n')
     settings = load_study_toml(path)
     assert settings.widths_pct == (0.0, 14.0) and settings.heights_pct == (0.0, 27.0)
     assert [c.name for c in settings.cases()] == ["normal", "W0_H0", "W0_H27", "W14_H0",
@@ -191,16 +192,17 @@ def test_settings_from_toml(tmp_path):
     configs = settings.layout().configs
     assert configs["W14_H27"].geometry.graft_height_pct == 27.0
     assert configs["normal"].geometry.mesh_size == 1.5
-    assert configs["normal"].dynamics.max_steps == 77
+    assert configs["normal"].pseudo_transient.max_steps == 77
     assert configs["W14_H27"].pressure_mmhg == 90.0
-    assert load_study_toml(path, ["dynamics.max_steps=78"]).case["dynamics"]["max_steps"] == 78
+    assert load_study_toml(path, ["pseudo_transient.max_steps=78"]).case[
+        "pseudo_transient"]["max_steps"] == 78
     path.write_text("[study]\nwidth = [0]\n")
     with pytest.raises(ParameterError, match="unknown key 'width'"):
         load_study_toml(path)
     path.write_text("[study]\n[dynamics]\nno_such_setting = 1\n")
     with pytest.raises(ParameterError, match="unknown key 'dynamics.no_such_setting'"):
         load_study_toml(path)
-    path.write_text("[study.case.dynamics]\nmax_steps = 77\n")
+    path.write_text("[study.case.pseudo_transient]\nmax_steps = 77\n")
     with pytest.raises(ParameterError, match=r"\[study.case\] is not read"):
         load_study_toml(path)
 

@@ -55,17 +55,26 @@ fem = dolfinx.fem
 SELF_EXCLUSION_FACTOR = 1.5
 #: the aortic pressure acts on the aortic side, against the chart normal
 VALVE_PRESSURE_SIDE = -1.0
+#: the leaflets' contact thickness against each other grows from 0 at the commissure where
+#: they are sewn together to its full value at this distance (mm), measured on the unloaded
+#: valve (see SurfaceContact: seam_taper_length)
+COMMISSURE_TAPER_MM = 2.5
+#: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
+#: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
+FREE_EDGE_BAND = 1.0
 
 
 # --- building blocks -----------------------------------------------------------------------
 def closure_model(domain: ValveDomain, config: CaseConfig) -> MembraneModel:
-    """The membrane model of a valve domain: native leaflets and (if present) the graft."""
+    """The membrane model of a valve domain: native leaflets and (if present) the graft,
+    with the membrane forms' quadrature degree 1 (exact for the linear triangles' constant
+    strain, :class:`~valve_dolfinx.mechanics.membrane.MembraneModel`)."""
     materials, relaxed = {}, {}
     for patch in domain.valve.leaflets:
         materials[patch.tag] = config.graft_material if patch.is_graft else config.native_material
         relaxed[patch.tag] = config.graft_tension_field or not patch.is_graft
     return MembraneModel(domain, materials, pressure_side=VALVE_PRESSURE_SIDE,
-                         quadrature_degree=config.quadrature_degree, wrinkling=relaxed)
+                         wrinkling=relaxed)
 
 
 def _radial_scaling(model: MembraneModel, factor: float) -> fem.Function:
@@ -249,8 +258,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      self_exclusion_radius=SELF_EXCLUSION_FACTOR
                                      * config.contact.reach,
                                      attached_reference=valve.points,
-                                     seam_taper_length=config.commissure_taper_mm,
-                                     boundary_band=config.free_edge_band))
+                                     seam_taper_length=COMMISSURE_TAPER_MM,
+                                     boundary_band=FREE_EDGE_BAND))
         # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
         # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
@@ -310,7 +319,6 @@ def analyse_case(state: CaseState, config: CaseConfig):
 
     valve, positions = state.shown()
     result = analyse_coaptation(positions, valve, threshold_mm=config.coaptation_threshold_mm,
-                                pixel_mm=config.orifice_pixel_mm,
                                 nodulus_length_mm=config.nodulus_length_mm)
     if config.symmetric_reference:
         # the heights are the solved leaflet's (its images see each other only through it)

@@ -2,7 +2,10 @@
 
 :class:`CaseConfig` holds everything that defines a case: the valve geometry,
 the pressure, the tissues, the root, the contact law, the solver path and its
-numerical settings, and the analysis settings.  Each nested parameter set
+numerical settings, and the analysis settings.  Numbers that every case takes alike are
+not settings: they are constants of the module that uses them (each solver path's step
+control, the contact's taper at the commissures, ...) or fields of a parameter set marked
+:data:`NOT_A_SETTING`.  Each nested parameter set
 validates its own ranges; :class:`CaseConfig` checks how they combine.  Nothing
 here imports DOLFINx or PETSc, so a configuration is loaded and checked in a
 fraction of a second, before any mesh is built.
@@ -20,8 +23,6 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from valve_dolfinx.analysis.coaptation import DEFAULT_NODULUS_LENGTH_MM
-from valve_dolfinx.contact.law import ContactParameters
 from valve_dolfinx.exceptions import (
     ConfigurationError,
     InputFileError,
@@ -36,9 +37,11 @@ from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransient
 
 __all__ = [
     "MMHG_TO_KPA",
-    "VALVE_CONTACT",
+    "NODULUS_LENGTH_MM",
     "SOLVERS",
     "CONFIG_FILE",
+    "NOT_A_SETTING",
+    "ContactParameters",
     "CaseConfig",
     "case_name",
     "DESCRIPTIONS",
@@ -61,21 +64,11 @@ __all__ = [
 
 #: 1 mmHg in kPa (80 mmHg = 10.666 kPa)
 MMHG_TO_KPA = 0.133322
-#: Contact of the closing valve (SPEC §5 law, k = 10 mN/mm, h = 0.1 mm) with the numerical
-#: choices of docs/numerics.md §4: the leaflets' contact surfaces are offset 0.125 mm (half of
-#: ``thickness``) from their mid-surfaces, so the three leaflets cannot wedge into each
-#: other's seams at the valve centre; the blending width smooths nodes in mesh-scale creases.
-#: The side of every node-triangle pair, between leaflets as within one, is the side the node
-#: approaches from (recorded at the last accepted state), whichever face of the triangle that is.
-VALVE_CONTACT = ContactParameters(thickness=0.25, penetration_depth=0.3, blend_distance=0.05,
-                                  crossing_stiffness=1000.0)
-#: the leaflets' contact thickness against each other grows from 0 at the commissure where
-#: they are sewn together to its full value at this distance (mm), measured on the unloaded
-#: valve (see SurfaceContact: seam_taper_length)
-COMMISSURE_TAPER_MM = 2.5
-#: face contacts with a neighbour leaflet fade out over this many triangle heights beyond
-#: its free edge (see SurfaceContact: boundary_band): coapting free edges lie level
-FREE_EDGE_BAND = 1.0
+#: Length (mm, flat, centred on the midline) of the free-edge tip treated as the nodulus
+#: of Arantius: one leaflet thickness (0.5 mm, SPEC §3) either side of the triple point,
+#: where three 0.5 mm thick free edges meet and a zero-thickness membrane has no
+#: meaningful coaptation height (docs/coaptation.md §2).
+NODULUS_LENGTH_MM = 1.0
 #: effective flexural modulus of the native leaflets (kPa): D = E_b·t³/12 (docs/model.md §3)
 BENDING_MODULUS_KPA = 200.0
 #: effective flexural modulus of the graft (kPa): the native leaflets' value, for want of a
@@ -98,6 +91,113 @@ _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
 GRAFT_ONLY_SETTINGS = ("graft_material", "graft_bending_modulus_kpa", "graft_tension_field",
                        "geometry.graft_fibre_angle_deg", "geometry.graft_placement",
                        "geometry.billow_mm")
+
+#: ``metadata`` of a parameter set's field that is not a setting: a fixed number of the
+#: model, or a label, that every case takes at its default.  It is left out of the
+#: configuration, its TOML and its hash; code and tests that build the parameter set
+#: themselves may still give it (:class:`ContactParameters`, ``FungMaterial.name``).
+NOT_A_SETTING = {"setting": False}
+
+
+@dataclass(frozen=True, slots=True)
+class ContactParameters:
+    """Parameters of the penalty contact (SPEC §5; :mod:`valve_dolfinx.contact.law`).
+
+    ``stiffness``, ``cutoff``, ``thickness`` and ``crossing_stiffness`` are settings (the
+    configuration's ``[contact]`` table).  The other fields are fixed numbers of the law
+    (:data:`NOT_A_SETTING`): every case uses their defaults; the tests of the literal SPEC
+    law set others.
+
+    Attributes
+    ----------
+    stiffness
+        Penalty stiffness ``k`` in mN/mm (SPEC: 10 N/m = 10 mN/mm).
+    cutoff
+        Distance ``h`` in mm beyond which a surface exerts no force (SPEC: 0.1 mm).
+    thickness
+        Contact thickness ``t_c`` (mm): the law acts on ``d = distance − t_c``,
+        so two sheets rest about ``t_c`` apart (a plane, which stands for a
+        mirror-image neighbour, at ``t_c/2``); the default 0.25 mm puts each leaflet's
+        contact surface 0.125 mm off its mid-surface.  0 is the SPEC's zero-thickness
+        law.  A positive value gives the membranes the volume real leaflets have: a
+        third leaflet cannot slide into the (force-free) seam between two coapting ones
+        at the valve centre without pushing them apart, which zero-thickness sheets do
+        freely.
+    crossing_stiffness
+        Stiffness ``k_x`` (mN/mm) of a barrier against the *mid-surfaces*
+        crossing (``d < -thickness``), added to the law: SPEC §5 asks for no
+        interpenetration, but its penalty ``k`` = 10 mN/mm only answers a node
+        pushed by its own pressure force.  A node pulled through a neighbour by
+        membrane tension (the taut free edge of a stiff pericardial graft near
+        a commissure: ~7 mN) would sink ~0.5 mm before ``k`` balanced it.  The
+        barrier (:func:`~valve_dolfinx.contact.law.crossing_barrier`) leaves the SPEC
+        law untouched wherever the mid-surfaces have not crossed -- every equilibrium
+        of the normal valve -- and is C¹ (quadratic onset over ``crossing_width``).
+        0 is the SPEC law alone.
+    penetration_depth
+        How far behind a triangle (mm) a node is still treated as penetrating
+        it.  Nodes further behind are taken to belong to the other side of the
+        (thin) sheet and are ignored.  Must exceed the largest penetration the
+        solver can produce in one step.
+    blend_distance
+        ε (mm) of the smooth minimum over the triangles a node meets on one
+        body: ``w ∝ exp(-(d - min d)/ε)``, so that a node in a crease does
+        not jump between the two faces' normals (see
+        ``SurfaceContact._blend_weights``).
+    taper
+        Fraction of the cut-off band ``[0, h)`` over whose outer part the
+        exponential branch is faded smoothly to zero (a C¹ smoothstep on
+        ``[(1 - taper)·h, h]``).  ``0`` is the literal SPEC law, whose force jumps
+        from ``F·e^{-kh/F}`` to 0 at ``d = h``; with nodal pressure forces of a
+        few mN that jump is several mN, and an implicit solver sees a
+        discontinuous residual there: Newton fails repeatedly and the adaptive
+        time step collapses.  0.5 leaves the law untouched for
+        ``d ≤ h/2`` -- in particular ``f(0) = F`` and the slope ``-k`` at
+        contact, which set the equilibrium -- and removes the jump.
+    min_driving_force
+        Floor on the driving force ``F`` in mN (the part of the node's pressure force
+        pushing it into the surface), so that :math:`e^{-kd/F}` stays defined when no
+        pressure acts; with the floor the law reduces to a pure penalty
+        :math:`-k d` behind the surface and (numerically) zero in front of it.
+    crossing_width
+        Width (mm) of the crossing barrier's quadratic onset.
+    """
+
+    stiffness: float = 10.0
+    cutoff: float = 0.1
+    thickness: float = 0.25
+    crossing_stiffness: float = 1000.0
+    penetration_depth: float = field(default=0.3, metadata=NOT_A_SETTING)
+    blend_distance: float = field(default=0.05, metadata=NOT_A_SETTING)
+    taper: float = field(default=0.5, metadata=NOT_A_SETTING)
+    min_driving_force: float = field(default=1e-9, metadata=NOT_A_SETTING)
+    crossing_width: float = field(default=0.02, metadata=NOT_A_SETTING)
+
+    def __post_init__(self) -> None:
+        check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
+                    hint="0 is the SPEC law alone")
+        check_range("crossing_width", self.crossing_width, 0.0, 1.0, low_open=True, unit="mm")
+        check_range("blend_distance", self.blend_distance, 0.0, 1.0, low_open=True, unit="mm")
+        check_range("thickness", self.thickness, 0.0, 2.0, unit="mm")
+        check_range("taper", self.taper, 0.0, 1.0,
+                    hint="0 keeps the force jump at d = h, 1 fades it over the whole band")
+        check_range("stiffness", self.stiffness, 0.0, low_open=True, unit="mN/mm")
+        check_range("cutoff", self.cutoff, 0.0, low_open=True, unit="mm")
+        check_range("penetration_depth", self.penetration_depth, 0.0, low_open=True, unit="mm",
+                    hint="it is the depth behind a triangle that still counts as penetration")
+        check_range("min_driving_force", self.min_driving_force, 0.0, low_open=True, unit="mN",
+                    hint="a tiny positive floor such as 1e-9 mN keeps exp(-k d / F) defined")
+
+    @property
+    def search_distance(self) -> float:
+        """Padding (mm) of the bounding boxes: ``thickness + max(cutoff, penetration_depth)``."""
+        return self.thickness + max(self.cutoff, self.penetration_depth)
+
+    @property
+    def reach(self) -> float:
+        """Largest raw distance (mm) at which a surface pushes: ``thickness + cutoff``."""
+        return self.thickness + self.cutoff
+
 
 #: the nested parameter sets of a CaseConfig, by field name
 _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
@@ -142,17 +242,13 @@ class CaseConfig:
     native_material: FungMaterial = NATIVE_LEAFLET
     graft_material: FungMaterial = BOVINE_PERICARDIUM
     root: RootParameters = field(default_factory=RootParameters)
-    contact: ContactParameters = field(default_factory=lambda: VALVE_CONTACT)
+    contact: ContactParameters = field(default_factory=ContactParameters)
     solver: str = "ptc"
     pseudo_transient: PseudoTransientParameters = field(
         default_factory=PseudoTransientParameters)
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
     coaptation_threshold_mm: float = 0.5
-    orifice_pixel_mm: float = 0.05
-    nodulus_length_mm: float = DEFAULT_NODULUS_LENGTH_MM
-    commissure_taper_mm: float = COMMISSURE_TAPER_MM
-    free_edge_band: float = FREE_EDGE_BAND
-    quadrature_degree: int = 1
+    nodulus_length_mm: float = NODULUS_LENGTH_MM
     symmetric_reference: bool = False
     bending_modulus_kpa: float = BENDING_MODULUS_KPA
     graft_bending_modulus_kpa: float = GRAFT_BENDING_MODULUS_KPA
@@ -170,8 +266,6 @@ class CaseConfig:
                     unit="kPa", low_hint="0 switches the graft's bending off",
                     high_hint="that is beyond even the in-plane tensile modulus of fixed "
                     "pericardium (tens of MPa)")
-        check_range("commissure_taper_mm", self.commissure_taper_mm, 0.0, 10.0, unit="mm",
-                    hint="0 gives the full contact thickness up to the commissures")
         if self.solver not in SOLVERS:
             raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
                                  "'ptc' (pseudo-transient continuation, the default) or "
@@ -184,10 +278,12 @@ class CaseConfig:
         return self.pressure_mmhg * MMHG_TO_KPA
 
     def to_dict(self) -> dict:
+        """The settings, nested by section (a parameter set's fields that are not settings,
+        :data:`NOT_A_SETTING`, are left out)."""
         out = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            out[f.name] = asdict(value) if hasattr(value, "__dataclass_fields__") else value
+            out[f.name] = _settings_of(value) if f.name in _SECTIONS else value
         return out
 
     @classmethod
@@ -214,6 +310,17 @@ class CaseConfig:
         return config_from_dict(data, source="normal valve")
 
 
+def _setting_names(section: Any) -> list[str]:
+    """The settings of a parameter set (class or instance): its fields but those marked
+    :data:`NOT_A_SETTING`."""
+    return [f.name for f in fields(section) if f.metadata.get("setting", True)]
+
+
+def _settings_of(section: Any) -> dict:
+    values = asdict(section)
+    return {name: values[name] for name in _setting_names(section)}
+
+
 def case_name(geometry: ValveParameters) -> str:
     """``normal`` or ``W<width>_H<height>``: a case's name in a study before its axis values."""
     if not geometry.has_graft:
@@ -231,16 +338,8 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
                    "continuation, the default) or 'bdf2' (damped BDF2 dynamics, the "
                    "cross-check)"),
         "coaptation_threshold_mm": ("mm", "leaflets closer than this to a neighbour coapt"),
-        "orifice_pixel_mm": ("mm", "pixel size of the regurgitant orifice map"),
         "nodulus_length_mm": ("mm", "free-edge length at the triple point treated as the "
                               "nodulus of Arantius by the coaptation heights (0: none)"),
-        "commissure_taper_mm": ("mm", "the leaflets' contact thickness against each other "
-                                "grows from 0 where they are sewn together (the commissures) "
-                                "to its full value at this distance"),
-        "free_edge_band": ("triangle heights", "face contact with a neighbour fades out "
-                           "over this band beyond its free edge"),
-        "quadrature_degree": ("", "quadrature degree of the membrane forms (1 is exact "
-                              "for the linear triangles' constant strain)"),
         "symmetric_reference": ("", "true: one leaflet against the two ±60° symmetry "
                                 "planes (the normal valve's cheap reference)"),
         "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the native leaflets, "
@@ -277,83 +376,38 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "A5": ("", "Fung coefficient of 2·E11·E12"),
         "A6": ("", "Fung coefficient of 2·E22·E12"),
         "thickness": ("mm", "tissue thickness (tension = thickness × stress)"),
-        "name": ("", "label of the tissue"),
-        "reference": ("", "literature source of the parameters"),
     },
     "root": {
         "free_edge_excess": ("", "free edges' length over the unpressurised root's "
                              "circumference, minus 1"),
         "youngs_modulus": ("kPa", "secant Young's modulus of the root wall over 0-80 mmHg"),
         "wall_thickness": ("mm", "root wall thickness"),
-        "height": ("mm", "height of the root segment carrying the leaflets (unset: the "
-                   "leaflet height)"),
         "loaded_diameter": ("mm", "prescribed root diameter at the loading pressure, a "
                             "patient's measured root (unset: the wall law distends it)"),
     },
     "contact": {
         "stiffness": ("mN/mm", "penalty stiffness k of the contact law"),
         "cutoff": ("mm", "distance h beyond which a surface exerts no force"),
-        "penetration_depth": ("mm", "depth behind a triangle still treated as penetration"),
-        "driving_force": ("", "driving force F from the pressure force: 'normal' or "
-                          "'magnitude'"),
-        "min_driving_force": ("mN", "floor on the driving force F"),
-        "taper": ("", "fraction of the cut-off band over which the force fades to zero"),
-        "pairing": ("", "node-triangle pairing: 'two_pass' or 'one_pass'"),
-        "blend_distance": ("mm", "width ε of the smooth minimum over a node's triangles"),
         "thickness": ("mm", "contact thickness: sheets rest this far apart"),
         "crossing_stiffness": ("mN/mm", "barrier against the mid-surfaces crossing "
                                "(0: the SPEC law alone)"),
-        "crossing_width": ("mm", "width of the barrier's quadratic onset"),
     },
     "pseudo_transient": {
+        "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
+        "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
         "coarse_mesh_mm": ("mm", "a valve without a graft on a finer mesh first comes to rest "
                            "on a mesh of this size and starts from there (0: from the "
                            "unloaded valve)"),
-        "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
-        "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
-        "pressure_ramp_steps": ("", "pseudo-time steps over which the pressure rises to its "
-                                "target (0: the full pressure from the first step)"),
-        "dt_initial": ("", "first pseudo-time step"),
-        "dt_min": ("", "pseudo-time step below which the run has stalled"),
-        "dt_max": ("", "largest pseudo-time step"),
-        "increment": ("", "growth factor of switched evolution relaxation"),
-        "growth_limit": ("", "largest factor of the step from one step to the next"),
-        "max_step_motion_mm": ("mm", "largest expected nodal motion per step"),
-        "newton_motion_mm": ("mm", "largest nodal motion of one Newton update"),
-        "newton_max_it": ("", "Newton iterations per step"),
-        "newton_rtol": ("", "relative residual reduction that ends a step's Newton solve"),
-        "settled_residual_mN": ("mN", "static residual below which the steps' Newton solves "
-                                "end at newton_rtol_settled (0: never)"),
-        "newton_rtol_settled": ("", "newton_rtol once the static residual is below "
-                                "settled_residual_mN"),
-        "newton_cycle_tolerance": ("", "relative repetition of the residual norms that ends "
-                                   "a Newton solve caught in a cycle of period 2 or 3 (0: never)"),
-        "newton_reversal_damping": ("", "factor on a Newton update that points back along "
-                                    "the previous one (1: never)"),
-        "predictor_motion_mm": ("mm", "largest nodal motion of the linear predictor that "
-                                "starts each step's Newton solve (0: none)"),
         "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),
         "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
-        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),
+        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix), e.g. "
+                          "{ snes_rtol = 1e-8 }"),
     },
     "dynamics": {
-        "relaxation_time": ("s", "τ: damping per unit stiffness, c = k·τ/L²"),
-        "mass_ratio": ("", "mass time scale over τ"),
-        "length_scale": ("mm", "L in the stiffness-per-area estimate k/L²"),
-        "stiffness_exponent": ("", "β in c ∝ (k_tissue/k_ref)^β"),
-        "ramp_time": ("s", "duration of the smooth pressure ramp"),
-        "dt_initial": ("s", "first time step"),
-        "dt_min": ("s", "time step below which the run has stalled"),
-        "dt_max": ("s", "largest time step"),
-        "t_max": ("s", "simulated time limit"),
-        "error_tolerance_mm": ("mm", "local truncation error target of the displacement"),
+        "relaxation_time": ("s", "τ: damping per unit stiffness, c = k·τ/L², and the mass "
+                            "time scale"),
         "stop_increment_mm": ("mm", "convergence: displacement increment per step"),
-        "max_increment_mm": ("mm", "largest nodal displacement per step"),
-        "equilibrium_tolerance": ("mN", "convergence: max-norm of the static residual"),
         "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
-        "max_steps": ("", "limit on time steps (accepted + rejected)"),
-        "newton_max_it": ("", "Newton iterations per step"),
-        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix)"),
     },
 }
 
@@ -481,11 +535,11 @@ def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> 
     """
     defaults = CaseConfig()
     known = {f.name: f for f in fields(CaseConfig)}
+    unknown = _unknown_keys(data, defaults)
+    if unknown:
+        raise ParameterError(f"{source}: {_unknown_message(unknown)}")
     kw: dict[str, Any] = {}
     for key, value in data.items():
-        if key not in known:
-            raise ParameterError(f"{source}: unknown key {key!r}; allowed keys are "
-                                 f"{', '.join(sorted(known))}")
         if key in _SECTIONS:
             kw[key] = _section(key, value, getattr(defaults, key), source)
         else:
@@ -503,17 +557,49 @@ def _section(name: str, value: Any, default: Any, source: str) -> Any:
     if not isinstance(value, Mapping):
         raise ParameterError(f"{source}: {name} must be a table of settings "
                              f"([{name}] in a TOML file), got {value!r}")
-    known = {f.name: f for f in fields(default)}
+    known = {f.name: f for f in fields(default) if f.name in _setting_names(default)}
     changes = {}
     for key, item in value.items():
-        if key not in known:
-            raise ParameterError(f"{source}: unknown key '{name}.{key}'; allowed keys of "
-                                 f"[{name}] are {', '.join(known)}")
         changes[key] = _checked_value(f"{name}.{key}", item, known[key].type, source)
     try:
         return replace(default, **changes)
     except ParameterError as err:
         raise ParameterError(f"{source}: {_dotted_message(name, known, str(err))}") from None
+
+
+def _unknown_keys(data: Mapping[str, Any], defaults: CaseConfig
+                  ) -> list[tuple[str, str, list[str]]]:
+    """Every key of ``data`` that is not a setting: ``(dotted key, the number every case takes
+    if it is a fixed number of its parameter set (else ""), the settings of its table)``."""
+    top = [f.name for f in fields(CaseConfig)]
+    unknown = [(key, "", sorted(top)) for key in data if key not in top]
+    for name in _SECTIONS:
+        value, default = data.get(name), getattr(defaults, name)
+        if not isinstance(value, Mapping):
+            continue
+        settings = _setting_names(default)
+        for key in value:
+            if key not in settings:
+                fixed = getattr(default, key, None)
+                fixed = (f" (every case takes {fixed!r})" if isinstance(fixed, int | float)
+                         and not isinstance(fixed, bool) else "")
+                unknown.append((f"{name}.{key}", fixed, settings))
+    return unknown
+
+
+def _unknown_message(unknown: list[tuple[str, str, list[str]]]) -> str:
+    """What the keys that are not settings are, and the fix: a file of an earlier version
+    can hold many (all are named at once)."""
+    named = ", ".join(f"{key!r}{fixed}" for key, fixed, _ in unknown)
+    earlier = ("(a file written by an earlier version may hold keys that are now fixed "
+               "numbers of the model or were removed)")
+    if len(unknown) > 1:
+        return (f"unknown keys {named}; they are not settings of this version {earlier}: "
+                "delete those lines (`valve-dolfinx config` prints every setting)")
+    key, _, settings = unknown[0]
+    table = f" of [{key.split('.')[0]}]" if "." in key else ""
+    return (f"unknown key {named}; it is not a setting of this version {earlier}: delete the "
+            f"line; allowed keys{table} are {', '.join(settings)}")
 
 
 def _dotted_message(section: str, keys: Iterable[str], message: str) -> str:

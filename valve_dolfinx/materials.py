@@ -46,7 +46,7 @@ docs/model.md, which documents the treatment, its parameters and sources.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import ufl
@@ -87,7 +87,8 @@ class FungMaterial:
     thickness
         Tissue thickness (mm); tension = thickness × stress.
     name, reference
-        Label and literature source.
+        Label and literature source of a preset: not settings of a case configuration
+        (their ``metadata`` is :data:`valve_dolfinx.config.NOT_A_SETTING`'s).
     """
 
     c: float
@@ -98,8 +99,8 @@ class FungMaterial:
     A5: float = 0.0
     A6: float = 0.0
     thickness: float = 0.5
-    name: str = "fung"
-    reference: str = ""
+    name: str = field(default="fung", metadata={"setting": False})
+    reference: str = field(default="", metadata={"setting": False})
 
     def __post_init__(self) -> None:
         check_range(f"{self.name}.c", self.c, 0.0, 1e6, low_open=True, unit="kPa")

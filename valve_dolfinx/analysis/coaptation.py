@@ -43,13 +43,13 @@ import numpy as np
 
 from valve_dolfinx.analysis.distance import distance_to_surface
 from valve_dolfinx.analysis.orifice import orifice_leak_map
+from valve_dolfinx.config import NODULUS_LENGTH_MM
 from valve_dolfinx.exceptions import MeshError, ParameterError, check_range
 from valve_dolfinx.geometry.valve import LeafletPatch, ValveMesh
 
 __all__ = [
     "DEFAULT_THRESHOLD_MM",
     "DEFAULT_PIXEL_MM",
-    "DEFAULT_NODULUS_LENGTH_MM",
     "PROFILE_SAMPLES",
     "LeafletCoaptation",
     "CoaptationResult",
@@ -72,11 +72,6 @@ DEFAULT_PIXEL_MM = 0.05
 #: Evenly spaced abscissae of the height profile along the flat free edge (for the map);
 #: the profile's break points are added to them, so the minima do not depend on this.
 PROFILE_SAMPLES = 201
-#: Length (mm, flat, centred on the midline) of the free-edge tip treated as the nodulus
-#: of Arantius: one leaflet thickness (0.5 mm, SPEC §3) either side of the triple point,
-#: where three 0.5 mm thick free edges meet and a zero-thickness membrane has no
-#: meaningful coaptation height (docs/coaptation.md §2).
-DEFAULT_NODULUS_LENGTH_MM = 1.0
 #: Round-off allowance (mm) when a sample is tested against the edge of the nodulus.
 _ON_POINT_MM = 1e-9
 
@@ -441,7 +436,7 @@ def analyse_coaptation(positions: np.ndarray, valve: ValveMesh,
                        pixel_mm: float = DEFAULT_PIXEL_MM, *,
                        profile_samples: int = PROFILE_SAMPLES,
                        orifice: bool = True,
-                       nodulus_length_mm: float = DEFAULT_NODULUS_LENGTH_MM
+                       nodulus_length_mm: float = NODULUS_LENGTH_MM
                        ) -> CoaptationResult:
     """Coaptation region, heights, area and competence of a loaded valve (SPEC §6).
 

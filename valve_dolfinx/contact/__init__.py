@@ -17,7 +17,6 @@ from valve_dolfinx.contact.geometry import (
     triangle_normals,
 )
 from valve_dolfinx.contact.law import (
-    DRIVING_FORCE_MODES,
     ContactParameters,
     contact_force,
     driving_force,
@@ -27,7 +26,6 @@ from valve_dolfinx.contact.results import ContactResult
 from valve_dolfinx.contact.surface import SurfaceContact
 
 __all__ = [
-    "DRIVING_FORCE_MODES",
     "ContactParameters",
     "ContactResult",
     "PlaneContact",

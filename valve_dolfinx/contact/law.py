@@ -19,148 +19,19 @@ throughout: mm, kPa, mN.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
-from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.config import ContactParameters
 
 __all__ = [
-    "ContactParameters", "DRIVING_FORCE_MODES", "PAIRINGS", "contact_force",
-    "DEFAULT_PARAMETERS", "contact_force_slope_in_F", "crossing_barrier", "law_force",
-    "driving_force", "law_force_from_load",
+    "ContactParameters", "contact_force", "DEFAULT_PARAMETERS", "contact_force_slope_in_F",
+    "crossing_barrier", "law_force", "driving_force", "law_force_from_load",
 ]
 
 log = logging.getLogger(__name__)
 
-#: Accepted values of :attr:`ContactParameters.driving_force`.
-DRIVING_FORCE_MODES = ("normal", "magnitude")
-#: Accepted values of :attr:`ContactParameters.pairing`.
-PAIRINGS = ("one_pass", "two_pass")
-
-
-@dataclass(frozen=True, slots=True)
-class ContactParameters:
-    """Parameters of the penalty contact (SPEC §5).
-
-    Attributes
-    ----------
-    stiffness
-        Penalty stiffness ``k`` in mN/mm (SPEC: 10 N/m = 10 mN/mm).
-    cutoff
-        Distance ``h`` in mm beyond which a surface exerts no force (SPEC: 0.1 mm).
-    penetration_depth
-        How far behind a triangle (mm) a node is still treated as penetrating
-        it.  Nodes further behind are taken to belong to the other side of the
-        (thin) sheet and are ignored.  Must exceed the largest penetration the
-        solver can produce in one step.
-    driving_force
-        How the driving force ``F`` of a node is taken from its external
-        (pressure) force ``f_ext``: ``"normal"`` uses
-        :math:`F = \\max(-f_{ext}\\cdot n, 0)`, the part of the pressure force
-        pushing the node into the surface whose sided normal is ``n``;
-        ``"magnitude"`` uses :math:`F = |f_{ext}|`, the literal SPEC wording.
-    min_driving_force
-        Floor on ``F`` in mN, so that :math:`e^{-kd/F}` stays defined when no
-        pressure acts; with the floor the law reduces to a pure penalty
-        :math:`-k d` behind the surface and (numerically) zero in front of it.
-    taper
-        Fraction of the cut-off band ``[0, h)`` over whose outer part the
-        exponential branch is faded smoothly to zero (a C¹ smoothstep on
-        ``[(1 - taper)·h, h]``).  ``0`` is the literal SPEC law, whose force jumps
-        from ``F·e^{-kh/F}`` to 0 at ``d = h``; with nodal pressure forces of a
-        few mN that jump is several mN, and an implicit solver sees a
-        discontinuous residual there: Newton fails repeatedly and the adaptive
-        time step collapses.  The default 0.5 leaves the law untouched for
-        ``d ≤ h/2`` -- in particular ``f(0) = F`` and the slope ``-k`` at
-        contact, which set the equilibrium -- and removes the jump.
-    thickness
-        Contact thickness ``t_c`` (mm): the law acts on ``d = distance − t_c``,
-        so two sheets rest about ``t_c`` apart (a plane, which stands for a
-        mirror-image neighbour, at ``t_c/2``).  0 is the SPEC's zero-thickness
-        law.  A positive value gives the membranes the volume real leaflets
-        have: a third leaflet cannot slide into the (force-free) seam between
-        two coapting ones at the valve centre without pushing them apart, which
-        zero-thickness sheets do freely.
-    blend_distance
-        ε (mm) of the smooth minimum over the triangles a node meets on one
-        body: ``w ∝ exp(-(d - min d)/ε)``, so that a node in a crease does
-        not jump between the two faces' normals (see
-        ``SurfaceContact._blend_weights``).
-    pairing
-        ``"two_pass"`` (default): every node is tested against every other
-        body's triangles (and its own body's, for folds) at full weight.  When
-        two pressure-loaded sheets press on each other, each feels its own
-        nodes' forces *and* the reactions of the other's nodes, so each pass
-        carries half the pressure: the sheets rest where ``f(d) = F/2``, a small
-        gap (inside the taper band, about 0.075 mm with the defaults) --
-        never a penetration, and no node can slip through a surface unseen.
-        A node pressing on a surface whose own nodes do not see it back (a free
-        edge on a belly) rests at ``d = 0``.  ``"one_pass"``: a node of body A
-        is tested against body B only if A < B (own body at half weight):
-        contact exactly at ``d = 0`` on both sides, but the second body's nodes
-        are not checked against the first body's triangles and can pass
-        through it where the surfaces are curved (seen at the valve centre).
-    crossing_stiffness
-        Stiffness ``k_x`` (mN/mm) of a barrier against the *mid-surfaces*
-        crossing (``d < -thickness``), added to the law: SPEC §5 asks for no
-        interpenetration, but its penalty ``k`` = 10 mN/mm only answers a node
-        pushed by its own pressure force.  A node pulled through a neighbour by
-        membrane tension (the taut free edge of a stiff pericardial graft near
-        a commissure: ~7 mN) would sink ~0.5 mm before ``k`` balanced it.  The
-        barrier :func:`crossing_barrier` leaves the SPEC law untouched wherever
-        the mid-surfaces have not crossed -- every equilibrium of the normal
-        valve -- and is C¹ (quadratic onset over ``crossing_width``).  0 (the
-        default, also the closure's setting) is the SPEC law alone.
-    crossing_width
-        Width (mm) of the barrier's quadratic onset.
-    """
-
-    stiffness: float = 10.0
-    cutoff: float = 0.1
-    penetration_depth: float = 0.2
-    driving_force: str = "normal"
-    min_driving_force: float = 1e-9
-    taper: float = 0.5
-    pairing: str = "two_pass"
-    blend_distance: float = 0.01
-    thickness: float = 0.0
-    crossing_stiffness: float = 0.0
-    crossing_width: float = 0.02
-
-    def __post_init__(self) -> None:
-        check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
-                    hint="0 is the SPEC law alone")
-        check_range("crossing_width", self.crossing_width, 0.0, 1.0, low_open=True, unit="mm")
-        check_range("blend_distance", self.blend_distance, 0.0, 1.0, low_open=True, unit="mm")
-        check_range("thickness", self.thickness, 0.0, 2.0, unit="mm")
-        check_range("taper", self.taper, 0.0, 1.0,
-                    hint="0 keeps the force jump at d = h, 1 fades it over the whole band")
-        if self.pairing not in PAIRINGS:
-            raise ParameterError(f"pairing = {self.pairing!r} is not one of {PAIRINGS}")
-        check_range("stiffness", self.stiffness, 0.0, low_open=True, unit="mN/mm")
-        check_range("cutoff", self.cutoff, 0.0, low_open=True, unit="mm")
-        check_range("penetration_depth", self.penetration_depth, 0.0, low_open=True, unit="mm",
-                    hint="it is the depth behind a triangle that still counts as penetration")
-        check_range("min_driving_force", self.min_driving_force, 0.0, low_open=True, unit="mN",
-                    hint="a tiny positive floor such as 1e-9 mN keeps exp(-k d / F) defined")
-        if self.driving_force not in DRIVING_FORCE_MODES:
-            raise ParameterError(
-                f"driving_force = {self.driving_force!r} is not one of {DRIVING_FORCE_MODES}"
-            )
-
-    @property
-    def search_distance(self) -> float:
-        """Padding (mm) of the bounding boxes: ``thickness + max(cutoff, penetration_depth)``."""
-        return self.thickness + max(self.cutoff, self.penetration_depth)
-
-    @property
-    def reach(self) -> float:
-        """Largest raw distance (mm) at which a surface pushes: ``thickness + cutoff``."""
-        return self.thickness + self.cutoff
-
-
-#: The SPEC §5 parameters (frozen, so safe as a default argument).
+#: The contact of the closing valve (frozen, so safe as a default argument).
 DEFAULT_PARAMETERS = ContactParameters()
 
 
@@ -280,8 +151,8 @@ def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParamete
                   ) -> np.ndarray:
     """Driving force ``F`` (mN) of nodes with external forces ``f_ext`` against sided normals.
 
-    ``"normal"``: :math:`F = \\max(-f_{ext}\\cdot n, 0)`; ``"magnitude"``:
-    :math:`F = |f_{ext}|`; both floored at ``params.min_driving_force``.
+    :math:`F = \\max(-f_{ext}\\cdot n, 0)`, the part of the pressure force pushing the node
+    into the surface, floored at ``params.min_driving_force``.
 
     Parameters
     ----------
@@ -289,10 +160,7 @@ def driving_force(f_ext: np.ndarray, normal: np.ndarray, params: ContactParamete
         ``(K, 3)`` external nodal forces (mN) and unit normals pointing to the
         side the node comes from.
     """
-    if params.driving_force == "normal":
-        F = -np.einsum("ij,ij->i", f_ext, normal)
-    else:
-        F = np.linalg.norm(f_ext, axis=1)
+    F = -np.einsum("ij,ij->i", f_ext, normal)
     return np.maximum(F, params.min_driving_force)
 
 

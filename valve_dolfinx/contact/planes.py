@@ -36,11 +36,12 @@ class PlaneContact:
         whose far side holds the sheet's mirror image (SPEC §4's one-leaflet
         reference): the law sees the distance to that image, ``d = 2δ − t_c``,
         exactly as a neighbouring sheet's node would, so the symmetric
-        reference and the full valve share one contact law.  With two-pass
-        pairing (``params.pairing``) the image's nodes would also push back on
-        the sheet's triangles; for a mirror image those reactions equal the
-        sheet's own contact forces, so the force is doubled (the sheets rest
-        where each pass carries half the load, as between leaflets).
+        reference and the full valve share one contact law.  Every node of a
+        sheet is tested against its neighbour's triangles and the other way
+        round, so the image's nodes would also push back on the sheet's
+        triangles; for a mirror image those reactions equal the sheet's own
+        contact forces, so the force is doubled (the sheets rest where each
+        pass carries half the load, as between leaflets).
     """
 
     def __init__(self, points: np.ndarray, normals: np.ndarray,
@@ -74,7 +75,7 @@ class PlaneContact:
         # d(x) = scale·δ(x) − offset: the image is at 2δ, the wall at δ
         scale = 2.0 if self.mirror else 1.0
         offset = scale * 0.5 * self.params.thickness
-        passes = 2.0 if self.mirror and self.params.pairing == "two_pass" else 1.0
+        passes = 2.0 if self.mirror else 1.0
         d = scale * d - offset
         k, i = np.nonzero(d < self.params.cutoff)                 # (node, plane) candidates
         node, normal = nodes[k], self.normals[i]

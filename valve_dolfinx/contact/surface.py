@@ -104,11 +104,10 @@ def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class _RowGeometry:
     """Per contact row, what its Jacobian terms need beyond :class:`ContactRows`: the row's
-    triangle plane (:class:`~valve_dolfinx.contact.presence.RowPlanes`), the law's pair
-    weight and the triangle's barycentric gradients."""
+    triangle plane (:class:`~valve_dolfinx.contact.presence.RowPlanes`) and the triangle's
+    barycentric gradients."""
 
     planes: RowPlanes
-    weight: np.ndarray
     plane_gradients: np.ndarray  # (A, 3, 3): g_j of the row's triangle, [j, axis]
 
 
@@ -390,20 +389,15 @@ class SurfaceContact:
         edge, d, normal, side_distance, lam_min, in_plane, presence = row_presence(
             side=s, d0=d0, gap=gap, offset=offset, plane_lam=plane_lam, plane_normal=n_tri,
             thickness=thickness, band=band, eps=eps, tapered=p.taper > 0.0, cutoff=p.cutoff)
-        keep = (d > -p.penetration_depth) & (presence > 0.0)
-        weight = self._pair_weight(node, tri)
-        keep &= weight > 0.0
-        kept = np.flatnonzero(keep)
-        node, tri, d, weight, presence, normal = (
-            v[kept] for v in (node, tri, d, weight, presence, normal))
+        kept = np.flatnonzero((d > -p.penetration_depth) & (presence > 0.0))
+        node, tri, d, presence, normal = (v[kept] for v in (node, tri, d, presence, normal))
         clock.add("narrow")
         blend = self._blend_weights(node, tri, d, presence)
         f, dfdd = law_force_from_load(d, f_ext[node], normal, p, thickness[kept])
-        f, dfdd = weight * f, weight * dfdd
         # rows with no force stay: their distance still moves the blending weights
         a = np.flatnonzero((f > 0.0) | (dfdd != 0.0) | (blend < 1.0))
-        node, tri, d, presence, normal, blend, f, dfdd, weight = (
-            v[a] for v in (node, tri, d, presence, normal, blend, f, dfdd, weight))
+        node, tri, d, presence, normal, blend, f, dfdd = (
+            v[a] for v in (node, tri, d, presence, normal, blend, f, dfdd))
         rows = kept[a]  # of the candidates
         clock.add("forces")
         group = node * len(self.body_labels) + self.triangle_body[tri]
@@ -416,8 +410,7 @@ class SurfaceContact:
             edge=edge[rows], side=s[rows], normal=n_tri[rows], lam=plane_lam[rows],
             distance=d0[rows], side_distance=side_distance[rows], in_plane=in_plane[rows],
             offset=offset[rows], lam_min=lam_min[rows], band=band[rows])
-        geometry = _RowGeometry(planes=planes, weight=weight,
-                                plane_gradients=frames.gradients(tri))
+        geometry = _RowGeometry(planes=planes, plane_gradients=frames.gradients(tri))
         return contacts, geometry
 
     def _jacobian_terms(self, x: np.ndarray, f_ext: np.ndarray, contacts: ContactRows,
@@ -435,14 +428,12 @@ class SurfaceContact:
         grad_logp = presence_gradients(B=B, normal=np.ascontiguousarray(normal), d=d, dlam=dlam,
                                        planes=g.planes, eps=eps, tapered=p.taper > 0.0,
                                        cutoff=p.cutoff)
-        grad_f = None
-        if p.driving_force == "normal":
-            # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
-            F = -np.einsum("ij,ij->i", f_ext[node], normal)
-            slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
-                                             p.stiffness, p.cutoff, p.taper)
-            slope = np.where(F > p.min_driving_force, g.weight * slope, 0.0)
-            grad_f = turning_load(dn, f_ext[node], slope)
+        # F = -f_ext·n turns with n: ∂f/∂x += ∂f/∂F · (-(∂n/∂x)ᵀ f_ext)
+        F = -np.einsum("ij,ij->i", f_ext[node], normal)
+        slope = contact_force_slope_in_F(d, np.maximum(F, p.min_driving_force),
+                                         p.stiffness, p.cutoff, p.taper)
+        slope = np.where(F > p.min_driving_force, slope, 0.0)
+        grad_f = turning_load(dn, f_ext[node], slope)
         return replace(contacts, grad_log_presence=grad_logp, grad_f=grad_f,
                        geometric=(dn, dlam))
 
@@ -560,17 +551,6 @@ class SurfaceContact:
             return present_side(d0)
         side = self.memory.lookup(node, tri, self.adjacent)
         return np.where(side != 0, side.astype(float), present_side(d0))
-
-    def _pair_weight(self, node: np.ndarray, tri: np.ndarray) -> np.ndarray:
-        """Weight of each (node, triangle) pair under the pairing rule (see ContactParameters).
-
-        ``"one_pass"``: 1 if the node's body precedes the triangle's, 0.5 within a
-        body (both halves of a fold test each other), 0 otherwise.
-        """
-        if self.params.pairing == "two_pass":
-            return np.ones(len(node))
-        nb, tb = self.node_body[node], self.triangle_body[tri]
-        return np.where(nb < tb, 1.0, np.where(nb == tb, 0.5, 0.0))
 
     def _blend_weights(self, node: np.ndarray, tri: np.ndarray, d: np.ndarray,
                        presence: np.ndarray | None = None) -> np.ndarray:

@@ -99,8 +99,7 @@ class RootParameters:
     ``free_edge_excess`` fixes the unpressurised root: d₀ = d/(1 + excess).
     ``youngs_modulus`` is the wall's secant modulus over 0-80 mmHg and
     ``wall_thickness`` its thickness (defaults and sources: module docstring).
-    ``height`` is the root segment carrying the leaflets; ``None`` = the leaflet
-    height (nadir to commissure top).  ``loaded_diameter`` (mm), when set, is the
+    ``loaded_diameter`` (mm), when set, is the
     root diameter at the loading pressure (a patient's measured root): the wall law
     is then not used.
     """
@@ -108,7 +107,6 @@ class RootParameters:
     free_edge_excess: float = 0.15
     youngs_modulus: float = 458.0
     wall_thickness: float = ASCENDING_AORTA_WALL_THICKNESS_MM
-    height: float | None = None
     loaded_diameter: float | None = None
 
     def __post_init__(self) -> None:
@@ -116,8 +114,6 @@ class RootParameters:
         check_range("root.youngs_modulus", self.youngs_modulus, 1.0, 1e6, unit="kPa",
                     hint="aortic wall moduli are 0.1-10 MPa (100-10000 kPa)")
         check_range("root.wall_thickness", self.wall_thickness, 0.05, 10.0, unit="mm")
-        if self.height is not None:
-            check_range("root.height", self.height, 0.5, 100.0, unit="mm")
         if self.loaded_diameter is not None:
             check_range("root.loaded_diameter", self.loaded_diameter, *LOADED_DIAMETER_RANGE_MM,
                         unit="mm", hint="the measured diameter of the pressurised root base; "
@@ -154,7 +150,7 @@ def distend_root(params: RootParameters, wrap_diameter: float, leaflet_height: f
     line load is evaluated there.
     """
     R0 = 0.5 * wrap_diameter / (1.0 + params.free_edge_excess)
-    L = params.height or leaflet_height
+    L = leaflet_height  # the root segment that carries the leaflets
     Et = params.youngs_modulus * params.wall_thickness
     h = 1e-4 * R0
 

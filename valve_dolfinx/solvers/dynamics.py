@@ -13,17 +13,18 @@ components per node):
 
 with lumped (vertex-quadrature) mass and damping, implicit second-order BDF
 (``TSBDF``, order 2) and adaptive step control on the local truncation error of
-the displacement only (absolute target ``error_tolerance_mm``, 0.01 mm as in
+the displacement only (absolute target :data:`ERROR_TOLERANCE_MM`, 0.01 mm as in
 the reference method; velocities are not error-controlled).  The pressure is
-ramped smoothly over ``ramp_time``.  The run stops when the displacement
+ramped smoothly over :data:`RAMP_TIME_S`.  The run stops when the displacement
 increment of the watched nodes (the middle of each leaflet's free edge) over
 one accepted step falls below ``stop_increment_mm`` (1e-5 mm) once the full
-load is on.
+load is on, and the static residual is below :data:`EQUILIBRIUM_TOLERANCE_MN`.
 
 Mass and damping are numerical devices: a steady state of the system has
 v = 0 and R(u) = 0 whatever ρ and c are, so the equilibrium does not depend on
 them (tested).  They are scaled per tissue to its stiffness,
-``c = (k_tissue/k_ref)^β · k_ref·τ/L²`` and ``ρ = c·(mass_ratio·τ)``, with
+``c = (k_tissue/k_ref)^β · k_ref·τ/L²`` and ``ρ = c·(m·τ)`` (τ = ``relaxation_time``,
+β = :data:`STIFFNESS_EXPONENT`, L = :data:`LENGTH_SCALE_MM`, m = :data:`MASS_RATIO`), with
 ``k = t·c_Fung·λmax(M)`` (:attr:`FungMaterial.stiffness_scale`), so that the
 pericardial graft -- hundreds of times stiffer in-plane than the native
 leaflet -- is not integrated with the native leaflet's time scale (SPEC §4).
@@ -59,6 +60,37 @@ fem_petsc = dolfinx.fem.petsc
 #: forces act on the momentum rows (components 3-5), depend on the displacement (0-2)
 STATE_LAYOUT = NodalLayout(block_size=6, row_offset=3, col_offset=0)
 
+#: mass time scale over τ: ``ρ = c·MASS_RATIO·τ`` (small: over-damped)
+MASS_RATIO = 0.05
+#: L (mm) in the stiffness-per-area estimate k/L² of the damping
+LENGTH_SCALE_MM = 10.0
+#: β in ``c ∝ (k_tissue/k_ref)^β`` (1: damping proportional to each tissue's stiffness)
+STIFFNESS_EXPONENT = 1.0
+#: duration (s) of the smooth-step pressure ramp
+RAMP_TIME_S = 1.0
+#: first time step (s)
+DT_INITIAL_S = 1e-3
+#: time step (s) below which the run has stalled
+DT_MIN_S = 1e-8
+#: largest time step (s)
+DT_MAX_S = 50.0
+#: simulated time limit (s)
+T_MAX_S = 1e5
+#: local truncation error target of the displacement (mm; the reference method's 0.01 mm)
+ERROR_TOLERANCE_MM = 0.01
+#: largest nodal displacement per step (mm): the next step is shortened so that no node
+#: moves further, which keeps nodes from tunnelling through a surface between two contact
+#: evaluations (the contact search only sees penetrations shallower than its window)
+MAX_INCREMENT_MM = 0.1
+#: convergence also needs the static residual (internal − pressure − contact forces at
+#: rest), max-norm over the free nodes, below this (mN): small increments alone can also
+#: mean a stalled, tiny time step
+EQUILIBRIUM_TOLERANCE_MN = 0.05
+#: limit on time steps (accepted + rejected)
+MAX_STEPS = 20000
+#: Newton iterations per step before the step is retried smaller
+NEWTON_MAX_IT = 20
+
 
 class _Stalled(RuntimeError):
     """Raised from a TS callback to stop a run whose time step fell below the floor."""
@@ -84,6 +116,8 @@ class DampedDynamicsSolver:
         ``{cell tag: k_tissue}`` (mN/mm) for the mass/damping scaling.
     watch_nodes
         Mesh node ids whose increments decide convergence.
+    params
+        Settings (damping time scale, convergence, wall-clock limit).
     hooks
         Factories ``make(coupling) -> hook`` (contact), called with the
         :class:`NodalCoupling` of the state space.
@@ -95,8 +129,7 @@ class DampedDynamicsSolver:
                  initial_displacement: fem.Function, target_pressure: float,
                  stiffness: dict[int, float], watch_nodes: Sequence[int],
                  params: DynamicsParameters | None = None,
-                 hooks: Sequence[Callable[[NodalCoupling], object]] = (),
-                 snes_options: dict | None = None):
+                 hooks: Sequence[Callable[[NodalCoupling], object]] = ()):
         self.model = model
         self.params = params or DynamicsParameters()
         self.target_pressure = float(target_pressure)
@@ -126,8 +159,7 @@ class DampedDynamicsSolver:
         self.J_mat = fem_petsc.create_matrix(self.J_form)
         self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         _, self._bc_rows = owned_bc_dofs(self.W, self.bcs)
-        self._snes_options = snes_options or {}
-        self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
+        self.report = DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
         self._ts = None
         self._progress: Callable[[dict], None] | None = None
 
@@ -156,9 +188,9 @@ class DampedDynamicsSolver:
         k_ref = min(stiffness.values())
         damping, mass = {}, {}
         for tag, k in stiffness.items():
-            c = (k / k_ref) ** p.stiffness_exponent * k_ref * p.relaxation_time / p.length_scale**2
+            c = (k / k_ref) ** STIFFNESS_EXPONENT * k_ref * p.relaxation_time / LENGTH_SCALE_MM**2
             damping[tag] = c
-            mass[tag] = c * p.mass_ratio * p.relaxation_time
+            mass[tag] = c * MASS_RATIO * p.relaxation_time
         return damping, mass
 
     def _forms(self):
@@ -185,7 +217,7 @@ class DampedDynamicsSolver:
 
     # --- PETSc TS callbacks ------------------------------------------------------------
     def _load(self, t: float) -> float:
-        xi = min(1.0, max(0.0, t / self.params.ramp_time))
+        xi = min(1.0, max(0.0, t / RAMP_TIME_S))
         return self.target_pressure * xi * xi * (3.0 - 2.0 * xi)
 
     def _set_state(self, t: float, X: PETSc.Vec, Xdot: PETSc.Vec) -> None:
@@ -196,10 +228,10 @@ class DampedDynamicsSolver:
         self.Udot.x.scatter_forward()
 
     def ifunction(self, ts, t, X, Xdot, F) -> None:
-        if ts is not None and ts.getTimeStep() < self.params.dt_min:
+        if ts is not None and ts.getTimeStep() < DT_MIN_S:
             # failed Newton solves keep cutting dt; below the floor the run has stalled
             self.report.reason = (
-                f"time step fell below the floor dt_min = {self.params.dt_min:g} s at "
+                f"time step fell below the floor {DT_MIN_S:g} s at "
                 f"t = {t:.6g} s, step {ts.getStepNumber()} (Newton kept failing; last |F| = "
                 f"{ts.getSNES().getFunctionNorm():.3g})")
             raise _Stalled(self.report.reason)
@@ -213,7 +245,6 @@ class DampedDynamicsSolver:
 
     # --- the run -------------------------------------------------------------------
     def _make_ts(self) -> PETSc.TS:
-        p = self.params
         comm = self.model.domain.comm
         DampedDynamicsSolver._count += 1
         prefix = f"valve_dyn{DampedDynamicsSolver._count}_"
@@ -224,8 +255,8 @@ class DampedDynamicsSolver:
             "ts_type": "bdf",
             "ts_bdf_order": 2,
             "ts_adapt_type": "basic",
-            "ts_adapt_dt_min": p.dt_min,
-            "ts_adapt_dt_max": p.dt_max,
+            "ts_adapt_dt_min": DT_MIN_S,
+            "ts_adapt_dt_max": DT_MAX_S,
             "ts_adapt_clip": "0.1,4.0",
             "ts_max_snes_failures": -1,
             "ts_max_step_rejections": -1,
@@ -233,10 +264,10 @@ class DampedDynamicsSolver:
             # backtracking: a node in a crease of a crumpled (wrinkled) sheet makes the
             # full Newton step cycle between two states; halving it breaks the cycle
             "snes_linesearch_type": "bt",
-            "snes_max_it": p.newton_max_it,
+            "snes_max_it": NEWTON_MAX_IT,
             # residuals are forces (mN); nodal pressure forces are ~1-10 mN, and 1e-2 mN
             # moves a node by 1e-3 mm against the contact stiffness (10 mN/mm): the path
-            # needs no more, and the equilibrium test (equilibrium_tolerance) is separate.
+            # needs no more, and the equilibrium test (EQUILIBRIUM_TOLERANCE_MN) is separate.
             # PETSc's stol ends Newton when round-off (huge shift at tiny dt) stalls |F|.
             "snes_rtol": 1e-4,
             "snes_atol": 1e-2,
@@ -254,20 +285,20 @@ class DampedDynamicsSolver:
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
         }
-        for key, value in {**defaults, **self.params.petsc_options, **self._snes_options}.items():
+        for key, value in defaults.items():
             opts[f"{prefix}{key}"] = value
         guard = self._guard
         ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
         ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
-        ts.setTimeStep(p.dt_initial)
-        ts.setMaxTime(p.t_max)
-        ts.setMaxSteps(p.max_steps)
+        ts.setTimeStep(DT_INITIAL_S)
+        ts.setMaxTime(T_MAX_S)
+        ts.setMaxSteps(MAX_STEPS)
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         atol = self.F_vec.duplicate()
         with atol.localForm() as a_local:
             arr = a_local.array.reshape(-1, 6)
-            arr[:, :3] = p.error_tolerance_mm
+            arr[:, :3] = ERROR_TOLERANCE_MM
             arr[:, 3:] = 1e30  # velocities are not error-controlled
         ts.setTolerances(rtol=0.0, atol=atol)
         ts.setFromOptions()
@@ -285,17 +316,17 @@ class DampedDynamicsSolver:
         displacement = self.coupling.displacements(self.U)
         step = np.linalg.norm(displacement - self._last_displacement, axis=1)
         largest = float(np.max(step))
-        if largest > p.max_increment_mm and self._step_dt > p.dt_min:
+        if largest > MAX_INCREMENT_MM and self._step_dt > DT_MIN_S:
             # a node moved further than the contact search can follow: redo the step shorter
             ts.rollBack()
-            ts.setTimeStep(max(p.dt_min, 0.8 * self._step_dt * p.max_increment_mm / largest))
+            ts.setTimeStep(max(DT_MIN_S, 0.8 * self._step_dt * MAX_INCREMENT_MM / largest))
             r.rejected_for_motion += 1
             return
         self._last_displacement = displacement
         self._t_prev = t
         increment = float(np.max(step[self.watch_nodes]))
-        if largest > 0.5 * p.max_increment_mm:  # keep the next step's motion bounded
-            ts.setTimeStep(min(dt, self._step_dt * p.max_increment_mm / largest))
+        if largest > 0.5 * MAX_INCREMENT_MM:  # keep the next step's motion bounded
+            ts.setTimeStep(min(dt, self._step_dt * MAX_INCREMENT_MM / largest))
         self._accept_state()
         r.steps = ts.getStepNumber()
         r.time = t
@@ -306,18 +337,18 @@ class DampedDynamicsSolver:
                  "pressure": self._load(t)}
         self._record(entry)
         elapsed = time.perf_counter() - self._t0
-        if (t >= p.ramp_time and increment < p.stop_increment_mm
-                and self.equilibrium_residual(t) < p.equilibrium_tolerance):
+        if (t >= RAMP_TIME_S and increment < p.stop_increment_mm
+                and self.equilibrium_residual(t) < EQUILIBRIUM_TOLERANCE_MN):
             r.converged, r.reason = True, (
                 f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and static residual "
-                f"< {p.equilibrium_tolerance:g} mN at t = {t:.4g} s")
+                f"< {EQUILIBRIUM_TOLERANCE_MN:g} mN at t = {t:.4g} s")
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
         elif elapsed > p.wall_time_limit_s:
             r.reason = (f"wall-clock limit {p.wall_time_limit_s:g} s reached at t = {t:.4g} s, "
                         f"step {r.steps}, dt = {dt:.3g} s, increment {increment:.3g} mm")
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-        elif dt <= p.dt_min * (1 + 1e-9):
-            r.reason = (f"time step fell to the floor dt_min = {p.dt_min:g} s at t = {t:.4g} s, "
+        elif dt <= DT_MIN_S * (1 + 1e-9):
+            r.reason = (f"time step fell to the floor {DT_MIN_S:g} s at t = {t:.4g} s, "
                         f"step {r.steps}, increment {increment:.3g} mm")
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
 
@@ -344,7 +375,7 @@ class DampedDynamicsSolver:
         X.array.reshape(-1, 6)[:, 3:] = 0.0
         Xdot = X.duplicate()
         Xdot.set(0.0)
-        t_full = max(self.params.ramp_time, self.report.time if t is None else t)
+        t_full = max(RAMP_TIME_S, self.report.time if t is None else t)
         return X, Xdot, t_full
 
     def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
@@ -356,7 +387,7 @@ class DampedDynamicsSolver:
         self._progress = progress
         self._guard = CallbackGuard(stops=(_Stalled,))
         self._t0 = time.perf_counter()
-        self.report = DynamicsReport(residual_tolerance_mN=self.params.equilibrium_tolerance)
+        self.report = DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
         self._last_displacement = self.coupling.displacements(self.U)
         self._t_prev = 0.0
         ts = self._make_ts()

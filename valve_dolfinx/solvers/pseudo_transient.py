@@ -10,19 +10,17 @@ with implicit (backward) Euler steps, PETSc TS (``beuler``) and Newton's
 method (SNES) in every step.  The step Δτ follows the residual (switched
 evolution relaxation, Mulder & van Leer 1985; Kelley & Keyes 1998):
 
-    Δτ_{n+1} = Δτ_n · clip(c·‖R_{n-1}‖₂ / ‖R_n‖₂, 1/growth_limit, growth_limit),
+    Δτ_{n+1} = Δτ_n · clip(c·‖R_{n-1}‖₂ / ‖R_n‖₂, 1/g, g),
 
-(c = ``increment``) so that far from the equilibrium the mass term ``M/Δτ`` regularises the
-singular tangent, and near it Δτ → ∞ turns the steps into Newton's method on
-the static problem.  Δτ is also limited so that no node moves further than
-``max_step_motion_mm`` in one step, and every Newton update is scaled so that
-no node moves further than ``newton_motion_mm`` between two contact
+(c = :data:`INCREMENT`, g = :data:`GROWTH_LIMIT`) so that far from the equilibrium the
+mass term ``M/Δτ`` regularises the singular tangent, and near it Δτ → ∞ turns the steps
+into Newton's method on the static problem.  Δτ is also limited so that no node moves further than
+:data:`MAX_STEP_MOTION_MM` in one step, and every Newton update is scaled so that
+no node moves further than :data:`NEWTON_MOTION_MM` between two contact
 evaluations (a line-search pre-check), which keeps nodes from tunnelling
 through a surface.  A step's Newton solve ends once its residual has fallen by
-``newton_rtol``, or, once the static residual of the accepted state is below
-``settled_residual_mN``, by ``newton_rtol_settled``.  An update that reverses the previous
-one, within a solve or from the last update of the previous accepted step, is damped
-(``newton_reversal_damping``).
+:data:`NEWTON_RTOL`.  An update that reverses the previous one, within a solve or from
+the last update of the previous accepted step, is damped (:data:`NEWTON_REVERSAL_DAMPING`).
 
 **The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
 nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
@@ -43,8 +41,8 @@ state coincide, so the equilibrium is the SPEC's.
 state — evaluated with contact sides and driving forces of that state —
 satisfies ``‖R‖∞ < residual_tolerance`` (mN) over the free degrees of freedom.
 Otherwise it stops ``converged = False`` at the step, wall-time or Δτ-floor
-limit, with the reason.  Mass, ``L`` and the step control are numerical
-devices: the equilibrium does not depend on them (tested).
+(:data:`DT_MIN`) limit, with the reason.  Mass, ``L`` and the step control are
+numerical devices: the equilibrium does not depend on them (tested).
 """
 
 from __future__ import annotations
@@ -80,6 +78,36 @@ log = logging.getLogger(__name__)
 fem = dolfinx.fem
 fem_petsc = dolfinx.fem.petsc
 
+#: first pseudo-time step (dimensionless): a node under its full pressure force moves
+#: about 0.05·L in it
+DT_INITIAL = 0.05
+#: pseudo-time step below which the run has stalled (its Newton solves kept failing, and a
+#: failed step is retried with half the Δτ)
+DT_MIN = 1e-8
+#: factor c on the residual ratio of switched evolution relaxation (PETSc's
+#: ``-ts_pseudo_increment``): Δτ still grows by it while the residual stalls
+INCREMENT = 1.2
+#: largest factor by which Δτ grows or shrinks from one step to the next
+GROWTH_LIMIT = 3.0
+#: the next Δτ is shortened so that no node is expected to move further than this in one
+#: step (mm)
+MAX_STEP_MOTION_MM = 0.5
+#: largest nodal motion of one Newton update (mm): contact is evaluated at every Newton
+#: iterate, and a shorter motion than its penetration window keeps nodes from tunnelling
+NEWTON_MOTION_MM = 0.1
+#: Newton iterations per step (``snes_max_it``; ``petsc_options`` may set another)
+NEWTON_MAX_IT = 12
+#: relative reduction of the step's residual that ends its Newton solve (``snes_rtol``)
+NEWTON_RTOL = 0.05
+#: a Newton solve whose residual norms repeat every second or third iteration to this
+#: relative tolerance has settled into a cycle and ends as failed at once, not at
+#: NEWTON_MAX_IT; the step is retried from its start, so the path does not change
+NEWTON_CYCLE_TOLERANCE = 1e-3
+#: factor on a Newton update that points back along the previous one (cosine below -0.9:
+#: the iterates jump to and fro across a kink of the residual, such as the relaxed
+#: membrane energy's taut/wrinkled switch), so that the iterate lands between the two sides
+NEWTON_REVERSAL_DAMPING = 0.5
+
 
 class _Stop(RuntimeError):
     """Raised from a TS callback to end a run whose step fell below the floor."""
@@ -98,7 +126,8 @@ class PseudoTransientSolver:
     target_pressure
         The pressure (kPa), applied in full from the first step.
     params
-        Step control.
+        Settings (tolerance, numerical mass, budgets); the step control's numbers are
+        the module's constants.
     hooks
         Factories ``make(coupling) -> hook`` of extra forces (contact, bending),
         called with the :class:`NodalCoupling` of ``model.V``; a hook has
@@ -190,9 +219,9 @@ class PseudoTransientSolver:
             self.udot.x.scatter_forward()
 
     def ifunction(self, ts, t, X, Xdot, F) -> None:
-        if ts is not None and ts.getTimeStep() < self.params.dt_min:
+        if ts is not None and ts.getTimeStep() < DT_MIN:
             self.report.reason = (
-                f"pseudo-time step fell below dt_min = {self.params.dt_min:g} at step "
+                f"pseudo-time step fell below {DT_MIN:g} at step "
                 f"{ts.getStepNumber()} (Newton kept failing; last |R| = "
                 f"{self.report.residual_mN:.3g} mN)")
             raise _Stop(self.report.reason)
@@ -218,30 +247,12 @@ class PseudoTransientSolver:
 
     def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """Line-search pre-check: scale the Newton update so that no node moves further
-        than ``newton_motion_mm``, then damp it if it reverses the previous one
-        (``newton_reversal_damping``)."""
+        than :data:`NEWTON_MOTION_MM`, then damp it if it reverses the previous one
+        (:data:`NEWTON_REVERSAL_DAMPING`)."""
         motion = self._largest_node_motion(y.array_r)
-        cap = self.params.newton_motion_mm
-        if motion > cap:
-            y.scale(cap / motion)
+        if motion > NEWTON_MOTION_MM:
+            y.scale(NEWTON_MOTION_MM / motion)
         self._reversals(self._snes.getIterationNumber(), y)
-
-    def _predict(self, snes: PETSc.SNES, x: PETSc.Vec) -> None:
-        """SNES initial guess: the accepted state ``x`` moved on by the last accepted step's
-        motion times the ratio of this step's Δτ to that step's, scaled down so that no
-        node moves further than ``predictor_motion_mm`` (a failed step's retry, with half
-        the Δτ, starts from half the prediction)."""
-        if self._last_step is None:
-            return
-        motion, dt = self._last_step
-        guess = motion * (self._ts.getTimeStep() / dt)
-        largest = self._largest_node_motion(guess)
-        cap = self.params.predictor_motion_mm
-        if largest > cap:
-            guess *= cap / largest
-        guess[self._bc_local] = 0.0
-        with x.localForm() as local:
-            local.array[:len(guess)] += guess
 
     def _largest_node_motion(self, owned: np.ndarray) -> float:
         local = owned.reshape(-1, 3)
@@ -277,8 +288,8 @@ class PseudoTransientSolver:
             "ts_adapt_scale_solve_failed": 0.5,
             "snes_type": "newtonls",
             "snes_linesearch_type": "basic",
-            "snes_max_it": p.newton_max_it,
-            "snes_rtol": p.newton_rtol,
+            "snes_max_it": NEWTON_MAX_IT,
+            "snes_rtol": NEWTON_RTOL,
             "snes_atol": 0.2 * p.residual_tolerance,
             "snes_stol": 0.0,
             "snes_divergence_tolerance": -1,
@@ -293,15 +304,13 @@ class PseudoTransientSolver:
         ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
         ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
         ts.setTime(0.0)
-        ts.setTimeStep(p.dt_initial)
+        ts.setTimeStep(DT_INITIAL)
         ts.setMaxTime(1e300)
         ts.setMaxSteps(p.max_steps)
         ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
         ts.setFromOptions()
         self._ts, self._snes = ts, ts.getSNES()
         ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
-        if p.predictor_motion_mm > 0.0:
-            ts.getSNES().setInitialGuess(guard.wrap(self._predict))
         ts.getSNES().setMonitor(guard.wrap(self._cycles))
         ts.setPostStep(guard.wrap(self._post_step))
         return ts
@@ -309,12 +318,8 @@ class PseudoTransientSolver:
     def _post_step(self, ts: PETSc.TS) -> None:
         p, r = self.params, self.report
         self._laps.start()
-        solution = ts.getSolution().array_r.copy()
         dt = ts.getTimeStep()
-        # the owned dofs' motion over this step, for the next step's predictor
-        self._last_step = (solution - self._accepted, dt)
-        self._accepted = solution
-        self.u.x.petsc_vec.array[:] = solution
+        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()
         displacement = self.coupling.displacements(self.u)
         step = np.linalg.norm(displacement - self._last_displacement, axis=1)
@@ -328,8 +333,7 @@ class PseudoTransientSolver:
                 accept(self.u)
         self._reversals.carry_over()  # a cycle across steps is damped as one within a solve
         self._laps("post_step")  # the static residual's assembly keeps its own laps
-        r_inf, r_two = self.static_residual()  # at the pressure the step was solved at
-        self.model.pressure.value = self._ramped_pressure(ts.getStepNumber())
+        r_inf, r_two = self.static_residual()
         r.steps = ts.getStepNumber()
         r.time = ts.getTime()
         r.newton_iterations += ts.getSNES().getIterationNumber()
@@ -349,7 +353,7 @@ class PseudoTransientSolver:
             self._progress(entry)
         self._laps("post_step")
         elapsed = time.perf_counter() - self._t0
-        if r_inf < p.residual_tolerance and ts.getStepNumber() >= p.pressure_ramp_steps:
+        if r_inf < p.residual_tolerance:
             r.converged = True
             r.reason = (f"static residual {r_inf:.3g} mN < {p.residual_tolerance:g} mN after "
                         f"{r.steps} pseudo-time steps, {r.newton_iterations} Newton iterations")
@@ -361,21 +365,12 @@ class PseudoTransientSolver:
             ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
             return
         # switched evolution relaxation, bounded growth, bounded nodal motion
-        ratio = p.increment * self._r_prev / r_two if r_two > 0 else p.growth_limit
-        new_dt = dt * min(max(ratio, 1.0 / p.growth_limit), p.growth_limit)
+        ratio = INCREMENT * self._r_prev / r_two if r_two > 0 else GROWTH_LIMIT
+        new_dt = dt * min(max(ratio, 1.0 / GROWTH_LIMIT), GROWTH_LIMIT)
         if motion > 0.0:
-            new_dt = min(new_dt, dt * p.max_step_motion_mm / motion)
+            new_dt = min(new_dt, dt * MAX_STEP_MOTION_MM / motion)
         self._r_prev = r_two
-        ts.setTimeStep(min(max(new_dt, p.dt_min), p.dt_max))
-        if p.settled_residual_mN > 0.0:  # once the valve has settled, a step's solve ends sooner
-            settled = r_inf < p.settled_residual_mN
-            ts.getSNES().setTolerances(rtol=p.newton_rtol_settled if settled else p.newton_rtol)
-
-    def _ramped_pressure(self, step: int) -> float:
-        """The pressure of the step after ``step`` accepted ones: the target reached in
-        ``pressure_ramp_steps`` equal increments (0: the target from the first step)."""
-        n = self.params.pressure_ramp_steps
-        return self.target_pressure * (1.0 if n <= 0 else min(1.0, (step + 1) / n))
+        ts.setTimeStep(max(new_dt, DT_MIN))
 
     def solve(self, progress: Callable[[dict], None] | None = None) -> SolveReport:
         """Step to the static equilibrium; never raises because the solve failed.
@@ -385,15 +380,13 @@ class PseudoTransientSolver:
         """
         self._progress = progress
         self._guard = CallbackGuard(stops=(_Stop,))
-        self._cycles = NewtonCycleStop(self.params.newton_cycle_tolerance)
-        self._reversals = NewtonReversalDamping(self.params.newton_reversal_damping)
+        self._cycles = NewtonCycleStop(NEWTON_CYCLE_TOLERANCE)
+        self._reversals = NewtonReversalDamping(NEWTON_REVERSAL_DAMPING)
         self._t0 = time.perf_counter()
         self._laps = Laps()
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
-        self.model.pressure.value = self._ramped_pressure(0)
+        self.model.pressure.value = self.target_pressure
         self._last_displacement = self.coupling.displacements(self.u)
-        self._accepted = self.u.x.petsc_vec.array_r.copy()  # owned dofs, last accepted
-        self._last_step = None  # (owned dofs' motion, Δτ) of the last accepted step
         _, self._r_prev = self.static_residual()
         ts = self._make_ts()
         X = self.u.x.petsc_vec.copy()
@@ -412,12 +405,6 @@ class PseudoTransientSolver:
                                   f"{ts.getStepNumber()} steps (max_steps = "
                                   f"{self.params.max_steps}): static residual "
                                   f"{self.report.residual_mN:.3g} mN")
-        if not self.report.converged and ts.getStepNumber() < self.params.pressure_ramp_steps:
-            # whatever stopped it, say that the target pressure was never reached
-            self.report.reason += (
-                f", during the pressure ramp ({self.model.pressure.value:.3g} of "
-                f"{self.target_pressure:.3g} kPa; pressure_ramp_steps = "
-                f"{self.params.pressure_ramp_steps})")
         self.report.count_rejections(ts)
         self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.u.x.scatter_forward()

@@ -63,7 +63,7 @@ class DynamicsReport(SolveReport):
     """:class:`SolveReport` of the damped dynamics, with its step-motion control.
 
     ``rejected_for_motion`` counts steps retried because a node would have moved further
-    than ``max_increment_mm``.
+    than :data:`~valve_dolfinx.solvers.dynamics.MAX_INCREMENT_MM`.
     """
 
     rejected_for_motion: int = 0
