@@ -10,7 +10,7 @@ The expected numbers come from outside the code:
 * the full three-leaflet valve agrees with its one-leaflet symmetry-plane reference.
 
 The clinical 3-4 mm central coaptation of a normal valve (Swanson & Clark 1974) is
-compared, not asserted: docs/numerics.md reports where the model lands and why.
+compared, not asserted: docs/verification.md reports where the model lands and why.
 """
 
 from __future__ import annotations
@@ -313,7 +313,7 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
     """The normal valve seals, and its coaptation region agrees with the one-leaflet
     reference (SPEC §4): the areas of the three regions within 2 %.  (The minimum height
     sits at the triple-point tip, where the planes and the neighbouring leaflets hold the
-    tip differently; docs/numerics.md reports both.)"""
+    tip differently; docs/model.md §3 reports both.)"""
     _, fields, *_ = default_mesh_cases["normal"]
     _, reference, *_ = default_mesh_cases["reference"]
     assert fields["regurgitant_orifice_area_mm2"] == 0.0

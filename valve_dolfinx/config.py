@@ -218,8 +218,8 @@ class CaseConfig:
     ``bending_modulus_kpa`` gives the native leaflets their flexural rigidity
     ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
     gives the slack free-edge tip at the triple point a length scale instead of a fold
-    at the scale of the mesh (docs/model.md §3; its effect on the figure of merit:
-    docs/numerics.md §7).  ``graft_bending_modulus_kpa`` is the graft's own, with the
+    at the scale of the mesh (docs/model.md §3, with its effect on the figure of
+    merit).  ``graft_bending_modulus_kpa`` is the graft's own, with the
     graft's thickness: fixed pericardium carries compression by bending.
     ``graft_tension_field`` chooses how the graft carries compression: the tension-field
     relaxed energy (the default: it wrinkles at no compressive stress, held by its bending

@@ -3,8 +3,7 @@
 The leaflets are membranes (SPEC §4), but a membrane's slack free edge has no
 stiffness against folding: at the triple point, where the three free edges
 meet, the last millimetre of each free edge folds one way or another at the
-scale of the mesh, held by nothing but contact, and the three-leaflet valve
-does not converge without bending (docs/numerics.md).  A real leaflet has
+scale of the mesh, held by nothing but contact (docs/model.md §3).  A real leaflet has
 a flexural rigidity ``D = E_b·t³/12``; this module adds it as the energy of a
 plate whose stress-free state is the flat leaflet,
 
