@@ -72,11 +72,11 @@ PATHS: tuple[StudyPath, ...] = (
               "laid over the closed native leaflet it replaces", start=START_FROM_NORMAL),
     StudyPath(2, "from the open valve", "the slack graft is first bulged 2 mm towards the "
               "valve axis on the unloaded valve and closes with the native leaflets from "
-              "there (coarse mesh first, then the case's own)",
+              "there",
               {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0}),
     StudyPath(3, "from the open valve, conformal", "the slack graft is first laid onto the "
               "native leaflet's wrapped surface on the unloaded valve and closes from there "
-              "(coarse mesh first; what `valve-dolfinx run` does)",
+              "(what `valve-dolfinx run` does)",
               {"geometry.graft_placement": "conformal"}),
 )
 
