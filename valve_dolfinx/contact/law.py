@@ -22,7 +22,7 @@ import logging
 
 import numpy as np
 
-from valve_dolfinx.config import ContactParameters
+from valve_dolfinx.contact_parameters import ContactParameters
 
 __all__ = [
     "ContactParameters", "contact_force", "DEFAULT_PARAMETERS", "contact_force_slope_in_F",

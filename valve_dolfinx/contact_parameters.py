@@ -1,0 +1,118 @@
+"""The contact law's parameters as data (SPEC §5): the configuration's ``[contact]`` table.
+
+A leaf module: :mod:`valve_dolfinx.config` takes the parameter set from here as one of a
+case's sections, and :mod:`valve_dolfinx.contact` takes it to evaluate the law, so neither
+imports the other for it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from valve_dolfinx.exceptions import check_range
+
+__all__ = ["ContactParameters"]
+
+#: ``metadata`` of a field that is a fixed number of the law, not a setting
+#: (:data:`valve_dolfinx.config.NOT_A_SETTING`)
+_FIXED = {"setting": False}
+
+
+@dataclass(frozen=True, slots=True)
+class ContactParameters:
+    """Parameters of the penalty contact (SPEC §5; :mod:`valve_dolfinx.contact.law`).
+
+    ``stiffness``, ``cutoff``, ``thickness`` and ``crossing_stiffness`` are settings (the
+    configuration's ``[contact]`` table).  The other fields are fixed numbers of the law
+    (:data:`~valve_dolfinx.config.NOT_A_SETTING`): every case uses their defaults; the
+    tests of the literal SPEC law set others.
+
+    Attributes
+    ----------
+    stiffness
+        Penalty stiffness ``k`` in mN/mm (SPEC: 10 N/m = 10 mN/mm).
+    cutoff
+        Distance ``h`` in mm beyond which a surface exerts no force (SPEC: 0.1 mm).
+    thickness
+        Contact thickness ``t_c`` (mm): the law acts on ``d = distance − t_c``,
+        so two sheets rest about ``t_c`` apart (a plane, which stands for a
+        mirror-image neighbour, at ``t_c/2``); the default 0.25 mm puts each leaflet's
+        contact surface 0.125 mm off its mid-surface.  0 is the SPEC's zero-thickness
+        law.  A positive value gives the membranes the volume real leaflets have: a
+        third leaflet cannot slide into the (force-free) seam between two coapting ones
+        at the valve centre without pushing them apart, which zero-thickness sheets do
+        freely.
+    crossing_stiffness
+        Stiffness ``k_x`` (mN/mm) of a barrier against the *mid-surfaces*
+        crossing (``d < -thickness``), added to the law: SPEC §5 asks for no
+        interpenetration, but its penalty ``k`` = 10 mN/mm only answers a node
+        pushed by its own pressure force.  A node pulled through a neighbour by
+        membrane tension (the taut free edge of a stiff pericardial graft near
+        a commissure: ~7 mN) would sink ~0.5 mm before ``k`` balanced it.  The
+        barrier (:func:`~valve_dolfinx.contact.law.crossing_barrier`) leaves the SPEC
+        law untouched wherever the mid-surfaces have not crossed -- every equilibrium
+        of the normal valve -- and is C¹ (quadratic onset over ``crossing_width``).
+        0 is the SPEC law alone.
+    penetration_depth
+        How far behind a triangle (mm) a node is still treated as penetrating
+        it.  Nodes further behind are taken to belong to the other side of the
+        (thin) sheet and are ignored.  Must exceed the largest penetration the
+        solver can produce in one step.
+    blend_distance
+        ε (mm) of the smooth minimum over the triangles a node meets on one
+        body: ``w ∝ exp(-(d - min d)/ε)``, so that a node in a crease does
+        not jump between the two faces' normals (see
+        ``SurfaceContact._blend_weights``).
+    taper
+        Fraction of the cut-off band ``[0, h)`` over whose outer part the
+        exponential branch is faded smoothly to zero (a C¹ smoothstep on
+        ``[(1 - taper)·h, h]``).  ``0`` is the literal SPEC law, whose force jumps
+        from ``F·e^{-kh/F}`` to 0 at ``d = h``; with nodal pressure forces of a
+        few mN that jump is several mN, and an implicit solver sees a
+        discontinuous residual there: Newton fails repeatedly and the adaptive
+        time step collapses.  0.5 leaves the law untouched for
+        ``d ≤ h/2`` -- in particular ``f(0) = F`` and the slope ``-k`` at
+        contact, which set the equilibrium -- and removes the jump.
+    min_driving_force
+        Floor on the driving force ``F`` in mN (the part of the node's pressure force
+        pushing it into the surface), so that :math:`e^{-kd/F}` stays defined when no
+        pressure acts; with the floor the law reduces to a pure penalty
+        :math:`-k d` behind the surface and (numerically) zero in front of it.
+    crossing_width
+        Width (mm) of the crossing barrier's quadratic onset.
+    """
+
+    stiffness: float = 10.0
+    cutoff: float = 0.1
+    thickness: float = 0.25
+    crossing_stiffness: float = 1000.0
+    penetration_depth: float = field(default=0.3, metadata=_FIXED)
+    blend_distance: float = field(default=0.05, metadata=_FIXED)
+    taper: float = field(default=0.5, metadata=_FIXED)
+    min_driving_force: float = field(default=1e-9, metadata=_FIXED)
+    crossing_width: float = field(default=0.02, metadata=_FIXED)
+
+    def __post_init__(self) -> None:
+        check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
+                    hint="0 is the SPEC law alone")
+        check_range("crossing_width", self.crossing_width, 0.0, 1.0, low_open=True, unit="mm")
+        check_range("blend_distance", self.blend_distance, 0.0, 1.0, low_open=True, unit="mm")
+        check_range("thickness", self.thickness, 0.0, 2.0, unit="mm")
+        check_range("taper", self.taper, 0.0, 1.0,
+                    hint="0 keeps the force jump at d = h, 1 fades it over the whole band")
+        check_range("stiffness", self.stiffness, 0.0, low_open=True, unit="mN/mm")
+        check_range("cutoff", self.cutoff, 0.0, low_open=True, unit="mm")
+        check_range("penetration_depth", self.penetration_depth, 0.0, low_open=True, unit="mm",
+                    hint="it is the depth behind a triangle that still counts as penetration")
+        check_range("min_driving_force", self.min_driving_force, 0.0, low_open=True, unit="mN",
+                    hint="a tiny positive floor such as 1e-9 mN keeps exp(-k d / F) defined")
+
+    @property
+    def search_distance(self) -> float:
+        """Padding (mm) of the bounding boxes: ``thickness + max(cutoff, penetration_depth)``."""
+        return self.thickness + max(self.cutoff, self.penetration_depth)
+
+    @property
+    def reach(self) -> float:
+        """Largest raw distance (mm) at which a surface pushes: ``thickness + cutoff``."""
+        return self.thickness + self.cutoff
