@@ -506,6 +506,8 @@ def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli):
     assert float(d21["margin_mm"]) == pytest.approx(margin(14, 13, 21, 200, 2))
     assert d21["limiting_member"] == "path 2 (billowed)"
     assert float(d21["target_mm"]) == pytest.approx(2.5)
+    assert float(d21["normal_min_coaptation_mm"]) == pytest.approx(2.5)
+    assert d21["normal_competent"] == d22["normal_competent"] == "true"
     assert d22["recommended"] == "" and d22["graft_width_pct"] == ""
     assert d22["best"] == "W14/H13"
     assert float(d22["shortfall_mm"]) == pytest.approx(-margin(14, 13, 22, 200, 2))
@@ -553,6 +555,9 @@ def test_nomogram_on_real_closures(tmp_path, quiet_cli):
                    and normal["converged"] == "true"
                    and float(graft["min_coaptation_height_mm"])
                    >= float(normal["min_coaptation_height_mm"]))
+        assert float(row["normal_min_coaptation_mm"]) == float(
+            normal["min_coaptation_height_mm"])
+        assert row["normal_competent"] == normal["competent"]
         assert row["recommended"] == ("W21/H27" if reaches else "") == (rec["recommended"]
                                                                          or "")
         if reaches:

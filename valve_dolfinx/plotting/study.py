@@ -210,13 +210,25 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     return save_figure(fig, path, dpi=130)
 
 
+def _normal_words(row: dict) -> str:
+    """The normal valve under a nomogram's diameter: its minimum coaptation height, and
+    whether it leaks (then the target it sets is no standard for a repair)."""
+    height = row.get("normal_min_coaptation_mm")
+    if height is None:
+        return ""
+    leaks = "" if row.get("normal_competent") in (True, None) else "\nnot competent"
+    return f"\nnormal\n{height:.2f} mm{leaks}"
+
+
 def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
                   footnote: str):
     """Recommended graft enlargements (top) and margin (bottom) against the loaded root
     diameter; ``rows`` are :func:`valve_dolfinx.study.nomogram.nomogram_rows`.
 
     A diameter where no graft on the grid qualifies is shaded, with the best graft's
-    enlargements hollow and its margin (negative: its shortfall) in vermillion."""
+    enlargements hollow and its margin (negative: its shortfall) in vermillion; under each
+    diameter, the normal valve's minimum coaptation height (the target) and whether it
+    is competent."""
     d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
     ok = np.array([bool(r["recommended"]) for r in rows], dtype=bool)
 
@@ -273,7 +285,9 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     low.set_ylim(lo - 0.2 * span, hi + 0.7 * span)  # room for the numbers and legend
     low.set_ylabel("margin (mm)")
     low.set_xlabel("loaded root diameter at 80 mmHg (mm)")
-    low.set_xticks(d, [f"{x:g}" for x in d])
+    low.set_xticks(d, [f"{x:g}" + _normal_words(r) for x, r in zip(d, rows, strict=True)])
+    for label in low.get_xticklabels():
+        label.set_fontsize(8)
     low.legend(fontsize=8, loc="upper left")
     notes.set_axis_off()
     notes.text(0.0, 1.0, footnote, fontsize=7, va="top", ha="left", wrap=True,

@@ -31,11 +31,14 @@ NOMOGRAM_KEY = "root.loaded_diameter"
 #: the columns of ``nomogram.csv``: the diameter; the recommended graft, its enlargements,
 #: flat area, margin (mm) and limiting member, its worst-case minimum coaptation height and
 #: the limiting member's target; when none qualifies, the best graft, its enlargements and
-#: shortfall (mm); and the number of members of each cell
+#: shortfall (mm); the number of members of each cell; and the normal valve at that
+#: diameter: its minimum coaptation height (mm) and whether it is competent (a normal valve
+#: that leaks sets a target no repair should be measured against)
 NOMOGRAM_COLUMNS = (
     "root_loaded_diameter_mm", "recommended", "graft_width_pct", "graft_height_pct",
     "flat_area_ratio", "margin_mm", "limiting_member", "min_coaptation_height_mm",
     "target_mm", "best", "best_width_pct", "best_height_pct", "shortfall_mm", "members",
+    "normal_min_coaptation_mm", "normal_competent",
 )
 
 
@@ -46,10 +49,15 @@ def is_nomogram(layout: StudyLayout) -> bool:
             and all(isinstance(v, float) for v in compared[0].values))
 
 
-def nomogram_rows(recommendations: Sequence[Recommendation]) -> list[dict]:
-    """One row per diameter (:data:`NOMOGRAM_COLUMNS`), in the order given."""
+def nomogram_rows(recommendations: Sequence[Recommendation],
+                  results: Sequence[dict] = ()) -> list[dict]:
+    """One row per diameter (:data:`NOMOGRAM_COLUMNS`), in the order given; the normal
+    valve's columns come from the study's result rows ``results`` (empty without them)."""
+    normals = {row.get(NOMOGRAM_KEY): row for row in results
+               if row.get("graft_width_pct") is None and row.get("status") == "finished"}
     rows = []
     for rec in recommendations:
+        normal = normals.get(rec.comparison[NOMOGRAM_KEY], {})
         chosen, best = rec.cell(rec.recommended), rec.cell(rec.best)
         limit = rec.limiting_member
         rows.append({
@@ -67,6 +75,8 @@ def nomogram_rows(recommendations: Sequence[Recommendation]) -> list[dict]:
             "best_height_pct": best.height_pct if best else None,
             "shortfall_mm": rec.shortfall_mm,
             "members": len(rec.members),
+            "normal_min_coaptation_mm": normal.get("min_coaptation_height_mm"),
+            "normal_competent": normal.get("competent"),
         })
     return rows
 
@@ -90,7 +100,8 @@ def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],
              f" % of the native leaflet) along {len(layout.paths)} numerical path(s) ({paths})"
              + (f"; {uncertain}" if uncertain else "") + ".",
              f"Recommended: the smallest graft (flat area) that converges, seals and reaches the "
-             f"target ({source}) in every member; margin = least height minus target.",
+             f"target ({source}) in every member; margin = least height minus target; under each "
+             "diameter, the normal valve's minimum coaptation height.",
              f"Mesh {mesh if mesh is not None else '?'} mm, "
              f"{pressure if pressure is not None else '?'} mmHg, valve_dolfinx "
              f"{(first.get('versions') or {}).get('valve_dolfinx', '?')}."]
@@ -101,7 +112,7 @@ def write_nomogram(out: Path, recommendations: Sequence[Recommendation], layout:
                    rows: Sequence[dict]) -> list[Path]:
     """Write ``nomogram.csv`` and ``nomogram.png`` into ``out``; the files written."""
     out = Path(out)
-    table = nomogram_rows(recommendations)
+    table = nomogram_rows(recommendations, rows)
     csv_path = write_csv(out / "nomogram.csv", table, NOMOGRAM_COLUMNS)
     png = out / "nomogram.png"
     plot_nomogram(table, png, title="Pericardial graft sizing nomogram: the smallest graft "
