@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
+from valve_dolfinx.study.recommend import shortfall_digits
 
 __all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
 
@@ -189,7 +190,8 @@ class PlanRecommendation:
         if self.closest is None:
             return f"{text} No graft case produced a coaptation height."
         if self.shortfall_mm is not None and self.shortfall_mm > 0:
-            short = f", {self.shortfall_mm:.2f} mm short in its worst member{where}"
+            d = shortfall_digits(self.shortfall_mm)
+            short = f", {self.shortfall_mm:.{d}f} mm short in its worst member{where}"
         else:
             state = next((g.state for g in self.grafts if g.graft == self.closest), "")
             short = f" ({state})" if state else ""

@@ -42,7 +42,7 @@ from typing import Any
 from valve_dolfinx.result import leaflets_cross
 
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
-           "flat_area_ratio", "cell_state"]
+           "flat_area_ratio", "cell_state", "shortfall_digits"]
 
 FIGURE = "min_coaptation_height_mm"
 #: the normal valve's figure, as the target says where it comes from
@@ -308,7 +308,7 @@ def cell_state(cell: CellSummary) -> str:
     return ", ".join(parts) or f"not sealed in {len(cell.incompetent)} of {n} members"
 
 
-def _digits(shortfall: float) -> int:
+def shortfall_digits(shortfall: float) -> int:
     """Decimals that show a shortfall (one that rounds to 0.00 mm is shown where it shows)."""
     return 2 if shortfall >= 0.005 else max(3, 1 - math.floor(math.log10(max(shortfall,
                                                                               1e-12))))
@@ -342,7 +342,7 @@ def _best_text(rec: Recommendation, best: CellSummary | None) -> str:
                 f"not converge; give --target-coaptation). The best graft is **{best.label}** "
                 f"({cell_state(best)}): {best.worst_height_mm:.2f} mm at worst.")
     short = rec.shortfall_mm
-    d = _digits(abs(short))
+    d = shortfall_digits(abs(short))
     limit = best.limiting_member
     if short <= 0:  # high enough everywhere, but not sound
         where = "" if n == 1 else " in every member"
