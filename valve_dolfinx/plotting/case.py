@@ -16,7 +16,7 @@ import numpy as np
 
 from valve_dolfinx.plotting.flat import plot_coaptation_map
 from valve_dolfinx.plotting.orifice import plot_orifice_map
-from valve_dolfinx.plotting.scene import plot_gap_3d, plot_valve_3d
+from valve_dolfinx.plotting.scene import ViewRenderer, plot_gap_3d, plot_valve_3d
 from valve_dolfinx.plotting.sections import plot_cross_sections, plot_cut_planes
 from valve_dolfinx.plotting.style import key_numbers
 
@@ -71,31 +71,18 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     """
     out = Path(out)
     name = case_label(result) + (" (one leaflet and its mirror images)" if mirrored else "")
-    numbers = key_numbers(result)
     orifice = getattr(coaptation, "orifice", None) if coaptation is not None else None
-    written = []
-
-    def title(what: str) -> str:
-        return f"{name}: {what}\n{numbers}"
-
-    closed = _closed(result)
-    for file, view, what in (("closed_valve.png", "iso", f"{closed}, oblique from the aorta"),
-                             ("closed_valve_aortic.png", "aortic", f"{closed}, from the aorta"),
-                             ("closed_valve_ventricular.png", "ventricular",
-                              f"{closed}, from the ventricle")):
-        plot_valve_3d(positions, valve, out / file, view=view, title=title(what),
-                      orifice=orifice)
-        written.append(out / file)
+    coapted = coaptation is not None and len(valve.leaflets) > 1
+    written = _write_views(out, positions, valve, coaptation if coapted else None, result,
+                           name, orifice)
     plot_cut_planes(positions, valve, out / "cut_planes.png", title=name, result=result)
     plot_cross_sections(positions, valve, out / "cross_sections.png", title=name,
                         result=result, orifice=orifice)
     written += [out / "cut_planes.png", out / "cross_sections.png"]
-    if coaptation is not None and len(valve.leaflets) > 1:
-        plot_gap_3d(positions, valve, coaptation, out / "coaptation_gap.png",
-                    title=title("gap to the nearest other leaflet"))
+    if coapted:
         plot_coaptation_map(coaptation, valve, out / "coaptation_map.png", title=name,
                             result=result)
-        written += [out / "coaptation_gap.png", out / "coaptation_map.png"]
+        written.append(out / "coaptation_map.png")
         if orifice is not None:
             plot_orifice_map(orifice, valve, out / "orifice_map.png",
                              title=f"{name}: regurgitant orifice, seen along the axis "
@@ -103,6 +90,30 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
             written.append(out / "orifice_map.png")
     for path in written:
         log.debug("wrote %s", path)
+    return written
+
+
+def _write_views(out: Path, positions: np.ndarray, valve, coaptation, result, name: str,
+                 orifice: dict | None) -> list[Path]:
+    """The 3-D figures of a case, in one off-screen window closed before the 2-D ones are
+    drawn; the gap view only if ``coaptation`` is given."""
+    numbers = key_numbers(result)
+    closed = _closed(result)
+    written = []
+    with ViewRenderer() as views:
+        for file, view, what in (("closed_valve.png", "iso", "oblique from the aorta"),
+                                 ("closed_valve_aortic.png", "aortic", "from the aorta"),
+                                 ("closed_valve_ventricular.png", "ventricular",
+                                  "from the ventricle")):
+            plot_valve_3d(positions, valve, out / file, view=view,
+                          title=f"{name}: {closed}, {what}\n{numbers}", orifice=orifice,
+                          views=views)
+            written.append(out / file)
+        if coaptation is not None:
+            plot_gap_3d(positions, valve, coaptation, out / "coaptation_gap.png",
+                        title=f"{name}: gap to the nearest other leaflet\n{numbers}",
+                        views=views)
+            written.append(out / "coaptation_gap.png")
     return written
 
 
@@ -120,10 +131,11 @@ def draw_closed_views(case_folder: str | Path, out: str | Path) -> tuple[Path, P
     name = case_label(case.result)
     numbers = key_numbers(case.result)
     written = []
-    for view, what in (("aortic", "from the aorta"), ("ventricular", "from the ventricle")):
-        path = Path(out) / f"{Path(case_folder).name}_{view}.png"
-        plot_valve_3d(case.positions, case.valve, path, view=view,
-                      title=f"{name}: {_closed(case.result)}, {what}\n{numbers}",
-                      orifice=coaptation.orifice)
-        written.append(path)
+    with ViewRenderer() as views:
+        for view, what in (("aortic", "from the aorta"), ("ventricular", "from the ventricle")):
+            path = Path(out) / f"{Path(case_folder).name}_{view}.png"
+            plot_valve_3d(case.positions, case.valve, path, view=view,
+                          title=f"{name}: {_closed(case.result)}, {what}\n{numbers}",
+                          orifice=coaptation.orifice, views=views)
+            written.append(path)
     return written[0], written[1]

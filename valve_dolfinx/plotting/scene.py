@@ -1,4 +1,4 @@
-"""3-D views of the valve with PyVista, each in its own off-screen plotter.
+"""3-D views of the valve with PyVista, rendered off screen.
 
 Views (``view``): ``"iso"`` (oblique, from the aortic side), ``"side"`` (lower,
 nearer the side: the open valve's shape), ``"aortic"``
@@ -12,13 +12,18 @@ the leaflets in the axial views.
 The figure functions return the rendered picture as an ``(h, w, 3)`` array
 (show it with ``PIL.Image.fromarray`` or ``matplotlib``'s ``imshow``) and write
 it to ``path`` if one is given; :func:`valve_plotter` returns the plotter
-itself, to render or explore interactively.  PyVista's global settings are
-never changed: every plotter is created with ``off_screen`` set explicitly.
+itself, to render or explore interactively.  A :class:`ViewRenderer` passed as
+``views`` draws several figures in one off-screen window, which saves each
+figure the creation of a window and an OpenGL context.  PyVista's global
+settings are never changed: every plotter is created with ``off_screen`` set
+explicitly.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -29,10 +34,12 @@ from valve_dolfinx.plotting.style import (
     SEQUENTIAL_CMAP,
     leaflet_colour,
     leaflet_label,
+    save_picture,
 )
 
 __all__ = ["VIEWS", "SCALE_BAR_MM", "GAP_RANGE_MM", "pyvista_surface", "node_gap",
-           "orifice_surface", "valve_plotter", "render", "plot_valve_3d", "plot_gap_3d"]
+           "orifice_surface", "valve_plotter", "render", "ViewRenderer", "plot_valve_3d",
+           "plot_gap_3d"]
 
 log = logging.getLogger(__name__)
 
@@ -207,47 +214,110 @@ def valve_plotter(positions: np.ndarray, valve, *, view: str = "iso", title: str
 
 def render(plotter, path: str | Path | None = None) -> np.ndarray:
     """The plotter's picture ``(h, w, 3)``, written to ``path`` if given; closes the plotter."""
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-    image = plotter.screenshot(None if path is None else str(path), return_img=True)
+    image = plotter.screenshot(None, return_img=True)
     plotter.close()
+    return _written(image, path)
+
+
+def _written(image: np.ndarray, path: str | Path | None) -> np.ndarray:
     if path is not None:
-        log.debug("wrote %s", path)
+        save_picture(image, path)
     return image
+
+
+class ViewRenderer:
+    """One off-screen window that renders picture after picture.
+
+    Each :meth:`picture` empties the scene (its lights stay), lets ``draw`` fill
+    it without rendering after every addition, and renders once.  Use it as a
+    context manager, or call :meth:`close`.
+    """
+
+    def __init__(self) -> None:
+        self._plotter = None
+
+    def picture(self, window: tuple[int, int], draw: Callable) -> np.ndarray:
+        """The picture ``(h, w, 3)`` of the scene ``draw(plotter)`` makes in a ``window``."""
+        if self._plotter is None:
+            self._plotter = _pv().Plotter(off_screen=True, window_size=list(window))
+        plotter = self._plotter
+        plotter.suppress_rendering = True
+        try:
+            plotter.renderer.clear_actors()
+            plotter.remove_legend()
+            plotter.scalar_bars.clear()
+            plotter.window_size = list(window)
+            draw(plotter)
+        finally:
+            plotter.suppress_rendering = False
+        plotter.render()
+        return plotter.screenshot(None, return_img=True)
+
+    def close(self) -> None:
+        if self._plotter is not None:
+            self._plotter.close()
+            self._plotter = None
+
+    def __enter__(self) -> ViewRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@contextlib.contextmanager
+def _window(views: ViewRenderer | None) -> Iterator[ViewRenderer]:
+    """``views``, or a window of the figure's own if ``views`` is None."""
+    if views is not None:
+        yield views
+        return
+    with ViewRenderer() as own:
+        yield own
 
 
 def plot_valve_3d(positions: np.ndarray, valve, path: str | Path | None = None, *,
                   view: str = "iso", title: str = "", orifice: dict | None = None,
-                  window: tuple[int, int] = (1000, 850)) -> np.ndarray:
+                  window: tuple[int, int] = (1000, 850),
+                  views: ViewRenderer | None = None) -> np.ndarray:
     """The valve in one view, leaflets coloured and labelled, with a scale bar.
 
     ``positions`` are the node positions to draw (``valve.points`` for the
     valve as built); ``orifice`` (the orifice raster's diagnostics) draws the
-    regurgitant orifice in the axial views.  Returns the picture; writes it to
-    ``path`` if given.
+    regurgitant orifice in the axial views; ``views`` renders it in a shared
+    window.  Returns the picture; writes it to ``path`` if given.
     """
-    return render(valve_plotter(positions, valve, view=view, title=title, orifice=orifice,
-                                window=window), path)
+    def draw(plotter) -> None:
+        valve_plotter(positions, valve, view=view, title=title, orifice=orifice,
+                      plotter=plotter)
+
+    with _window(views) as shared:
+        return _written(shared.picture(window, draw), path)
 
 
 def plot_gap_3d(positions: np.ndarray, valve, coaptation, path: str | Path | None = None, *,
-                title: str = "", window: tuple[int, int] = (1800, 850)) -> np.ndarray:
+                title: str = "", window: tuple[int, int] = (1800, 850),
+                views: ViewRenderer | None = None) -> np.ndarray:
     """The loaded valve coloured by the gap to the nearest other leaflet (mm), two views.
 
-    Left: oblique from the aortic side; right: from the aorta.  A black
-    line marks the coaptation threshold.  Returns the picture; writes it to
-    ``path`` if given.
+    Left: oblique from the aortic side; right: from the aorta, each in half of
+    ``window``.  A black line marks the coaptation threshold.  ``views`` renders
+    it in a shared window.  Returns the picture; writes it to ``path`` if given.
     """
-    pv = _pv()
-    plotter = pv.Plotter(off_screen=True, window_size=list(window), shape=(1, 2), border=False)
     gap = node_gap(valve, coaptation)
     bar = "gap to the nearest other leaflet (mm)"
-    for k, view in enumerate(("iso", "aortic")):
-        plotter.subplot(0, k)
-        valve_plotter(positions, valve, view=view, scalars=gap, scalar_title=bar,
-                      clim=GAP_RANGE_MM, contour=coaptation.threshold_mm, plotter=plotter,
-                      scalar_bar=k == 1,
-                      title=(title + "\n" if title and k == 0 else "") + VIEW_TITLES[view]
-                      + (f"; black line: gap = {coaptation.threshold_mm:g} mm "
-                         "(coaptation threshold)" if k == 1 else ""))
-    return render(plotter, path)
+
+    def half(view: str, heading: str, scalar_bar: bool) -> Callable:
+        def draw(plotter) -> None:
+            valve_plotter(positions, valve, view=view, scalars=gap, scalar_title=bar,
+                          clim=GAP_RANGE_MM, contour=coaptation.threshold_mm,
+                          plotter=plotter, scalar_bar=scalar_bar, title=heading)
+        return draw
+
+    left = (title + "\n" if title else "") + VIEW_TITLES["iso"]
+    right = (VIEW_TITLES["aortic"] + f"; black line: gap = {coaptation.threshold_mm:g} mm "
+             "(coaptation threshold)")
+    size = (window[0] // 2, window[1])
+    with _window(views) as shared:
+        image = np.hstack([shared.picture(size, half("iso", left, False)),
+                           shared.picture(size, half("aortic", right, True))])
+    return _written(image, path)

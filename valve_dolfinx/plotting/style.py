@@ -34,6 +34,7 @@ __all__ = [
     "key_numbers",
     "new_figure",
     "save_figure",
+    "save_picture",
 ]
 
 log = logging.getLogger(__name__)
@@ -52,6 +53,9 @@ COAPTATION_COLOUR = "#555555"
 SEQUENTIAL_CMAP = "viridis"
 LEAFLET_LABELS = {"left_coronary": "LC", "right_coronary": "RC", "non_coronary": "NC"}
 _BY_POSITION = tuple(LEAFLET_COLOURS.values())
+#: zlib level of the PNG files: the same pixels as the default level 6 in files a few per
+#: cent larger, written in about half the time
+PNG_COMPRESSION = 3
 
 
 def leaflet_colour(patch, index: int | None = None) -> str:
@@ -121,7 +125,18 @@ def save_figure(fig: Figure, path: str | Path | None, dpi: int = 150) -> Figure:
     if path is not None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=dpi)
+        fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": PNG_COMPRESSION})
         log.debug("wrote %s", path)
     return fig
+
+
+def save_picture(image, path: str | Path) -> Path:
+    """Write a picture array ``(h, w, 3)`` to ``path`` (PNG, the folder made if needed)."""
+    from PIL import Image
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(image).save(path, format="PNG", compress_level=PNG_COMPRESSION)
+    log.debug("wrote %s", path)
+    return path
 
