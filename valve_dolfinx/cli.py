@@ -27,6 +27,7 @@ import contextlib
 import logging
 import signal
 import sys
+import time
 from pathlib import Path
 
 from valve_dolfinx.exceptions import ExitCode, StudyIncompleteError
@@ -557,6 +558,10 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
                    help="replace the plan of other inputs in --out")
 
 
+#: seconds an MPI rank that fails waits, after writing its error line, before it aborts
+#: every rank (the process manager forwards the line meanwhile)
+ABORT_GRACE_S = 0.5
+
 _EXIT_STATUS = """exit status:
   0    success
   1    internal error (a bug): rerun with -v and report the traceback
@@ -620,6 +625,9 @@ def _fail(err: BaseException, verbose: bool) -> int:
                 handler.flush()
             sys.stdout.flush()
             sys.stderr.flush()
+            # the process manager forwards the error line through a pipe that the abort
+            # closes: give it time to read the line before every rank is killed
+            time.sleep(ABORT_GRACE_S)
             mpi.COMM_WORLD.Abort(code)  # the other ranks may wait in a collective call
     return code
 
