@@ -358,6 +358,13 @@ ANSWERS = {
                                  members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
               ["Recommended graft W14/H13", "smallest margin is 0.12 mm",
                "root 23.0 mm, billowed placement", "in all 3 members"]),
+    # a margin that rounds to 0.00 mm is shown with its significant digits
+    "thin margin": (PlanRecommendation(graft=GraftSize(27, 27), margin_mm=0.0023,
+                                       limiting_member="root 23.0 mm", target_mm=2.31,
+                                       target_source="the normal valve's",
+                                       members=("root 22.0 mm", "root 23.0 mm")),
+                    ["Recommended graft W27/H27", "smallest margin is 0.0023 mm, in root 23.0",
+                     "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
     "closest": (PlanRecommendation(closest=GraftSize(27, 40), shortfall_mm=0.4, target_mm=2.3,
                                    target_source="given", members=("a", "b")),
                 ["No graft on the grid is robust", "The closest is W27/H40",
@@ -383,6 +390,15 @@ def test_the_report_is_one_a4_page_with_the_answer(tmp_path, kind):
         assert word in text, word
     if kind != "cannot":
         assert "not made" in text  # the pictures that were not given say so
+
+
+@pytest.mark.parametrize(("margin", "shown"), [(0.12, "0.12"), (0.0051, "0.01"),
+                                               (0.0023, "0.0023"), (0.0004, "0.00040"),
+                                               (0.0, "0.00")])
+def test_the_margin_is_shown_with_its_significant_digits(margin, shown):
+    rec = PlanRecommendation(graft=GraftSize(14, 13), margin_mm=margin, target_mm=2.31,
+                             target_source="given")
+    assert f"its smallest margin is {shown} mm." in rec.headline()
 
 
 def test_a_recommendation_has_one_answer():

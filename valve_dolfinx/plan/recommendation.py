@@ -25,7 +25,7 @@ from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
 from valve_dolfinx.study.recommend import shortfall_digits
 
-__all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
+__all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation", "margin_text"]
 
 
 class GraftSize(NamedTuple):
@@ -59,6 +59,12 @@ class GraftSize(NamedTuple):
                 raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
                                      f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
         return size
+
+
+def margin_text(margin_mm: float) -> str:
+    """A margin (mm) with the decimals that show it (:func:`shortfall_digits`): 0.0023 mm
+    reads 0.0023, not 0.00."""
+    return f"{margin_mm:.{shortfall_digits(abs(margin_mm))}f}"
 
 
 @dataclass(frozen=True)
@@ -173,13 +179,13 @@ class PlanRecommendation:
             return (f"Recommended graft {self.graft.label} (+{self.graft.width_pct:g} % width, "
                     f"+{self.graft.height_pct:g} % height). It converges, seals and reaches "
                     f"{self._target()}{scope}; its smallest margin is "
-                    f"{self.margin_mm:.2f} mm{where}.")
+                    f"{margin_text(self.margin_mm)} mm{where}.")
         computed = " computed" if self.unsealable_roots_mm else ""
         if self.closest is not None and self.margin_mm is not None:  # fails beyond reach only
             return (f"{self._unsealable()} In the {n} members{computed}, {self.closest.label} "
                     f"(+{self.closest.width_pct:g} % width, +{self.closest.height_pct:g} % "
                     f"height) converges, seals and reaches {self._target()}; its smallest "
-                    f"margin is {self.margin_mm:.2f} mm{where}.")
+                    f"margin is {margin_text(self.margin_mm)} mm{where}.")
         scope = f" in every one of the {n} members{computed}" if n > 1 else ""
         if self.unsealable_roots_mm:
             text = (f"{self._unsealable()} Nor does any graft converge, seal and reach "

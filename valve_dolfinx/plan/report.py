@@ -21,7 +21,7 @@ from pathlib import Path
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
-from valve_dolfinx.plan.recommendation import PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanRecommendation, margin_text
 from valve_dolfinx.plotting.style import OKABE_ITO
 from valve_dolfinx.study.paths import study_paths
 
@@ -132,7 +132,7 @@ def _details(rec: PlanRecommendation) -> list[str]:
     if _targets(rec):
         out.append(_targets(rec))
     if rec.margin_mm is not None and rec.limiting_member:
-        out.append(f"Smallest margin over the target: {rec.margin_mm:.2f} mm, in "
+        out.append(f"Smallest margin over the target: {margin_text(rec.margin_mm)} mm, in "
                    f"{rec.limiting_member}.")
     if rec.unsealable_roots_mm:
         roots = " and ".join(f"{d:.1f}" for d in rec.unsealable_roots_mm)

@@ -309,9 +309,11 @@ def cell_state(cell: CellSummary) -> str:
 
 
 def shortfall_digits(shortfall: float) -> int:
-    """Decimals that show a shortfall (one that rounds to 0.00 mm is shown where it shows)."""
-    return 2 if shortfall >= 0.005 else max(3, 1 - math.floor(math.log10(max(shortfall,
-                                                                              1e-12))))
+    """Decimals that show a shortfall (one that rounds to 0.00 mm is shown where it shows;
+    zero is 0.00)."""
+    if shortfall >= 0.005 or shortfall <= 0.0:
+        return 2
+    return max(3, 1 - math.floor(math.log10(max(shortfall, 1e-12))))
 
 
 def _chosen_text(rec: Recommendation, chosen: CellSummary) -> str:
