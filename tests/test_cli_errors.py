@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from valve_dolfinx.exceptions import (
+    DegenerateGeometryError,
     ExitCode,
     MeshError,
     OutputConflictError,
@@ -71,6 +72,7 @@ def test_exit_codes_are_distinct_and_listed_in_the_help():
     (FileNotFoundError(2, "No such file or directory", "a.npz"), ExitCode.INPUT),
     (MeshError("x"), ExitCode.INPUT),
     (SolverError("x"), ExitCode.SOLVER),
+    (DegenerateGeometryError("x"), ExitCode.SOLVER),
     (OutputConflictError("x"), ExitCode.OUTPUT_CONFLICT),
     (KeyboardInterrupt(), ExitCode.INTERRUPTED),
     (ZeroDivisionError("x"), ExitCode.INTERNAL),

@@ -11,15 +11,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from valve_dolfinx._compat import MPI, dolfinx
+from valve_dolfinx._compat import MPI, PETSc, dolfinx
 from valve_dolfinx.contact import ContactParameters, SurfaceContact
+from valve_dolfinx.exceptions import DegenerateGeometryError
 from valve_dolfinx.geometry.verification import membrane_domain_from_arrays, tangent_frames
 from valve_dolfinx.materials import FungMaterial
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
-from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
+from valve_dolfinx.solvers.pseudo_transient import DT_INITIAL, PseudoTransientSolver
 
 #: Soft isotropic Fung membrane: the sheets balloon into each other at 2 kPa.
 SOFT = FungMaterial.isotropic(c=20.0, a=5.0, thickness=0.2, name="soft")
@@ -174,6 +175,96 @@ def test_newton_converges_quadratically_with_contact_active(pressed_sheets):
         orders.append(np.log(e2 / e1) / np.log(e1 / e0))
     assert len(orders) >= 4
     assert min(orders) > 1.5 and np.median(orders) > 1.8
+
+
+#: an interior node of the lower sheet and its neighbour along x: the two triangles that
+#: share their edge collapse when the node is moved onto the neighbour
+NODE, NEIGHBOUR = 6 * (CELLS + 1) + 6, 7 * (CELLS + 1) + 6
+
+
+def sheets_solver(comm, solver_class=PseudoTransientSolver, **params):
+    """The two sheets' closure solver (default settings but ``params``), at rest."""
+    domain, arrays = two_sheets(comm)
+    points, cells, tags = comm.bcast(arrays)
+    model = MembraneModel(domain, {1: SOFT, 2: SOFT}, pressure_side=1.0)
+    contact = SurfaceContact(cells, len(points), SPEC_LAW, triangle_body=tags,
+                             body_names={1: "the lower sheet"})
+    return solver_class(model, [clamp_boundary(model)], 2.0,
+                        PseudoTransientParameters(**params),
+                        hooks=[contact_hook([contact], cells, model.pressure)])
+
+
+def onto_neighbour(coupling, displacement: np.ndarray) -> np.ndarray:
+    """``(3,)`` displacement of NODE that puts it where NEIGHBOUR is with the nodes'
+    ``displacement`` ``(N, 3)``."""
+    x0 = coupling.reference_positions
+    return x0[NEIGHBOUR] + displacement[NEIGHBOUR] - x0[NODE]
+
+
+@pytest.mark.mpi
+def test_a_collapsed_triangle_fails_an_iterate_and_ends_a_run_from_an_accepted_state():
+    """At a trial Newton iterate (``ifunction`` called by the time stepper) a collapsed
+    contact triangle makes the residual NaN on every rank, which fails the Newton solve; at
+    an accepted state (the static residual, the start of a run) it is the named error, and
+    a run that starts there ends as failed, naming the triangles -- never a bug in a
+    callback."""
+    comm = MPI.COMM_WORLD
+    solver = sheets_solver(comm)
+    coupling, imap = solver.coupling, solver.model.V.dofmap.index_map
+    target = onto_neighbour(coupling, coupling.displacements(solver.u))
+    block = coupling.block_of_node[NODE] - imap.local_range[0]
+    if 0 <= block < imap.size_local:  # the rank that owns NODE
+        solver.u.x.array.reshape(-1, 3)[block] = target
+    solver.u.x.scatter_forward()
+    X = solver.u.x.petsc_vec.copy()
+    Xdot, F = X.duplicate(), X.duplicate()
+    Xdot.set(0.0)
+    ts = PETSc.TS().create(comm)  # ifunction reads its step only
+    ts.setTimeStep(0.05)
+    solver.ifunction(ts, 0.0, X, Xdot, F)
+    assert np.isnan(F.array_r).all()
+    ts.destroy()
+    with pytest.raises(DegenerateGeometryError, match=r"^2 collapsed .*triangle"):
+        solver.static_residual()
+    report = solver.solve()
+    assert not report.converged and report.steps == 0
+    assert report.reason.startswith("DegenerateGeometryError at step 0")
+    assert f"(nodes {NODE}, {NEIGHBOUR}," in report.reason
+    assert report.reason.endswith("of the lower sheet")
+
+
+class CollapsingSolver(PseudoTransientSolver):
+    """Its first Newton update moves NODE onto NEIGHBOUR; counts the NaN residuals (one
+    process: the blocks are the vectors' indices)."""
+
+    def solve(self, progress=None):
+        self.collapse, self.nan_residuals = True, 0
+        return super().solve(progress)
+
+    def _limit_update(self, x, y):
+        super()._limit_update(x, y)
+        if self.collapse:  # the iterate x - y: NODE where NEIGHBOUR lands
+            self.collapse = False
+            iterate = (x.array_r - y.array_r).reshape(-1, 3)[self.coupling.block_of_node]
+            target = onto_neighbour(self.coupling, iterate)
+            rows = (3 * self.coupling.block_of_node[NODE] + np.arange(3)).astype(PETSc.IntType)
+            y.setValues(rows, x.array_r[rows] - target)
+            y.assemble()
+
+    def ifunction(self, ts, t, X, Xdot, F):
+        super().ifunction(ts, t, X, Xdot, F)
+        self.nan_residuals += bool(np.isnan(F.array_r).any())
+
+
+def test_a_newton_iterate_that_collapses_a_triangle_retries_its_step_shorter():
+    """The first pseudo-time step's Newton solve meets a collapsed triangle at its first
+    iterate: the solve fails and the step is retried with half the Δτ (DT_INITIAL), as
+    after any failed solve, and the run goes on."""
+    solver = sheets_solver(MPI.COMM_SELF, CollapsingSolver, max_steps=2)
+    report = solver.solve()
+    assert solver.nan_residuals == 1
+    assert report.rejected_steps == 1 and report.steps == 2
+    assert report.history[0]["dt"] == pytest.approx(0.5 * DT_INITIAL)
 
 
 L_FOLD, W_FOLD, R_FOLD = 6.0, 6.0, 0.5

@@ -126,7 +126,8 @@ def test_barycentric_gradients_give_the_plane_projection():
 def test_triangle_frames_are_the_unit_normal_the_dual_edge_basis_and_the_altitudes():
     rng = np.random.default_rng(8)
     a, b, c = (rng.normal(size=(3, 25)) for _ in range(3))
-    normal, grad, altitudes = triangle_frames(a, b, c)
+    normal, grad, altitudes, collapsed = triangle_frames(a, b, c)
+    assert not collapsed.any()
     for t in range(25):
         e1, e2 = b[:, t] - a[:, t], c[:, t] - a[:, t]
         n = np.cross(e1, e2)
@@ -142,6 +143,37 @@ def test_triangle_frames_are_the_unit_normal_the_dual_edge_basis_and_the_altitud
         opposite = [c[:, t] - b[:, t], e2, e1]
         assert np.allclose(altitudes[:, t], area2 / np.linalg.norm(opposite, axis=1),
                            rtol=1e-10)
+
+
+def test_collapsed_triangles_are_flagged_and_not_divided_by():
+    """Coincident vertices, exactly collinear ones and a sliver of height 1e-6 on a unit base
+    are collapsed; a sliver of height 2e-6 is not.  For a base (0,0)-(1,0) and apex (0.5, h)
+    the Gram determinant is h² and Σℓ² = 1.5 + 2h², so the threshold
+    h² ≤ COLLAPSE_TOLERANCE·(Σℓ²)² lies at h ≈ 1.5e-6.  The other triangles' frames are
+    those computed without the collapsed ones, bit for bit."""
+    rng = np.random.default_rng(3)
+    good = [rng.normal(size=(3, 3)) for _ in range(4)]
+    corners = [
+        [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 2.0, 0.0]],    # a = b
+        [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5]],    # collinear
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 1e-6, 0.0]],   # quality 2.3e-6
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 2e-6, 0.0]],   # quality 4.6e-6
+        [[2.0, 3.0, 1.0], [2.0, 3.0, 1.0], [2.0, 3.0, 1.0]],    # a point
+    ]
+    triangles = np.array(good[:2] + corners + good[2:])         # (M, vertex, axis)
+    a, b, c = (np.ascontiguousarray(triangles[:, j].T) for j in range(3))
+    normal, grad, altitudes, collapsed = triangle_frames(a, b, c)
+    expected = np.array([False, False, True, True, True, False, True, False, False])
+    np.testing.assert_array_equal(collapsed, expected)
+    assert np.isnan(grad[:, :, collapsed]).all() and np.isnan(altitudes[:, collapsed]).all()
+    kept = triangles[~collapsed]
+    alone = triangle_frames(*(np.ascontiguousarray(kept[:, j].T) for j in range(3)))
+    for got, ref in zip((normal, grad, altitudes), alone[:3], strict=True):
+        np.testing.assert_array_equal(got[..., ~collapsed], ref)
+    assert np.isfinite(grad[..., ~collapsed]).all()
+    # the sliver above the threshold: the altitude at its apex is its height, to the
+    # determinant's rounding (1e-16·(Σℓ²)²/h² ≈ 1e-5 relative)
+    assert altitudes[2, 5] == pytest.approx(2e-6, rel=1e-4)
 
 
 def brute_force_pairs(x, triangles, nodes, pad, prism=False):

@@ -24,7 +24,7 @@ from valve_dolfinx.contact import (
 from valve_dolfinx.contact.narrowphase import TriangleFrames
 from valve_dolfinx.contact.results import StepClock
 from valve_dolfinx.contact.surface import FACE_BAND
-from valve_dolfinx.exceptions import MeshError, ParameterError
+from valve_dolfinx.exceptions import DegenerateGeometryError, MeshError, ParameterError
 
 K, H = 10.0, 0.1
 SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
@@ -581,6 +581,25 @@ def test_bad_inputs_raise_named_errors():
         contact.evaluate(np.zeros((5, 3)), np.zeros((5, 3)), np.array([5]))
     with pytest.raises(ParameterError, match="normals"):
         PlaneContact([[0, 0, 0]], [[0, 0, 0]])
+
+
+def test_a_collapsed_triangle_is_named_not_divided_by():
+    """Positions at which a triangle has collapsed (a vertex moved onto another) are outside
+    the contact's domain: the evaluation and the history raise the named error, naming the
+    triangle, its nodes and its body."""
+    contact = SurfaceContact(SQUARE_TRIANGLES, 4, LITERAL, triangle_body=np.array([1, 2]),
+                             body_names={2: "leaflet right_coronary"})
+    x = SQUARE.copy()
+    x[1] = x[0]
+    with pytest.raises(DegenerateGeometryError,
+                       match=r"^1 collapsed .*: triangle 0 \(nodes 0, 1, 2\) of body 1$"):
+        contact.evaluate(x, np.zeros((4, 3)))
+    x = SQUARE.copy()
+    x[3] = x[2]
+    with pytest.raises(DegenerateGeometryError,
+                       match=r"triangle 1 \(nodes 0, 2, 3\) of leaflet right_coronary$"):
+        contact.update_history(x)
+    contact.update_history(SQUARE)  # the square itself is fine
 
 
 def test_two_pressed_sheets_count_their_pair_twice():

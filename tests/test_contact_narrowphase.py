@@ -39,7 +39,8 @@ def test_near_pairs_keeps_exactly_the_pairs_the_definitions_keep():
     excluded[:, 0] = rng.integers(0, num_nodes, num_tri)
     search, reach = 0.8, 0.5
     by_axis = [np.ascontiguousarray(v.T) for v in (a, normal, grads[:, 1], grads[:, 2], altitudes)]
-    frames = TriangleFrames(*by_axis, gradients_by_triangle=grads)
+    frames = TriangleFrames(*by_axis, gradients_by_triangle=grads,
+                            collapsed=np.zeros(num_tri, dtype=bool))
     got = near_pairs(node, tri, np.ascontiguousarray(points.T), frames, node_body=node_body,
                      triangle_body=triangle_body, side_band=side_band, face_band=0.1,
                      excluded=excluded, search_distance=search, reach=reach)

@@ -259,7 +259,9 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                      * config.contact.reach,
                                      attached_reference=valve.points,
                                      seam_taper_length=COMMISSURE_TAPER_MM,
-                                     boundary_band=FREE_EDGE_BAND))
+                                     boundary_band=FREE_EDGE_BAND,
+                                     body_names={p.tag: f"leaflet {p.name}"
+                                                 for p in valve.leaflets}))
         # PTC freezes the driving force within a pseudo-time step (exact Jacobian); BDF2
         # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,

@@ -20,6 +20,7 @@ __all__ = [
     "MeshError",
     "InputFileError",
     "SolverError",
+    "DegenerateGeometryError",
     "OutputConflictError",
     "OutputNotFolderError",
     "OutputNotWritableError",
@@ -79,6 +80,12 @@ class SolverError(ValveError, RuntimeError):
     """A nonlinear or time-stepping solve failed; the message says where and with what residual."""
 
     exit_code = ExitCode.SOLVER
+
+
+class DegenerateGeometryError(SolverError):
+    """A state of a solve has a collapsed (zero-area) triangle: it is outside the domain of the
+    residual.  The solvers retry a step whose Newton iterate collapses a triangle with a
+    shorter one, and end the run as failed when an accepted state has one."""
 
 
 class OutputConflictError(ValveError, FileExistsError):

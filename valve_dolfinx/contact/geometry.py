@@ -13,7 +13,14 @@ __all__ = [
     "plane_projection",
     "barycentric_gradients",
     "triangle_frames",
+    "COLLAPSE_TOLERANCE",
 ]
+
+#: A triangle has collapsed when the Gram determinant of its edges, 4A² (A its area), is at
+#: most this times the square of the sum of its squared edge lengths Σℓ²: its mean-ratio
+#: quality 4√3·A/Σℓ² (1 for an equilateral triangle) is below √(12·1e-12) ≈ 3.5e-6.  Above
+#: it the determinant's rounding error (about 1e-16·(Σℓ²)²) is far below the determinant.
+COLLAPSE_TOLERANCE = 1e-12
 
 
 def triangle_normals(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -58,30 +65,34 @@ def barycentric_gradients(a: np.ndarray, b: np.ndarray, c: np.ndarray
     :math:`\lambda_j = \delta_{j0} + g_j\cdot(p - a)` and its signed distance
     :math:`n\cdot(p - a)`, i.e. :func:`plane_projection` with the per-triangle
     work done once, which pays off when each triangle is tested against many
-    points.  ``gradients[:, j]`` is :math:`g_j`.  A zero-area triangle has
-    non-finite gradients, so no point ever projects inside it.  The work is
-    :func:`triangle_frames`'.
+    points.  ``gradients[:, j]`` is :math:`g_j`.  A collapsed triangle
+    (:data:`COLLAPSE_TOLERANCE`) has NaN gradients, so no point ever projects inside it.
+    The work is :func:`triangle_frames`'.
     """
-    normal, grad, _ = triangle_frames(*(np.ascontiguousarray(np.asarray(v, dtype=float).T)
-                                        for v in (a, b, c)))
+    normal, grad, _, _ = triangle_frames(*(np.ascontiguousarray(np.asarray(v, dtype=float).T)
+                                           for v in (a, b, c)))
     return normal.T, np.moveaxis(grad, 2, 0)
 
 
 def triangle_frames(a: np.ndarray, b: np.ndarray, c: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Unit normals ``(3, M)``, barycentric gradients ``(3, 3, M)`` (``[j, axis]``, as in
-    :func:`barycentric_gradients`) and altitudes ``1/|g_j|`` ``(3, M)`` of triangles
-    whose vertices are given by axis, ``(3, M)`` each: a loop compiled by Numba with the
-    floating-point operations of the NumPy formulas (:func:`triangle_normals`,
-    ``np.linalg.norm``, :func:`dot3`), so the bits are theirs."""
+    :func:`barycentric_gradients`), altitudes ``1/|g_j|`` ``(3, M)`` and collapse flags
+    ``(M,)`` of triangles whose vertices are given by axis, ``(3, M)`` each: a loop
+    compiled by Numba with the floating-point operations of the NumPy formulas
+    (:func:`triangle_normals`, ``np.linalg.norm``, :func:`dot3`), so the bits are theirs.
+
+    A collapsed triangle (:data:`COLLAPSE_TOLERANCE`) is flagged and has NaN gradients and
+    altitudes: its Gram determinant is not divided by."""
     count = a.shape[1]
     normal, grad, altitudes = np.empty((3, count)), np.empty((3, 3, count)), np.empty((3, count))
-    _triangle_frames(a, b, c, normal, grad, altitudes)
-    return normal, grad, altitudes
+    collapsed = np.empty(count, dtype=np.bool_)
+    _triangle_frames(a, b, c, normal, grad, altitudes, collapsed)
+    return normal, grad, altitudes, collapsed
 
 
 @numba.njit(cache=True)
-def _triangle_frames(a, b, c, normal, grad, altitudes):  # pragma: no cover
+def _triangle_frames(a, b, c, normal, grad, altitudes, collapsed):  # pragma: no cover
     for t in range(a.shape[1]):
         e10, e11, e12 = b[0, t] - a[0, t], b[1, t] - a[1, t], b[2, t] - a[2, t]
         e20, e21, e22 = c[0, t] - a[0, t], c[1, t] - a[1, t], c[2, t] - a[2, t]
@@ -94,6 +105,12 @@ def _triangle_frames(a, b, c, normal, grad, altitudes):  # pragma: no cover
         g12 = dot3(e10, e11, e12, e20, e21, e22)
         g22 = dot3(e20, e21, e22, e20, e21, e22)
         det = g11 * g22 - g12 * g12
+        squared_edges = 2.0 * (g11 + g22 - g12)  # |e1|² + |e2|² + |e2 - e1|²
+        collapsed[t] = det <= COLLAPSE_TOLERANCE * squared_edges * squared_edges
+        if collapsed[t]:
+            grad[:, :, t] = np.nan
+            altitudes[:, t] = np.nan
+            continue
         for i in range(3):
             u = e10 if i == 0 else (e11 if i == 1 else e12)
             v = e20 if i == 0 else (e21 if i == 1 else e22)

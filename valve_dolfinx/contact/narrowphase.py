@@ -33,7 +33,8 @@ class TriangleFrames(NamedTuple):
     the in-plane gradients of the barycentric coordinates λ1, λ2
     (:func:`~valve_dolfinx.contact.geometry.triangle_frames`), so that a
     point ``p`` projects to ``λ_j = grad_j·(p - origin)`` at distance
-    ``normal·(p - origin)``.
+    ``normal·(p - origin)``.  ``collapsed`` ``(M,)`` flags the collapsed triangles, whose
+    gradients are NaN.
     """
 
     origin: np.ndarray
@@ -42,14 +43,16 @@ class TriangleFrames(NamedTuple):
     grad2: np.ndarray
     altitudes: np.ndarray  # (3, M): 1/|∇λ_j|, the altitude of the triangle at vertex j
     gradients_by_triangle: np.ndarray  # (M, 3, 3): the gradients g_j, [triangle, j, axis]
+    collapsed: np.ndarray  # (M,) bool
 
     @classmethod
     def at(cls, xt: np.ndarray, triangles: np.ndarray) -> TriangleFrames:
         """The frames of ``triangles`` ``(M, 3)`` at the node positions ``xt`` ``(3, N)``."""
         a, b, c = (xt[:, triangles[:, j]] for j in range(3))
-        normal, grad, altitudes = triangle_frames(a, b, c)
+        normal, grad, altitudes, collapsed = triangle_frames(a, b, c)
         return cls(origin=a, normal=normal, grad1=grad[1], grad2=grad[2], altitudes=altitudes,
-                   gradients_by_triangle=np.ascontiguousarray(grad.transpose(2, 0, 1)))
+                   gradients_by_triangle=np.ascontiguousarray(grad.transpose(2, 0, 1)),
+                   collapsed=collapsed)
 
     def gradients(self, tri: np.ndarray) -> np.ndarray:
         """``(K, 3, 3)`` barycentric gradients ``g_j`` (``[j, axis]``) of triangles ``tri``."""

@@ -33,6 +33,7 @@ their union.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -68,7 +69,7 @@ from valve_dolfinx.contact.results import (
     group_index,
 )
 from valve_dolfinx.contact.sides import SideMemory, nearest_inside, present_side
-from valve_dolfinx.exceptions import MeshError
+from valve_dolfinx.exceptions import DegenerateGeometryError, MeshError
 
 __all__ = ["FACE_BAND", "SurfaceContact"]
 
@@ -198,6 +199,15 @@ class SurfaceContact:
         force appears and vanishes within that distance.  A band of about one
         triangle continues the neighbour's last row of faces as a plane (as
         the symmetry planes of the reference do).
+    body_names
+        Name of each body label, for messages (``"leaflet left_coronary"``; default
+        ``"body <label>"``).
+
+    **Collapsed triangles.**  Positions at which a triangle has collapsed
+    (:data:`~valve_dolfinx.contact.geometry.COLLAPSE_TOLERANCE`) are outside the domain of
+    the contact forces: :meth:`evaluate` and :meth:`update_history` raise
+    :class:`~valve_dolfinx.exceptions.DegenerateGeometryError` naming the triangles and
+    their bodies.
     """
 
     def __init__(self, triangles: np.ndarray, num_nodes: int,
@@ -207,7 +217,8 @@ class SurfaceContact:
                  self_exclusion_radius: float = 0.0,
                  attached_reference: np.ndarray | None = None,
                  seam_taper_length: float = 0.0,
-                 boundary_band: float = FACE_BAND) -> None:
+                 boundary_band: float = FACE_BAND,
+                 body_names: Mapping[int, str] | None = None) -> None:
         triangles = np.asarray(triangles, dtype=np.int64)
         if triangles.ndim != 2 or triangles.shape[1] != 3:
             raise MeshError(f"triangles must be an (M, 3) array of node ids, got {triangles.shape}")
@@ -225,6 +236,7 @@ class SurfaceContact:
         self.search_distance = max(params.search_distance,
                                    params.thickness + params.penetration_depth)
         self.body_labels, self.triangle_body = np.unique(body, return_inverse=True)
+        self.body_names = dict(body_names or {})
         #: body of each node: the lowest body among its triangles (commissure nodes are shared)
         self.node_body = np.full(self.num_nodes, np.iinfo(np.int64).max, dtype=np.int64)
         for k in range(3):
@@ -288,7 +300,7 @@ class SurfaceContact:
         recorded, so that within the next step no side flips as the node moves.)"""
         x = check_positions(x, self.num_nodes, "x")
         xt = np.ascontiguousarray(x.T)
-        frames = TriangleFrames.at(xt, self.triangles)
+        frames = self._frames(xt)
         # faces within the tracking distance; edges and vertices within the law's reach (a
         # node beyond it of a triangle's boundary feels no force from it, and takes its side
         # from the adjacent faces when it slides over them)
@@ -454,13 +466,30 @@ class SurfaceContact:
         if last is not None and np.array_equal(last[0], x) and np.array_equal(last[1], nodes):
             return last[2]
         xt = np.ascontiguousarray(x.T)
-        frames = TriangleFrames.at(xt, self.triangles)
+        frames = self._frames(xt)
         near = self._search(xt, frames, nodes, clock)
         node, tri, d0, gap, lam, offset, plane_lam = self._narrow(xt, frames, near)
         clock.add("narrow")
         found = node, tri, d0, gap, lam, offset, plane_lam, frames.normal[:, tri].T, frames
         self._last_candidates = (x.copy(), nodes.copy(), found)
         return found
+
+    def _frames(self, xt: np.ndarray) -> TriangleFrames:
+        """The triangles' frames at the node positions ``xt`` ``(3, N)``; raises
+        :class:`DegenerateGeometryError` naming the collapsed triangles, if any."""
+        frames = TriangleFrames.at(xt, self.triangles)
+        collapsed = np.flatnonzero(frames.collapsed)
+        if len(collapsed):
+            raise DegenerateGeometryError(
+                f"{len(collapsed)} collapsed (zero-area) contact triangle(s): "
+                + "; ".join(self._describe_triangle(t) for t in collapsed[:3])
+                + ("; ..." if len(collapsed) > 3 else ""))
+        return frames
+
+    def _describe_triangle(self, t: int) -> str:
+        label = int(self.body_labels[self.triangle_body[t]])
+        body = self.body_names.get(label, f"body {label}")
+        return f"triangle {t} (nodes {', '.join(map(str, self.triangles[t]))}) of {body}"
 
     def _search(self, xt: np.ndarray, frames: TriangleFrames, nodes: np.ndarray,
                 clock: StepClock, distance: float | None = None) -> NearPairs:

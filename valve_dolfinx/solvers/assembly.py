@@ -8,15 +8,18 @@ A)``; its optional ``timing_name`` labels its share of the :class:`Laps`.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Sequence
 
 import numpy as np
 
 from valve_dolfinx._compat import PETSc, dolfinx
+from valve_dolfinx.exceptions import DegenerateGeometryError
 
 __all__ = ["Laps", "assemble_jacobian", "assemble_residual", "owned_bc_dofs"]
 
+log = logging.getLogger(__name__)
 fem_petsc = dolfinx.fem.petsc
 
 
@@ -58,18 +61,34 @@ def _hook_name(hook) -> str:
 
 def assemble_residual(F: PETSc.Vec, form: dolfinx.fem.Form, state: dolfinx.fem.Function,
                       hooks: Sequence, bcs: Sequence[dolfinx.fem.DirichletBC], X: PETSc.Vec,
-                      laps: Laps | None = None) -> None:
+                      laps: Laps | None = None, *, trial: bool = False) -> None:
     """``F`` = the form's vector plus the hooks' forces at ``state``, and ``-(X - g)`` on
-    the Dirichlet dofs (so that Newton's update moves them onto their values ``g``)."""
+    the Dirichlet dofs (so that Newton's update moves them onto their values ``g``).
+
+    A ``trial`` state (a Newton iterate) at which a hook finds a collapsed triangle
+    (:class:`DegenerateGeometryError`) is outside the residual's domain: ``F`` is then NaN,
+    which ends the Newton solve as diverged (``DIVERGED_FNORM_NAN``, or a failed line
+    search), and the time stepper retries the step with a shorter one, as after any failed
+    solve.  (petsc4py has no binding of ``SNESSetFunctionDomainError``.)  Every rank
+    evaluates the hooks on all-gathered positions, so every rank finds the collapse.  At any
+    other state (an accepted one) the error is raised."""
     lap = _no_laps if laps is None else laps
     with F.localForm() as f_local:
         f_local.set(0.0)
     fem_petsc.assemble_vector(F, form)
     F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     lap("residual_assembly")
-    for hook in hooks:
-        hook.add_residual(state, F)
-        lap(_hook_name(hook))
+    try:
+        for hook in hooks:
+            hook.add_residual(state, F)
+            lap(_hook_name(hook))
+    except DegenerateGeometryError as err:
+        if not trial:
+            raise
+        log.debug("a Newton iterate is outside the residual's domain: %s", err)
+        F.assemble()  # the forces the hooks before it added
+        F.array[:] = np.nan
+        return
     F.assemble()
     fem_petsc.set_bc(F, bcs, x0=X, alpha=-1.0)
     lap("residual_assembly")

@@ -82,13 +82,14 @@ class CallbackGuard(contextlib.AbstractContextManager):
         signals, self._signals = self._signals, None
         signals.__exit__(*exc)
 
-    def reraise(self, where: str) -> None:
+    def reraise(self, where: str) -> BaseException | None:
         """Raise what a callback raised (and forget it): an interrupt or ``SystemExit`` as
         it is, another exception as a ``SolverError`` naming it and ``where`` the solve
-        was; nothing for one of the ``stops`` or when no callback raised."""
+        was.  Return one of the ``stops`` (for the solver's reason), or None when no
+        callback raised."""
         err, self.caught = self.caught, None
         if err is None or isinstance(err, self.stops):
-            return
+            return err
         if not isinstance(err, Exception):
             raise err
         log.debug("the PETSc callback %s raised", self.callback, exc_info=err)

@@ -43,6 +43,7 @@ import numpy as np
 import ufl
 
 from valve_dolfinx._compat import PETSc, dolfinx
+from valve_dolfinx.exceptions import DegenerateGeometryError
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual, owned_bc_dofs
@@ -236,7 +237,8 @@ class DampedDynamicsSolver:
                 f"{ts.getSNES().getFunctionNorm():.3g})")
             raise _Stalled(self.report.reason)
         self._set_state(t, X, Xdot)
-        assemble_residual(F, self.G_form, self.U, self.hooks, self.bcs, X)
+        # a Newton iterate that collapses a triangle fails its solve; an accepted state raises
+        assemble_residual(F, self.G_form, self.U, self.hooks, self.bcs, X, trial=ts is not None)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
         self._set_state(t, X, Xdot)
@@ -385,7 +387,7 @@ class DampedDynamicsSolver:
         says whether it is the equilibrium and, if not, where it stopped.
         """
         self._progress = progress
-        self._guard = CallbackGuard(stops=(_Stalled,))
+        self._guard = CallbackGuard(stops=(_Stalled, DegenerateGeometryError))
         self._t0 = time.perf_counter()
         self.report = DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
         self._last_displacement = self.coupling.displacements(self.U)
@@ -396,11 +398,15 @@ class DampedDynamicsSolver:
             with self._guard:  # a signal waits for the next callback
                 ts.solve(X)
         except PETSc.Error as err:
-            # an interrupt or an error in a callback is not a failed solve
-            self._guard.reraise(f"at t = {ts.getTime():.4g} s, step {ts.getStepNumber()}")
+            # an interrupt or an error in a callback is not a failed solve; a collapsed
+            # triangle at an accepted state is
+            where = f"at t = {ts.getTime():.4g} s, step {ts.getStepNumber()}"
+            stop = self._guard.reraise(where)
+            if stop is not None and not self.report.reason:
+                self.report.reason = f"{type(stop).__name__} {where}: {stop}"
             if not self.report.reason:
-                self.report.reason = (f"PETSc error {err.ierr} at t = {ts.getTime():.4g} s, "
-                                      f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")
+                self.report.reason = (f"PETSc error {err.ierr} {where}, "
+                                      f"dt = {ts.getTimeStep():.3g} s")
             log.error("damped dynamics failed: %s", self.report.reason)
         reason = ts.getConvergedReason()
         if not self.report.converged and not self.report.reason:
@@ -410,7 +416,10 @@ class DampedDynamicsSolver:
         self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
         self.U.x.scatter_forward()
         self._copy_displacement()
-        self.report.residual_mN = self.equilibrium_residual()
+        try:
+            self.report.residual_mN = self.equilibrium_residual()
+        except DegenerateGeometryError:  # the state the reason names: no residual (NaN)
+            pass
         self.report.wall_time_s = time.perf_counter() - self._t0
         log.info("damped dynamics: %s; %d steps (%d rejected, %d redone for their motion), "
                  "%d Newton its, t = %.4g s, |R_static|_inf = %.3g mN, %.1f s",

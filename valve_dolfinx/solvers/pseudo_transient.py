@@ -19,8 +19,11 @@ into Newton's method on the static problem.  Δτ is also limited so that no nod
 no node moves further than :data:`NEWTON_MOTION_MM` between two contact
 evaluations (a line-search pre-check), which keeps nodes from tunnelling
 through a surface.  A step's Newton solve ends once its residual has fallen by
-:data:`NEWTON_RTOL`.  An update that reverses the previous one, within a solve or from
-the last update of the previous accepted step, is damped (:data:`NEWTON_REVERSAL_DAMPING`).
+:data:`NEWTON_RTOL`; it fails, and the step is retried with half the Δτ, also at an iterate
+that collapses a contact triangle, whose residual is NaN
+(:func:`~valve_dolfinx.solvers.assembly.assemble_residual`).  An update that reverses the
+previous one, within a solve or from the last update of the previous accepted step, is damped
+(:data:`NEWTON_REVERSAL_DAMPING`).
 
 **The mass is in force units.**  ``M`` is diagonal (vertex quadrature) with
 nodal entries ``p·A_i/L`` (A_i the nodal reference area, p the target pressure,
@@ -41,8 +44,9 @@ state coincide, so the equilibrium is the SPEC's.
 state — evaluated with contact sides and driving forces of that state —
 satisfies ``‖R‖∞ < residual_tolerance`` (mN) over the free degrees of freedom.
 Otherwise it stops ``converged = False`` at the step, wall-time or Δτ-floor
-(:data:`DT_MIN`) limit, with the reason.  Mass, ``L`` and the step control are
-numerical devices: the equilibrium does not depend on them (tested).
+(:data:`DT_MIN`) limit, or at a start with a collapsed contact triangle, with the
+reason.  Mass, ``L`` and the step control are numerical devices: the equilibrium does
+not depend on them (tested).
 """
 
 from __future__ import annotations
@@ -55,7 +59,7 @@ import numpy as np
 import ufl
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.exceptions import MeshError
+from valve_dolfinx.exceptions import DegenerateGeometryError, MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import (
     Laps,
@@ -227,7 +231,9 @@ class PseudoTransientSolver:
             raise _Stop(self.report.reason)
         self._laps.start()
         self._set_state(X, Xdot)
-        assemble_residual(F, self.F_form, self.u, self.hooks, self.bcs, X, self._laps)
+        # a Newton iterate that collapses a triangle fails its solve; an accepted state raises
+        assemble_residual(F, self.F_form, self.u, self.hooks, self.bcs, X, self._laps,
+                          trial=ts is not None)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
         self._laps.start()
@@ -379,7 +385,7 @@ class PseudoTransientSolver:
         whether it is the equilibrium and, if not, where and why it stopped.
         """
         self._progress = progress
-        self._guard = CallbackGuard(stops=(_Stop,))
+        self._guard = CallbackGuard(stops=(_Stop, DegenerateGeometryError))
         self._cycles = NewtonCycleStop(NEWTON_CYCLE_TOLERANCE)
         self._reversals = NewtonReversalDamping(NEWTON_REVERSAL_DAMPING)
         self._t0 = time.perf_counter()
@@ -387,18 +393,20 @@ class PseudoTransientSolver:
         self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
         self.model.pressure.value = self.target_pressure
         self._last_displacement = self.coupling.displacements(self.u)
-        _, self._r_prev = self.static_residual()
         ts = self._make_ts()
         X = self.u.x.petsc_vec.copy()
+        ts.setSolution(X)  # the final state, should the run end at its start
         try:
+            _, self._r_prev = self.static_residual()
             with self._guard:  # a signal waits for the next callback
                 ts.solve(X)
-        except (PETSc.Error, MeshError, _Stop) as err:
-            # an interrupt or an error in a callback is not a failed solve
-            self._guard.reraise(f"at step {ts.getStepNumber()}, Δτ = {ts.getTimeStep():.3g}")
+        except (PETSc.Error, MeshError, DegenerateGeometryError, _Stop) as err:
+            # an interrupt or an error in a callback is not a failed solve; a collapsed
+            # triangle at an accepted state is
+            where = f"at step {ts.getStepNumber()}, Δτ = {ts.getTimeStep():.3g}"
+            err = self._guard.reraise(where) or err
             if not self.report.reason:
-                self.report.reason = (f"{type(err).__name__} at step {ts.getStepNumber()}, "
-                                      f"Δτ = {ts.getTimeStep():.3g}: {err}")
+                self.report.reason = f"{type(err).__name__} {where}: {err}"
             log.error("pseudo-transient continuation failed: %s", self.report.reason)
         if not self.report.converged and not self.report.reason:
             self.report.reason = (f"TS stopped ({ts.getConvergedReason()}) after "
