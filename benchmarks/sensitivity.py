@@ -34,6 +34,7 @@ from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
 from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.axes import check_axis_values, value_text
+from valve_dolfinx.study.recommend import margin_text
 from valve_dolfinx.study.runner import run_study
 
 
@@ -101,9 +102,9 @@ def _cell(cell) -> str:
 
 def _answer(rec) -> str:
     if rec.recommended:
-        return f"{rec.recommended} ({rec.margin_mm:+.2f})"
+        return f"{rec.recommended} ({margin_text(rec.margin_mm, signed=True)})"
     if rec.best and rec.shortfall_mm is not None:
-        return f"none (best {rec.best}, {-rec.shortfall_mm:+.2f})"
+        return f"none (best {rec.best}, {margin_text(-rec.shortfall_mm, signed=True)})"
     return "none"
 
 

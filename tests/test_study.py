@@ -629,6 +629,36 @@ def test_recommendation_when_none_qualifies():
             "target (margin 0.30 mm).") in above.text
 
 
+def test_a_thin_margin_is_shown_with_its_significant_digits_in_the_report(tmp_path):
+    """The stand-in W7/H0 reaches 2.88 mm; against a target of 2.8777 mm its margin of
+    0.0023 mm reads 0.0023 in the recommendation and +0.0023 in the worst-case table of
+    report.md (not 0.00), and a margin of 0.12 mm keeps two decimals."""
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.study.report import build_report
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    run_study(_settings(target_coaptation_mm=2.8777), out, MPI.COMM_SELF,
+              case_function=stand_in_case)
+    report = (out / "report.md").read_text()
+    assert "Recommended graft: **W7/H0**" in report
+    assert "2.88 mm, a margin of 0.0023 mm." in report
+    assert "| W7/H0 | 2.88 | 0.00 | +0.0023 |" in report
+    wider = build_report(out, _settings(target_coaptation_mm=2.76))
+    assert "a margin of 0.12 mm." in wider.recommendations[0].text
+    assert "| W7/H0 | 2.88 | 0.00 | +0.12 |" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize(("margin", "plain", "signed"), [
+    (0.12, "0.12", "+0.12"), (0.0023, "0.0023", "+0.0023"), (-0.0023, "-0.0023", "-0.0023"),
+    (0.0001, "0.00010", "+0.00010"), (-0.0, "0.00", "+0.00"),
+    (2.0 - 2.0000000000000004, "0.00", "+0.00")])  # round-off of a tie: no 13 decimals
+def test_margin_text_shows_a_thin_margin_and_hides_round_off(margin, plain, signed):
+    from valve_dolfinx.study.recommend import margin_text
+
+    assert margin_text(margin) == plain and margin_text(margin, signed=True) == signed
+
+
 # --- run_case itself --------------------------------------------------------------------------
 #: the crossing given to the real case (standing in for the 1.97 mm of W14/H27 at 1.6 mm)
 CROSSING_MM = 2.5

@@ -23,9 +23,9 @@ from typing import NamedTuple
 
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
-from valve_dolfinx.study.recommend import shortfall_digits
+from valve_dolfinx.study.recommend import margin_text, shortfall_digits
 
-__all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation", "margin_text"]
+__all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
 
 
 class GraftSize(NamedTuple):
@@ -59,12 +59,6 @@ class GraftSize(NamedTuple):
                 raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
                                      f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
         return size
-
-
-def margin_text(margin_mm: float) -> str:
-    """A margin (mm) with the decimals that show it (:func:`shortfall_digits`): 0.0023 mm
-    reads 0.0023, not 0.00."""
-    return f"{margin_mm:.{shortfall_digits(abs(margin_mm))}f}"
 
 
 @dataclass(frozen=True)

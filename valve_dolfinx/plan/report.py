@@ -21,9 +21,10 @@ from pathlib import Path
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
-from valve_dolfinx.plan.recommendation import PlanRecommendation, margin_text
+from valve_dolfinx.plan.recommendation import PlanRecommendation
 from valve_dolfinx.plotting.style import OKABE_ITO
 from valve_dolfinx.study.paths import study_paths
+from valve_dolfinx.study.recommend import margin_text
 
 __all__ = ["PLAN_MD", "PLAN_PDF", "PlanFigures", "RunInfo", "input_lines", "reach_text",
            "write_plan_report"]
@@ -141,10 +142,12 @@ def _details(rec: PlanRecommendation) -> list[str]:
     return out
 
 
-def _number(value: float | None, signed: bool = False) -> str:
-    if value is None:
-        return "–"
-    return f"{value:+.2f}" if signed else f"{value:.2f}"
+def _number(value: float | None) -> str:
+    return "–" if value is None else f"{value:.2f}"
+
+
+def _margin(value: float | None) -> str:
+    return "–" if value is None else margin_text(value, signed=True)
 
 
 def _grafts_table(rec: PlanRecommendation) -> list[str]:
@@ -156,7 +159,7 @@ def _grafts_table(rec: PlanRecommendation) -> list[str]:
              "| over the members | qualifies |", "|---|---|---|---|---|---|---|"]
     for g in rec.grafts:
         lines.append(f"| {g.graft.label} | {_number(g.worst_height_mm)} | "
-                     f"{_number(g.spread_mm)} | {_number(g.margin_mm, signed=True)} | "
+                     f"{_number(g.spread_mm)} | {_margin(g.margin_mm)} | "
                      f"{g.limiting_member or '–'} | {g.state} | {'yes' if g.qualifies else 'no'} |")
     lines += ["", "| member | target (mm) |", "|---|---|",
               *(f"| {m} | {_number(t)} |" for m, t in rec.targets_mm.items()), ""]

@@ -30,7 +30,7 @@ from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
-from valve_dolfinx.study.recommend import Recommendation, recommend
+from valve_dolfinx.study.recommend import Recommendation, margin_text, recommend
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
 from valve_dolfinx.study.table import case_rows, write_tables
 
@@ -174,7 +174,7 @@ def _worst_case_table(rec: Recommendation) -> list[str]:
         counts = [f"{len(m)}/{n}" if m else "–" for m in (c.unconverged + c.missing,
                                                           c.leaking, c.crossing)]
         cells = (c.label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
-                 "–" if c.margin_mm is None else f"{c.margin_mm:+.2f}",
+                 "–" if c.margin_mm is None else margin_text(c.margin_mm, signed=True),
                  c.limiting_member or "–", *counts, _fmt(c.qualifies))
         lines.append("| " + " | ".join(cells) + " |")
     return lines
