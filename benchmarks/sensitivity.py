@@ -32,9 +32,9 @@ from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import CaseConfig, get_dotted
 from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE
 from valve_dolfinx.interrupts import interrupt_on_signals
+from valve_dolfinx.result import margin_text
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.axes import check_axis_values, value_text
-from valve_dolfinx.study.recommend import margin_text
 from valve_dolfinx.study.runner import run_study
 
 

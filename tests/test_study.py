@@ -654,7 +654,7 @@ def test_a_thin_margin_is_shown_with_its_significant_digits_in_the_report(tmp_pa
     (0.0001, "0.00010", "+0.00010"), (-0.0, "0.00", "+0.00"),
     (2.0 - 2.0000000000000004, "0.00", "+0.00")])  # round-off of a tie: no 13 decimals
 def test_margin_text_shows_a_thin_margin_and_hides_round_off(margin, plain, signed):
-    from valve_dolfinx.study.recommend import margin_text
+    from valve_dolfinx.result import margin_text
 
     assert margin_text(margin) == plain and margin_text(margin, signed=True) == signed
 

@@ -5,7 +5,8 @@ areas in mm², forces in mN, times in s.  :func:`competence` is the one definiti
 of a competent valve.  :func:`check_case` says whether a case folder holds a finished
 case, whole and for which settings (``run`` and ``sweep`` resume with it);
 :func:`load_case` reads a case folder back: the result, the configuration that produced
-it and the loaded surface to draw.  Nothing here imports DOLFINx.
+it and the loaded surface to draw; :func:`margin_text` writes a margin (mm) with the digits
+that show it.  Nothing here imports DOLFINx.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from valve_dolfinx.exceptions import InputFileError, MeshError, ValveError
 
 __all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "CaseResult", "CaseCheck",
            "LoadedCase", "check_case", "competence", "competence_text", "leaflets_cross",
-           "load_case"]
+           "load_case", "margin_text", "shortfall_digits"]
 
 #: a case folder's result (written last: its presence means the case finished)
 RESULT_FILE = "result.json"
@@ -85,6 +86,26 @@ def competence_text(result: CaseResult | Mapping) -> str:
         return "competent"
     why = data.get("competence_reason") or ""
     return f"not competent ({why})" if why else "not competent"
+
+
+#: a margin or shortfall below this (mm) is the round-off of two equal heights: shown as 0.00
+ROUND_OFF_MM = 1e-9
+
+
+def shortfall_digits(shortfall: float) -> int:
+    """Decimals that show a shortfall (one that rounds to 0.00 mm is shown to its first two
+    significant digits; zero, or round-off below :data:`ROUND_OFF_MM`, is 0.00)."""
+    if shortfall >= 0.005 or shortfall < ROUND_OFF_MM:
+        return 2
+    return max(3, 1 - math.floor(math.log10(shortfall)))
+
+
+def margin_text(margin_mm: float, *, signed: bool = False) -> str:
+    """A margin or shortfall (mm) with the decimals that show it (:func:`shortfall_digits`):
+    0.0023 mm reads 0.0023, not 0.00; ``signed`` writes its sign (+0.0023); round-off of a
+    tie reads 0.00 (+0.00), without a sign of its own."""
+    value = 0.0 if abs(margin_mm) < ROUND_OFF_MM else margin_mm
+    return f"{value:{'+' if signed else ''}.{shortfall_digits(abs(value))}f}"
 
 
 @dataclass

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
-from valve_dolfinx.study.recommend import margin_text, shortfall_digits
+from valve_dolfinx.result import margin_text, shortfall_digits
 
 __all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
 

@@ -23,8 +23,8 @@ from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
 from valve_dolfinx.plan.recommendation import PlanRecommendation
 from valve_dolfinx.plotting.style import OKABE_ITO
+from valve_dolfinx.result import margin_text
 from valve_dolfinx.study.paths import study_paths
-from valve_dolfinx.study.recommend import margin_text
 
 __all__ = ["PLAN_MD", "PLAN_PDF", "PlanFigures", "RunInfo", "input_lines", "reach_text",
            "write_plan_report"]

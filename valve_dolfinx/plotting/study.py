@@ -31,6 +31,7 @@ from matplotlib import colormaps
 from matplotlib.patches import Rectangle
 
 from valve_dolfinx.plotting.style import OKABE_ITO, SEQUENTIAL_CMAP, new_figure, save_figure
+from valve_dolfinx.result import margin_text
 
 if TYPE_CHECKING:
     from valve_dolfinx.study.recommend import CellSummary, Recommendation
@@ -117,21 +118,13 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     return save_figure(fig, path, dpi=130)
 
 
-def _signed_margin(margin_mm: float) -> str:
-    """+0.0023, not +0.00: the study's :func:`~valve_dolfinx.study.recommend.margin_text`
-    (imported here, since the study package imports this module)."""
-    from valve_dolfinx.study.recommend import margin_text
-
-    return margin_text(margin_mm, signed=True)
-
-
 def _cell_lines(cell: CellSummary, n: int) -> list[str]:
     value = _worst(cell)
     lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
     if n > 1 and cell.spread_mm is not None:
         lines.append(f"spread {cell.spread_mm:.2f} mm")
     if cell.margin_mm is not None:
-        lines.append(f"margin {_signed_margin(cell.margin_mm)} mm")
+        lines.append(f"margin {margin_text(cell.margin_mm, signed=True)} mm")
     if n == 1:  # why it is not competent, as its result.json says
         for why in cell.reasons.values():
             lines += (why or "not competent").split("; ")
@@ -283,7 +276,7 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
             low.bar(d[where], margin[where], width=step / 2, color=colour, label=label)
     for x, m in zip(d, margin, strict=True):
         if math.isfinite(m):
-            low.annotate(_signed_margin(m), (x, m),
+            low.annotate(margin_text(m, signed=True), (x, m),
                          xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
                          ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)

@@ -39,16 +39,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from valve_dolfinx.result import leaflets_cross
+from valve_dolfinx.result import leaflets_cross, margin_text, shortfall_digits
 
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
-           "flat_area_ratio", "cell_state", "shortfall_digits", "margin_text"]
+           "flat_area_ratio", "cell_state"]
 
 FIGURE = "min_coaptation_height_mm"
 #: the normal valve's figure, as the target says where it comes from
 NORMAL_TARGET = "the normal valve's minimum coaptation height"
-#: a margin or shortfall below this (mm) is the round-off of two equal heights: shown as 0.00
-ROUND_OFF_MM = 1e-9
 
 
 def flat_area_ratio(width_pct: float, height_pct: float) -> float:
@@ -308,22 +306,6 @@ def cell_state(cell: CellSummary) -> str:
         ("not computed", cell.missing), ("not converged", cell.unconverged),
         ("leaking", cell.leaking), ("leaflets crossing", cell.crossing)) if members]
     return ", ".join(parts) or f"not sealed in {len(cell.incompetent)} of {n} members"
-
-
-def shortfall_digits(shortfall: float) -> int:
-    """Decimals that show a shortfall (one that rounds to 0.00 mm is shown to its first two
-    significant digits; zero, or round-off below :data:`ROUND_OFF_MM`, is 0.00)."""
-    if shortfall >= 0.005 or shortfall < ROUND_OFF_MM:
-        return 2
-    return max(3, 1 - math.floor(math.log10(shortfall)))
-
-
-def margin_text(margin_mm: float, *, signed: bool = False) -> str:
-    """A margin or shortfall (mm) with the decimals that show it (:func:`shortfall_digits`):
-    0.0023 mm reads 0.0023, not 0.00; ``signed`` writes its sign (+0.0023); round-off of a
-    tie reads 0.00 (+0.00), without a sign of its own."""
-    value = 0.0 if abs(margin_mm) < ROUND_OFF_MM else margin_mm
-    return f"{value:{'+' if signed else ''}.{shortfall_digits(abs(value))}f}"
 
 
 def _chosen_text(rec: Recommendation, chosen: CellSummary) -> str:

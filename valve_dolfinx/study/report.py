@@ -25,12 +25,12 @@ from valve_dolfinx.plotting.study import (
     plot_coaptation_vs_width,
     plot_sizing_map,
 )
-from valve_dolfinx.result import competence_text
+from valve_dolfinx.result import competence_text, margin_text
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
-from valve_dolfinx.study.recommend import Recommendation, margin_text, recommend
+from valve_dolfinx.study.recommend import Recommendation, recommend
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
 from valve_dolfinx.study.table import case_rows, write_tables
 
