@@ -17,48 +17,13 @@ run_plan_study`) maps its own result onto it.  It is one of three answers:
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict, dataclass, field
-from typing import NamedTuple
 
 from valve_dolfinx.exceptions import ParameterError
-from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
 from valve_dolfinx.result import margin_text, shortfall_digits
+from valve_dolfinx.sizing.cells import GraftSize
 
 __all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
-
-
-class GraftSize(NamedTuple):
-    """A graft's enlargement over the measured leaflet, per cent of its width and height."""
-
-    width_pct: float
-    height_pct: float
-
-    @property
-    def label(self) -> str:
-        """``W14/H13``, as the study names it."""
-        return f"W{self.width_pct:g}/H{self.height_pct:g}"
-
-    @property
-    def stem(self) -> str:
-        """``W14_H13``: the graft's part of a file name."""
-        return f"W{self.width_pct:g}_H{self.height_pct:g}"
-
-    @classmethod
-    def parse(cls, text: str, option: str = "--template") -> GraftSize:
-        """``"14/13"`` or ``"W14/H13"`` (per cent), range-checked."""
-        match = re.fullmatch(r"\s*W?\s*([-+0-9.eE]+)\s*[/_,]\s*H?\s*([-+0-9.eE]+)\s*", text)
-        try:
-            size = cls(float(match.group(1)), float(match.group(2)))
-        except (AttributeError, ValueError):
-            raise ParameterError(f"{option} {text!r}: give the graft as W/H in per cent of "
-                                 "the measured leaflet, e.g. 14/13") from None
-        for value in size:
-            if not 0.0 <= value <= MAX_GRAFT_PCT:
-                reason = GRAFT_TOO_SMALL if value < 0 else GRAFT_TOO_LARGE
-                raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
-                                     f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
-        return size
 
 
 @dataclass(frozen=True)

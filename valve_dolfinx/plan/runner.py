@@ -251,12 +251,11 @@ def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[f
                   targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
                   unsealable_roots_mm=beyond, unsealable_reason=reason,
                   limiting_member=limiting)
-    if rec.recommended is not None:
-        chosen = sizes[rec.recommended]
-        answer = {"closest": chosen} if beyond else {"graft": chosen}
+    if rec.size is not None:
+        answer = {"closest": rec.size} if beyond else {"graft": rec.size}
         return PlanRecommendation(**answer, margin_mm=rec.margin_mm, **common)
-    if rec.best is not None:
-        return PlanRecommendation(closest=sizes[rec.best], shortfall_mm=rec.shortfall_mm,
+    if rec.best_size is not None:
+        return PlanRecommendation(closest=rec.best_size, shortfall_mm=rec.shortfall_mm,
                                   **common)
     return PlanRecommendation(**common)
 

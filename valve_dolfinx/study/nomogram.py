@@ -58,7 +58,7 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
     rows = []
     for rec in recommendations:
         normal = normals.get(rec.comparison[NOMOGRAM_KEY], {})
-        chosen, best = rec.cell(rec.recommended), rec.cell(rec.best)
+        chosen, best = rec.size, rec.best_size
         limit = rec.limiting_member
         rows.append({
             "root_loaded_diameter_mm": rec.comparison[NOMOGRAM_KEY],

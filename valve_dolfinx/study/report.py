@@ -30,7 +30,7 @@ from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
-from valve_dolfinx.study.recommend import Recommendation, recommend
+from valve_dolfinx.study.recommend import Recommendation, layout_tables, recommend_all
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
 from valve_dolfinx.study.table import case_rows, write_tables
 
@@ -305,10 +305,9 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         report.rows = rows = case_rows(out, [c.name for c in layout.cases])
         have = {r["case"] for r in rows}
         report.missing = [c.name for c in layout.cases if c.name not in have]
-        report.recommendations = [
-            recommend(member_tables(layout, c, rows), target_mm,
-                      comparison=dict(layout.comparisons[c]), n_paths=len(layout.paths))
-            for c in range(len(layout.comparisons))]
+        report.recommendations = recommend_all(
+            [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
+            target_mm, n_paths=len(layout.paths))
     files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None,

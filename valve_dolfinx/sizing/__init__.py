@@ -1,0 +1,52 @@
+"""The graft sizing answer (SPEC §7): one home for the study, the nomogram and the plan.
+
+* :mod:`~valve_dolfinx.sizing.cells`: :class:`GraftSize`; the solved cells, each graft's
+  worst case over its members (:class:`CellSummary`) and the members' targets;
+* :mod:`~valve_dolfinx.sizing.surface`: the response surfaces, coaptation
+  (Gaussian-process regression with a noise term) and sealing (Gaussian-process
+  classification), over W, H and every axis;
+* :mod:`~valve_dolfinx.sizing.resolution`: the measured resolution (path scatter, surface
+  noise, discretisation error) and the decision tolerance;
+* :mod:`~valve_dolfinx.sizing.answer`: the answer read from the surfaces at that
+  tolerance, its band and its wording, and the sizes to confirm.
+
+Nothing here imports DOLFINx.
+"""
+
+from __future__ import annotations
+
+from valve_dolfinx.sizing.answer import (
+    SEAL_PROBABILITY,
+    MemberTable,
+    SizingAnswer,
+    StudyFit,
+    fit_study,
+    read_answer,
+    sizes_to_confirm,
+)
+from valve_dolfinx.sizing.cells import (
+    CellSummary,
+    GraftSize,
+    cell_state,
+    flat_area_ratio,
+    member_targets,
+    summarise_cells,
+)
+from valve_dolfinx.sizing.resolution import Resolution
+
+__all__ = [
+    "SEAL_PROBABILITY",
+    "CellSummary",
+    "GraftSize",
+    "MemberTable",
+    "Resolution",
+    "SizingAnswer",
+    "StudyFit",
+    "cell_state",
+    "fit_study",
+    "flat_area_ratio",
+    "member_targets",
+    "read_answer",
+    "sizes_to_confirm",
+    "summarise_cells",
+]
