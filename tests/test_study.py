@@ -575,64 +575,63 @@ def _row(w, h, height, converged=True, competent=True):
             "competent": competent, "min_coaptation_height_mm": height}
 
 
-def test_recommendation_smallest_qualifying_graft():
+def _plane(target, base, per_w, per_h, sizes=(0, 7, 14)):
+    """A one-member study on a 3 × 3 grid whose heights are the plane
+    ``base + per_w·W + per_h·H`` (mm), every graft sealed; the normal valve at ``target``."""
+    return [_row(None, None, target), *(_row(w, h, base + per_w * w + per_h * h)
+                                        for w in sizes for h in (0, 13, 27))]
+
+
+def test_recommendation_reads_the_answer_beside_the_solved_cells():
+    """Heights on the plane 2 + 0.08 W + 0.03 H against a target of 3 mm: on that plane the
+    flat area (1 + W)(1 + H) along the target's line H = (1 - 0.08 W)/0.03 falls as W grows,
+    so the smallest adequate size is where the line meets H = 0: W = 12.5 %, read on the
+    1 % lattice as W13/H0 (3.04 mm; W12/H0 is 0.04 mm short, more than the noise of an
+    exact plane).  No grid cell qualifies below W14/H0."""
     from valve_dolfinx.study.recommend import recommend
 
-    rows = [_row(None, None, 3.0),
-            _row(0, 0, 2.0), _row(7, 0, 2.6), _row(14, 0, 3.1),
-            _row(0, 13, 2.4), _row(7, 13, 3.2), _row(14, 13, 3.5),
-            _row(0, 27, 3.4, competent=False), _row(7, 27, 3.6, converged=False),
-            _row(14, 27, 3.9)]
-    rec = recommend(rows)
+    rows = _plane(3.0, 2.0, 0.08, 0.03)
+    rec = recommend(rows, ladder=None)
     assert rec.target_mm == 3.0 and "normal valve" in rec.target_source
-    # W14/H0 (1.14) is smaller than W7/H13 (1.209); W0/H27 leaks, W7/H27 did not converge
-    assert rec.recommended == "W14/H0" and rec.recommended_height_mm == 3.1
-    assert rec.qualifying == ["W14/H0", "W7/H13", "W14/H13", "W14/H27"]
-    assert rec.neighbours == pytest.approx({"W7/H0": -0.5, "W14/H13": 0.4})
-    assert rec.max_neighbour_step_mm == pytest.approx(1.0)  # W0/H13 -> W0/H27
-    assert rec.shortfall_mm is None and "W14/H0" in rec.text and "0.50" in rec.text
-    assert recommend(rows, target_mm=3.3).recommended == "W14/H13"
-    # one member: the margin over the target is the graft's own, and the text says that the
-    # path was not varied
-    assert rec.margin_mm == pytest.approx(0.1) and rec.limiting_member == ""
-    assert rec.spread_mm == 0.0 and "a margin of 0.10 mm" in rec.text
-    assert "one numerical path" in rec.text and "--paths 2" in rec.text
-    assert "one numerical path" not in recommend({"path 1": rows, "path 2": rows},
-                                                 n_paths=2).text
+    assert rec.size == (13.0, 0.0) and rec.recommended == "W13/H0"
+    assert rec.margin_mm == pytest.approx(0.04, abs=0.01)
+    assert rec.tolerance_mm < 0.01 and rec.answer.resolution.path_scatter_mm is None
+    # every case sealed: the rule of succession (9 + 1)/(9 + 2) >= 0.9
+    assert rec.answer.seal_probability == pytest.approx(10 / 11)
+    assert rec.answer.highest == (14.0, 27.0)
+    # the solved cells beside it, as solved: W7/H0 is 2.56 mm, 0.44 mm short
+    cell = rec.cell("W7/H0")
+    assert cell.worst_height_mm == pytest.approx(2.56) and cell.margin_mm == pytest.approx(-0.44)
+    assert not cell.qualifies and rec.cell("W14/H0").qualifies
+    assert "**W13/H0**" in rec.text and "one numerical path" in rec.text
+    # a given target moves the answer up the plane: 0.08 W + 0.03 H >= 1.3 needs H > 0 at
+    # W <= 14 (W14 gives 0.08·14 + 0.03 H >= 1.3 for H >= 6)
+    higher = recommend(rows, target_mm=3.3, ladder=None)
+    assert higher.size.width_pct == 14.0 and 5.0 <= higher.size.height_pct <= 7.0
 
 
 def test_recommendation_when_none_qualifies():
+    """The plane 1 + 0.05 W + 0.02 H reaches 2.24 mm at W14/H27 against a target of 3.5 mm:
+    no graft, the closest W14/H27, 1.26 mm short; without a converged normal valve there is
+    no target."""
     from valve_dolfinx.study.recommend import recommend
 
-    rows = [_row(None, None, 3.5), _row(0, 0, 2.0), _row(7, 0, 2.9),
-            _row(14, 0, 3.8, competent=False), _row(21, 0, 4.0, converged=False)]
-    rec = recommend(rows)
-    assert rec.recommended is None and rec.best == "W7/H0" and rec.best_is_sound
-    assert rec.shortfall_mm == pytest.approx(0.6)
-    assert "0.60 mm short" in rec.text and "W7/H0" in rec.text
-    assert rec.neighbours == pytest.approx({"W0/H0": -0.9, "W14/H0": 0.9})
-    # a shortfall below 0.005 mm is printed to the digit where it shows, not as "0.00 mm"
-    tie = recommend([_row(None, None, 2.90391), _row(0, 0, 2.0), _row(7, 0, 2.90381)])
-    assert tie.best == "W7/H0" and tie.shortfall_mm == pytest.approx(1e-4)
-    assert "0.00010 mm short" in tie.text and "2.90381 mm" in tie.text
-    no_normal = recommend(rows[1:])
+    rows = _plane(3.5, 1.0, 0.05, 0.02)
+    rec = recommend(rows, ladder=None)
+    assert rec.recommended is None and rec.answer.why == "short"
+    assert rec.best == "W14/H27" and rec.shortfall_mm == pytest.approx(1.26, abs=0.01)
+    assert rec.text.startswith("No graft:") and "1.26 mm short" in rec.text
+    no_normal = recommend(rows[1:], ladder=None)
     assert no_normal.target_mm is None and "give --target-coaptation" in no_normal.text
-    assert no_normal.best == "W7/H0" and no_normal.shortfall_mm is None
-    unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]])
-    assert unconverged.target_mm is None and "did not converge" in unconverged.text
-    # the only finite figure is a leaking graft's, above the target: the text gives the
-    # reason of its result.json, and the margin at two decimals
-    leaking = {**_row(14, 0, 3.8, competent=False), "competence_reason": "leaks 0.40 mm²"}
-    above = recommend([_row(None, None, 3.5), leaking])
-    assert above.best == "W14/H0" and above.shortfall_mm == pytest.approx(-0.3)
-    assert ("The best is **W14/H0** (not competent: leaks 0.40 mm²); its height reaches the "
-            "target (margin 0.30 mm).") in above.text
+    assert no_normal.size is None and no_normal.answer.why == "no target"
+    unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]], ladder=None)
+    assert unconverged.answer.why == "no target" and "did not converge" in unconverged.text
 
 
 def test_a_thin_margin_is_shown_with_its_significant_digits_in_the_report(tmp_path):
     """The stand-in W7/H0 reaches 2.88 mm; against a target of 2.8777 mm its margin of
-    0.0023 mm reads 0.0023 in the recommendation and +0.0023 in the worst-case table of
-    report.md (not 0.00), and a margin of 0.12 mm keeps two decimals."""
+    0.0023 mm reads +0.0023 in the worst-case table of report.md (not 0.00), and a margin
+    of 0.12 mm keeps two decimals."""
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.study.report import build_report
     from valve_dolfinx.study.runner import run_study
@@ -641,11 +640,11 @@ def test_a_thin_margin_is_shown_with_its_significant_digits_in_the_report(tmp_pa
     run_study(_settings(target_coaptation_mm=2.8777), out, MPI.COMM_SELF,
               case_function=stand_in_case)
     report = (out / "report.md").read_text()
-    assert "Recommended graft: **W7/H0**" in report
-    assert "2.88 mm, a margin of 0.0023 mm." in report
+    # two grafts are too few for a surface: no answer, the solved cells as they are
+    assert "No answer: a response surface needs at least 6 solved cells" in report
     assert "| W7/H0 | 2.88 | 0.00 | +0.0023 |" in report
     wider = build_report(out, _settings(target_coaptation_mm=2.76))
-    assert "a margin of 0.12 mm." in wider.recommendations[0].text
+    assert wider.recommendations[0].cell("W7/H0").margin_mm == pytest.approx(0.12, abs=1e-9)
     assert "| W7/H0 | 2.88 | 0.00 | +0.12 |" in (out / "report.md").read_text()
 
 

@@ -316,46 +316,42 @@ def _member(rows, **flags):
     return out
 
 
-def test_worst_case_recommendation_on_constructed_tables():
-    """Three members: 7/0 qualifies in two and leaks in the third, so 14/0 (the next in flat
-    area, lowest member 2.95 mm against its target 2.90 mm) is recommended with that margin
-    and member; without 14/0 nothing qualifies and the best graft's shortfall is named."""
-    from valve_dolfinx.study.recommend import recommend
+def test_worst_case_of_each_graft_on_constructed_tables():
+    """Three members: 7/0 reaches the target in all three but leaks in D=21, so it does not
+    qualify; 14/0 qualifies, its lowest member 2.95 mm against its target 2.90 mm (margin
+    0.05 mm in D=21); 0/13 is 1.0 mm short in D=20.  Missing and unconverged members are
+    named.  (The answer read from the surface: tests/test_sizing.py.)"""
+    from valve_dolfinx.sizing import member_targets, summarise_cells
 
     tables = {
         "D=20": _member({None: 3.0, "7/0": 3.3, "14/0": 3.4, "0/13": 2.0}),
         "D=21": _member({None: 2.9, "7/0": 3.5, "14/0": 2.95, "0/13": 2.1}, leaks="7/0"),
         "D=22": _member({None: 2.5, "7/0": 2.8, "14/0": 3.0, "0/13": 2.2}),
     }
-    rec = recommend(tables)
-    assert rec.recommended == "W14/H0" and rec.qualifying == ["W14/H0"]
-    assert rec.margin_mm == pytest.approx(0.05) and rec.limiting_member == "D=21"
-    assert rec.recommended_height_mm == pytest.approx(2.95)  # the worst member's height
-    assert rec.spread_mm == pytest.approx(3.4 - 2.95)
-    leaky = rec.cell("W7/H0")
+
+    def cells(tables, target_mm=None):
+        targets, _ = member_targets(tables, target_mm)
+        return {c.label: c for c in summarise_cells(tables, targets)}
+
+    found = cells(tables)
+    assert [label for label, c in found.items() if c.qualifies] == ["W14/H0"]
+    chosen = found["W14/H0"]
+    assert chosen.margin_mm == pytest.approx(0.05) and chosen.limiting_member == "D=21"
+    assert chosen.worst_height_mm == pytest.approx(2.95)  # the worst member's height
+    assert chosen.spread_mm == pytest.approx(3.4 - 2.95)
+    leaky = found["W7/H0"]
     assert leaky.leaking == ["D=21"] and not leaky.qualifies
     assert leaky.margin_mm == pytest.approx(0.3)  # it reaches the target everywhere
-    assert rec.cell("W0/H13").margin_mm == pytest.approx(-1.0)
-    assert "margin 0.05 mm, limited by `D=21` (2.95 mm against 2.90 mm)" in rec.text
-
-    without = {m: [r for r in rows if r["graft_width_pct"] != 14.0] for m, rows in tables.items()}
-    none = recommend(without)
-    # W7/H0 leaks in D=21, so the best is the graft sound in every member: W0/H13, whose
-    # worst margin is D=20's 2.0 - 3.0
-    assert none.recommended is None and none.best == "W0/H13"
-    assert none.shortfall_mm == pytest.approx(1.0) and none.limiting_member == "D=20"
-    assert "No graft on the grid is robust" in none.text
-    assert "1.00 mm short in `D=20`" in none.text
-
-    unconverged = recommend({**tables, "D=21": _member(
+    assert found["W0/H13"].margin_mm == pytest.approx(-1.0)
+    assert found["W0/H13"].limiting_member == "D=20"
+    unconverged = cells({**tables, "D=21": _member(
         {None: 2.9, "7/0": 3.5, "14/0": 2.95, "0/13": 2.1}, leaks="7/0", unconverged="14/0")})
-    assert unconverged.recommended is None and unconverged.qualifying == []
-    assert unconverged.cell("W14/H0").unconverged == ["D=21"]
-    missing = recommend({**tables, "D=22": [r for r in tables["D=22"]
-                                            if r["graft_width_pct"] != 14.0]})
-    assert missing.cell("W14/H0").missing == ["D=22"] and missing.recommended is None
-    given = recommend(tables, target_mm=2.8)  # one target for every member
-    assert given.recommended == "W14/H0" and given.margin_mm == pytest.approx(0.15)
+    assert unconverged["W14/H0"].unconverged == ["D=21"] and not unconverged["W14/H0"].qualifies
+    missing = cells({**tables, "D=22": [r for r in tables["D=22"]
+                                        if r["graft_width_pct"] != 14.0]})
+    assert missing["W14/H0"].missing == ["D=22"] and not missing["W14/H0"].qualifies
+    given = cells(tables, target_mm=2.8)  # one target for every member
+    assert given["W14/H0"].margin_mm == pytest.approx(0.15)
 
 
 # --- bad input --------------------------------------------------------------------------------

@@ -281,7 +281,7 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
                          ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)
     finite = margin[np.isfinite(margin)]
-    lo, hi = min(0.0, *finite), max(0.0, *finite)
+    lo, hi = min([0.0, *finite]), max([0.0, *finite])
     span = (hi - lo) or 0.1
     low.set_ylim(lo - 0.2 * span, hi + 0.7 * span)  # room for the numbers and legend
     low.set_ylabel("margin (mm)")
