@@ -13,11 +13,13 @@ The numerical path is not an input: the paths of a cell are replicates.
   is the scatter the inputs do not explain (paths, mesh), reported in mm, and a grouped
   K-fold cross-validation (all cases of a cell held out together) gives its
   out-of-sample error.
-* :class:`SealingModel`: scikit-learn's ``GaussianProcessClassifier`` (``C · RBF``, one
-  length scale per input) of the probability that a graft case converges, seals and has
-  no leaflets crossing (``competent``).  A study whose cases all seal (or all fail) has
-  no boundary to fit: the probability is then Laplace's rule of succession,
-  ``(k + 1)/(n + 2)`` everywhere.
+* :class:`SealingModel`: the probability that a graft case converges, seals and has no
+  leaflets crossing (``competent``): scikit-learn's ``LogisticRegression`` on the
+  quadratic features of the scaled inputs (a sealing boundary that is a smooth conic in
+  W, H and the axes: it can bend, and seal only in a middle band, as wide grafts of low
+  height leak), its L2 regularisation chosen by a grouped, stratified cross-validation.
+  A study whose cases all seal (or all fail) has no boundary to fit: the probability is
+  then Laplace's rule of succession, ``(k + 1)/(n + 2)`` everywhere.
 
 Both are deterministic: a fixed ``random_state`` and a fixed number of optimiser
 restarts.  Nothing here imports DOLFINx.
@@ -35,12 +37,20 @@ from typing import Any
 import numpy as np
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessClassifier, GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
-from sklearn.model_selection import GroupKFold, cross_val_predict
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+from sklearn.linear_model import LogisticRegression
+from sklearn.model_selection import (
+    GridSearchCV,
+    GroupKFold,
+    StratifiedGroupKFold,
+    cross_val_predict,
+)
+from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.preprocessing import PolynomialFeatures
 
 __all__ = ["SurfacePoint", "Design", "CoaptationSurface", "SealingModel", "fit_surface",
-           "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS"]
+           "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS", "SEAL_CS"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +62,8 @@ RANDOM_STATE = 0
 RESTARTS = 4
 #: folds of the grouped cross-validation (fewer when the study has fewer cells)
 CV_FOLDS = 5
+#: the regularisation strengths (C, inverse) the sealing model's cross-validation chooses from
+SEAL_CS = (0.1, 1.0, 10.0, 100.0, 1000.0)
 #: bounds of the scaled length scales: a tenth of the studied range to 20 times it
 _LENGTH_BOUNDS = (0.1, 20.0)
 
@@ -128,6 +140,13 @@ def _raw(points: Sequence[SurfacePoint], columns: Sequence[str]) -> np.ndarray:
                 key, _, value = column.partition("=")
                 out[i, j] = float(repr(values.get(key)) == value)
     return out
+
+
+def _cell_groups(points: Sequence[SurfacePoint]) -> np.ndarray:
+    """The number of each point's cell: a cross-validation holds a cell's replicates out
+    together."""
+    numbers: dict[tuple, int] = {}
+    return np.array([numbers.setdefault(p.cell, len(numbers)) for p in points])
 
 
 def _quiet_fit(model, x: np.ndarray, y: np.ndarray):
@@ -212,9 +231,8 @@ def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
     z = (y - mean) / scale
     model = _quiet_fit(_regressor(x.shape[1]), x, z)
     noise = math.sqrt(model.kernel_.k2.noise_level) * scale
-    cells = [p.cell for p in points]
-    groups = np.array([sorted(set(cells), key=repr).index(c) for c in cells])
-    folds = min(cv_folds, len(set(cells)))
+    groups = _cell_groups(points)
+    folds = min(cv_folds, len(set(groups)))
     rmse = None
     if folds >= 3:
         with warnings.catch_warnings():
@@ -225,23 +243,25 @@ def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
     log.debug("coaptation surface: %s; noise %.3f mm, CV error %s mm", model.kernel_, noise,
               rmse)
     return CoaptationSurface(design, model, mean, scale, noise, rmse, folds, len(y),
-                             len(set(cells)))
+                             len(set(groups)))
 
 
 @dataclass
 class SealingModel:
     """The probability that a graft case converges, seals and has no leaflets crossing.
 
-    ``model`` is the fitted ``GaussianProcessClassifier``; None when every case had the
-    same outcome, and then ``constant`` is the rule of succession ``(k + 1)/(n + 2)``.
+    ``model`` is the fitted pipeline (quadratic features of the scaled inputs, then an
+    L2-regularised logistic regression whose strength ``C`` the grouped cross-validation
+    chose); None when every case had the same outcome, and then ``constant`` is the rule
+    of succession ``(k + 1)/(n + 2)``.
     """
 
     design: Design
     n_cases: int
     n_sealed: int
-    model: GaussianProcessClassifier | None = None
+    model: Pipeline | None = None
     constant: float | None = None
-    kernel: str = field(default="")
+    regularisation: float | None = None
 
     def probability(self, points: Sequence[SurfacePoint]) -> np.ndarray:
         if self.model is None:
@@ -249,24 +269,40 @@ class SealingModel:
         return self.model.predict_proba(self.design.matrix(points))[:, 1]
 
     def summary(self) -> dict:
-        return {"cases": self.n_cases, "sealed": self.n_sealed,
-                "kernel": self.kernel or f"constant {self.constant:.3f} (rule of succession)"}
+        model = ("constant (rule of succession)" if self.model is None else
+                 f"logistic regression on quadratic features, C = {self.regularisation:g}")
+        return {"cases": self.n_cases, "sealed": self.n_sealed, "model": model}
 
 
 def fit_sealing(points: Sequence[SurfacePoint], sealed: Sequence[bool],
                 design: Design | None = None) -> SealingModel:
     """Fit :class:`SealingModel` to the outcomes ``sealed`` at ``points``; ``design``: the
-    inputs to use (the coaptation surface's, so that both read the same axes)."""
+    inputs to use (the coaptation surface's, so that both read the same axes).
+
+    ``C`` is chosen among :data:`SEAL_CS` by the log-loss of a grouped, stratified K-fold
+    cross-validation (each cell's cases held out together); with fewer than two cells of
+    the rarer outcome there is nothing to hold out, and the middle of :data:`SEAL_CS` is
+    taken.
+    """
     design = design or Design.of(points)
-    y = np.asarray(sealed, dtype=bool)
+    y = np.asarray(sealed, dtype=int)
     out = SealingModel(design, len(y), int(y.sum()))
     if y.all() or not y.any():
         out.constant = (out.n_sealed + 1) / (out.n_cases + 2)
         return out
     x = design.matrix(points)
-    kernel = ConstantKernel(1.0, (1e-2, 1e2)) * RBF(np.ones(x.shape[1]), _LENGTH_BOUNDS)
-    out.model = _quiet_fit(GaussianProcessClassifier(
-        kernel, n_restarts_optimizer=RESTARTS, random_state=RANDOM_STATE), x, y.astype(int))
-    out.kernel = str(out.model.kernel_)
+    groups = _cell_groups(points)
+    rare = min(len(set(groups[y == 1])), len(set(groups[y == 0])))
+    out.model = make_pipeline(PolynomialFeatures(2), LogisticRegression(max_iter=2000))
+    out.regularisation = SEAL_CS[len(SEAL_CS) // 2]
+    if rare >= 2:
+        folds = list(StratifiedGroupKFold(min(CV_FOLDS, rare)).split(x, y, groups))
+        search = GridSearchCV(out.model, {"logisticregression__C": list(SEAL_CS)}, cv=folds,
+                              scoring="neg_log_loss")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            search.fit(x, y)
+        out.regularisation = float(search.best_params_["logisticregression__C"])
+    out.model.set_params(logisticregression__C=out.regularisation)
+    _quiet_fit(out.model, x, y)
     return out
-
