@@ -46,6 +46,7 @@ from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
 from valve_dolfinx.plan.recommendation import GraftSize, GraftWorstCase, PlanRecommendation
 from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
 from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
+from valve_dolfinx.study.axes import axis_label
 from valve_dolfinx.study.grid import StudySettings
 from valve_dolfinx.study.recommend import NORMAL_TARGET, cell_state
 from valve_dolfinx.study.store import CASES_DIR, RESULT_FILE, SETTINGS_FILE
@@ -185,6 +186,9 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     recommended (or closest) graft at the measured diameter along the first path."""
     layout = report.layout
     words = {member.label: member_words(member) for member in layout.members}
+    # the answer's members are the root diameters, the paths being its replicates
+    words.update({axis_label(m.values): f"root {dict(m.values)[ROOT_KEY]:.1f} mm"
+                  for m in layout.members})
     beyond = reachable_roots(patient)[1]
     reason = ""
     if beyond:
