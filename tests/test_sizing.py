@@ -220,3 +220,18 @@ def test_path_scatter_and_the_mesh_ladder(tmp_path):
     fit = fit_study(tables, ladder=ladder)
     assert fit.resolution.discretisation_mm == pytest.approx(error)
     assert fit.resolution.tolerance_mm == pytest.approx(error)  # the largest of the three
+
+
+def test_sizing_map_draws_the_answer(tmp_path):
+    """The study's recommendation of a synthetic study drawn as the continuous sizing map
+    (looked at by eye; here: it is written, with the answer's lattice behind it)."""
+    from valve_dolfinx.plotting.study import plot_sizing_map
+    from valve_dolfinx.study.recommend import recommend
+
+    rec = recommend(study(seed=2, leaks=lambda w, h: h == 0 and w >= 14), n_paths=2,
+                    ladder=None)
+    assert rec.answer.lattice.worst_margin_mm.shape == (41, 28)
+    fig = plot_sizing_map(rec, tmp_path / "sizing_map.png", title="synthetic")
+    assert (tmp_path / "sizing_map.png").stat().st_size > 50_000
+    labels = [t.get_text() for t in fig.axes[0].texts]
+    assert f"answer {rec.recommended}" in labels and len(rec.cells) == 20

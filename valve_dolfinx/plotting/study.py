@@ -4,10 +4,9 @@
   against graft width, one curve per graft height, with a bar up to the best member
   (the spread), and the target (the normal valve's, per member) as a line or band;
   grafts not sound in every member hollow.
-* :func:`plot_sizing_map`: the W × H grid as a heat map of the same worst case, each
-  cell with its spread, its margin over the target and why it is not competent (its
-  ``competence_reason``; with several members, how many leak, cross or did not
-  converge); the recommended (or best) graft framed.
+* :func:`plot_sizing_map`: the answer over W × H: contours of the predicted worst-case
+  margin, the sealing boundary, the band of qualifying sizes, the answer and the highest
+  size, with the solved cells marked.
 * :func:`plot_nomogram`: the recommended graft and its margin against the loaded root
   diameter (:mod:`valve_dolfinx.study.nomogram`).
 * :func:`plot_case_panel`: the figure-style panel of one case (ventricular view,
@@ -26,11 +25,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import matplotlib
 import numpy as np
-from matplotlib import colormaps
-from matplotlib.patches import Rectangle
 
-from valve_dolfinx.plotting.style import OKABE_ITO, SEQUENTIAL_CMAP, new_figure, save_figure
+from valve_dolfinx.plotting.style import OKABE_ITO, new_figure, save_figure
 from valve_dolfinx.result import margin_text
 
 if TYPE_CHECKING:
@@ -118,96 +116,99 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     return save_figure(fig, path, dpi=130)
 
 
-def _cell_lines(cell: CellSummary, n: int) -> list[str]:
-    value = _worst(cell)
-    lines = [f"{value:.2f} mm" if math.isfinite(value) else "no result"]
-    if n > 1 and cell.spread_mm is not None:
-        lines.append(f"spread {cell.spread_mm:.2f} mm")
-    if cell.margin_mm is not None:
-        lines.append(f"margin {margin_text(cell.margin_mm, signed=True)} mm")
-    if n == 1:  # why it is not competent, as its result.json says
-        for why in cell.reasons.values():
-            lines += (why or "not competent").split("; ")
-        return lines + (["missing"] if cell.missing else [])
-    for what, members in (("leaks", cell.leaking), ("crosses", cell.crossing),
-                          ("not converged", cell.unconverged), ("missing", cell.missing)):
-        if members:
-            lines.append(f"{what} {len(members)}/{n}")
-    return lines
+#: the diverging colour map of a margin over the target (blue above, red below)
+_MARGIN_CMAP = "RdBu"
+
+
+def _solved_cells(ax, rec: Recommendation) -> None:
+    """The solved cells on a sizing map: filled where sound in every member, a cross where
+    not, each with its worst-case height (mm)."""
+    for c in rec.cells:
+        value = _worst(c)
+        marker = dict(marker="o", mfc="black", mec="white") if c.sound else dict(
+            marker="X", mfc=_LEAK_COLOUR, mec="black")
+        ax.plot(c.width_pct, c.height_pct, ms=8, mew=1.0, ls="none", zorder=4, **marker)
+        if math.isfinite(value):
+            ax.annotate(f"{value:.2f}", (c.width_pct, c.height_pct), xytext=(0, -13),
+                        textcoords="offset points", ha="center", va="top", fontsize=8,
+                        zorder=4, bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none",
+                                            alpha=0.7))
 
 
 def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = ""):
-    """The W × H grid coloured by the worst-case minimum coaptation height; each cell with
-    its spread over the members, its margin over the target and its failures.
+    """The answer's sizing map over W × H (:mod:`valve_dolfinx.sizing.answer`).
 
-    Cells that are not competent (in some member) are hatched; the recommended cell is
-    framed, or, when there is none, the best one, labelled as short of the target."""
-    cells = rec.cells
-    widths = sorted({c.width_pct for c in cells})
-    heights = sorted({c.height_pct for c in cells})
-    if not cells:
-        fig = new_figure(5, 3)
-        ax = fig.add_subplot()
-        ax.text(0.5, 0.5, "no graft case finished yet", ha="center", va="center")
-        ax.set_axis_off()
-        return save_figure(fig, path, dpi=100)
-    n = len(rec.members)
-    grid = np.full((len(heights), len(widths)), np.nan)
-    for c in cells:
-        grid[heights.index(c.height_pct), widths.index(c.width_pct)] = _worst(c)
-    width_in = 1.5 * len(widths) + 3.2
-    fig = new_figure(width_in, (1.1 if n == 1 else 1.35) * len(heights) + 2.4)
+    Filled contours of the predicted worst-case margin over the target (mm; its 0 line
+    solid, the tolerance's line dashed), the sealing boundary (the probability
+    threshold, dash-dotted, the side that does not seal hatched), the band of qualifying
+    sizes outlined in green, the answer (star) and the highest size (triangle), and the
+    solved cells with their worst-case heights.  Without a surface, the solved cells
+    alone."""
+    answer = rec.answer
+    lattice = answer.lattice
+    fig = new_figure(8.6, 7.4)
     ax = fig.add_subplot()
-    cmap = colormaps[SEQUENTIAL_CMAP].with_extremes(bad="0.85")
-    targets = _targets(rec)
-    # the colour range takes in the targets, so that their marks lie on the bar
-    values = [*grid[np.isfinite(grid)], *targets]
-    limits = (min(values), max(values)) if values else (None, None)
-    image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, aspect="auto",
-                      vmin=limits[0], vmax=limits[1])
-    bar = fig.colorbar(image, ax=ax)
-    bar.set_label("worst-case minimum coaptation height (mm)" if n > 1 else
-                  "minimum coaptation height (mm)")
-    note = "vermillion hatched: not competent (leaks, crosses or not converged)"
-    if n > 1:
-        note += " in some member"
-    for t in targets:
-        bar.ax.axhline(t, color="k", lw=2.5)
-    if targets:
-        span = (f"{targets[0]:.2f} mm" if len(targets) == 1
-                else f"{targets[0]:.2f}–{targets[-1]:.2f} mm")
-        note += f"; black line{'s' if len(targets) > 1 else ''} on the colour bar: target {span}"
-    finite = grid[np.isfinite(grid)]
-    middle = 0.5 * (finite.min() + finite.max()) if finite.size else 0.0
-    framed = rec.recommended or rec.best
-    for c in cells:
-        i, j = heights.index(c.height_pct), widths.index(c.width_pct)
-        value = grid[i, j]
-        colour = "white" if math.isfinite(value) and value < middle else "black"
-        ax.text(j, i, "\n".join(_cell_lines(c, n)), ha="center", va="center",
-                fontsize=8 if n == 1 else 7, color=colour,
-                fontweight="bold" if c.incompetent else "normal")
-        if c.incompetent:
-            ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec=_LEAK_COLOUR,
-                                   lw=2.5, hatch="//", alpha=0.8))
-        if c.label == framed:
-            for edge, width in (("black", 5.0), ("white", 2.0)):  # seen on any colour
-                ax.add_patch(Rectangle((j - 0.45, i - 0.45), 0.9, 0.9, fill=False,
-                                       ec=edge, lw=width))
-    ax.set_xticks(range(len(widths)), [f"+{w:g}" for w in widths])
-    ax.set_yticks(range(len(heights)), [f"+{h:g}" for h in heights])
-    ax.set_xlabel("graft width enlargement W (%)")
-    ax.set_ylabel("graft height enlargement H (%)")
-    if rec.recommended:
-        note += f"\nblack-and-white frame: recommended {rec.recommended}"
-    elif rec.best:
-        note += f"\nblack-and-white frame: best {rec.best}, short of the target"
-    if n > 1:
-        note += ("\nper cell: the lowest member's height, the spread over the members and the "
-                 "least margin over the member's target")
-    # a narrow grid's figure takes the notes on more lines (about 13 characters an inch)
-    note = "\n".join(textwrap.fill(line, int(13 * width_in)) for line in note.split("\n"))
-    ax.set_title(_title(rec, "Graft sizing map", title) + f"\n{note}", fontsize=9)
+    lines = []
+    if lattice is not None:
+        w, h = np.meshgrid(lattice.widths_pct, lattice.heights_pct)
+        margin = lattice.worst_margin_mm
+        reach = max(float(np.abs(margin).max()), 0.05)
+        levels = np.linspace(-reach, reach, 21)
+        filled = ax.contourf(w, h, margin, levels=levels, cmap=_MARGIN_CMAP, extend="both")
+        bar = fig.colorbar(filled, ax=ax, shrink=0.9)
+        bar.set_label("predicted worst-case margin over the target (mm)", fontsize=10)
+        bar.set_ticks(levels[::4], labels=[f"{v:+.2f}" for v in levels[::4]])
+        steps = ax.contour(w, h, margin, levels=levels[::4], colors="0.3", linewidths=0.6)
+        ax.clabel(steps, fmt="%.2f", fontsize=8)
+        tol = answer.tolerance_mm
+        ax.contour(w, h, margin, levels=[0.0], colors="black", linewidths=2.0)
+        ax.contour(w, h, margin, levels=[-tol], colors="black", linewidths=1.5,
+                   linestyles="--")
+        threshold = answer.seal_threshold
+        if lattice.seal_probability.min() < threshold <= lattice.seal_probability.max():
+            ax.contour(w, h, lattice.seal_probability, levels=[threshold], colors="black",
+                       linewidths=1.8, linestyles="-.")
+        with matplotlib.rc_context({"hatch.color": "0.25", "hatch.linewidth": 0.6}):
+            ax.contourf(w, h, lattice.seal_probability, levels=[0.0, threshold],
+                        colors=["0.5"], alpha=0.3, hatches=["//"])
+        if lattice.qualifies.any():
+            ax.contour(w, h, lattice.qualifies.astype(float), levels=[0.5],
+                       colors=OKABE_ITO["bluish_green"], linewidths=3.0)
+        lines += [f"solid: the target; dashed: the tolerance, −{tol:.2f} mm; dash-dotted: "
+                  f"probability of sealing {threshold:g} in every member, grey hatched below "
+                  f"it; green: the band of sizes that qualify"]
+        if answer.size is not None:
+            ax.plot(*answer.size, marker="*", ms=20, mfc="white", mec="black", mew=1.5,
+                    ls="none", zorder=5)
+            ax.annotate(f"answer {answer.size.label}", answer.size, xytext=(8, 8),
+                        textcoords="offset points", fontsize=10, fontweight="bold",
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"), zorder=5)
+        if answer.highest is not None:
+            ax.plot(*answer.highest, marker="^", ms=11, mfc="white", mec="black", mew=1.2,
+                    ls="none", zorder=5)
+            ax.annotate(f"highest {answer.highest.label}", answer.highest, xytext=(-8, -16),
+                        textcoords="offset points", ha="right", fontsize=9,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"), zorder=5)
+    else:
+        lines.append(answer.text.split(". ")[0] + ".")
+    _solved_cells(ax, rec)
+    lines.append("solved cells: dot sound in every member, cross not; number: worst-case "
+                 "minimum coaptation height (mm)")
+    widths = sorted({c.width_pct for c in rec.cells})
+    heights = sorted({c.height_pct for c in rec.cells})
+    if widths:
+        ax.set_xticks(widths, [f"+{x:g}" for x in widths])
+        ax.set_yticks(heights, [f"+{y:g}" for y in heights])
+        pad_w = 0.04 * ((widths[-1] - widths[0]) or 10)
+        pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
+        ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)
+        ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + pad_h)
+    ax.tick_params(labelsize=10)
+    ax.set_xlabel("graft width enlargement W (%)", fontsize=11)
+    ax.set_ylabel("graft height enlargement H (%)", fontsize=11)
+    head = _title(rec, "Graft sizing map", title)
+    note = "\n".join(textwrap.fill(line, 100) for line in lines)
+    ax.set_title(f"{head}\n{note}", fontsize=9)
     return save_figure(fig, path, dpi=130)
 
 
