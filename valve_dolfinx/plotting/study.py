@@ -227,8 +227,9 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     """Recommended graft enlargements (top) and margin (bottom) against the loaded root
     diameter; ``rows`` are :func:`valve_dolfinx.study.nomogram.nomogram_rows`.
 
-    A diameter where no graft on the grid qualifies is shaded, with the best graft's
-    enlargements hollow and its margin (negative: its shortfall) in vermillion; under each
+    Bars about the recommended enlargements span the band of sizes that also qualify.  A
+    diameter without a graft is shaded, with the closest size's enlargements hollow and its
+    margin (negative: its shortfall) in vermillion; under each
     diameter, the normal valve's minimum coaptation height (the target) and whether it
     is competent."""
     d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
@@ -254,12 +255,17 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
         if ok.any():
             top.plot(x[ok], y[ok], "-", marker=marker, color=colour, ms=8, lw=1.5,
                      label=f"recommended {label}")
+            what = key.split("_")[1]
+            low_end, high_end = column(f"band_{what}_min_pct"), column(f"band_{what}_max_pct")
+            top.errorbar(x[ok], y[ok], yerr=[y[ok] - low_end[ok], high_end[ok] - y[ok]],
+                         fmt="none", ecolor=colour, elinewidth=5, alpha=0.35,
+                         label=f"band of {label} that also qualify")
         if (~ok).any():
             top.plot(x[~ok], best[~ok], marker, mfc="white", mec=colour, mew=1.8, ms=8,
-                     ls="none", label=f"best {label} (grey: no graft qualifies)")
+                     ls="none", label=f"closest {label} (grey: no graft)")
         highest = np.nanmax([highest, *y[ok], *best[~ok]])
     for r, x in zip(rows, d, strict=True):
-        name = r["recommended"] or (f"best {r['best']}" if r["best"] else "")
+        name = r["recommended"] or (f"closest {r['best']}" if r["best"] else "")
         if name:
             top.annotate(name, (x, 0), xytext=(0, 4), textcoords="offset points",
                          xycoords=("data", "axes fraction"), ha="center", fontsize=8,
@@ -270,9 +276,9 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     top.tick_params(labelbottom=False)
     margin = np.where(ok, column("margin_mm"), -column("shortfall_mm"))
     for where, colour, label in (
-            (ok, OKABE_ITO["bluish_green"], "margin over the target in every member"),
-            (~ok, OKABE_ITO["vermillion"], "no graft qualifies: the best one's margin "
-             "(if positive, it fails to converge or seal)")):
+            (ok, OKABE_ITO["bluish_green"], "the answer's predicted worst-case margin"),
+            (~ok, OKABE_ITO["vermillion"], "no graft: the closest size's margin "
+             "(if positive, it does not seal)")):
         if where.any():
             low.bar(d[where], margin[where], width=step / 2, color=colour, label=label)
     for x, m in zip(d, margin, strict=True):
@@ -281,8 +287,15 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
                          xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
                          ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)
+    tolerance = column("tolerance_mm")
+    if np.isfinite(tolerance).any():
+        tol = float(np.nanmax(tolerance))
+        low.axhline(-tol, color="k", lw=1.0, ls="--", label=f"the tolerance, −{tol:.2f} mm")
+        margin_floor = -tol
+    else:
+        margin_floor = 0.0
     finite = margin[np.isfinite(margin)]
-    lo, hi = min([0.0, *finite]), max([0.0, *finite])
+    lo, hi = min([margin_floor, *finite]), max([0.0, *finite])
     span = (hi - lo) or 0.1
     low.set_ylim(lo - 0.2 * span, hi + 0.7 * span)  # room for the numbers and legend
     low.set_ylabel("margin (mm)")

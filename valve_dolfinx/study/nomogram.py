@@ -33,12 +33,14 @@ NOMOGRAM_KEY = "root.loaded_diameter"
 #: the limiting member's target; when none qualifies, the best graft, its enlargements and
 #: shortfall (mm); the number of members of each cell; and the normal valve at that
 #: diameter: its minimum coaptation height (mm) and whether it is competent (a normal valve
-#: that leaks sets a target no repair should be measured against)
+#: that leaks sets a target no repair should be measured against); the tolerance (mm) and the
+#: band of qualifying sizes (its least and greatest W and H)
 NOMOGRAM_COLUMNS = (
     "root_loaded_diameter_mm", "recommended", "graft_width_pct", "graft_height_pct",
     "flat_area_ratio", "margin_mm", "limiting_member", "min_coaptation_height_mm",
     "target_mm", "best", "best_width_pct", "best_height_pct", "shortfall_mm", "members",
-    "normal_min_coaptation_mm", "normal_competent",
+    "normal_min_coaptation_mm", "normal_competent", "tolerance_mm", "band_width_min_pct",
+    "band_width_max_pct", "band_height_min_pct", "band_height_max_pct",
 )
 
 
@@ -58,7 +60,7 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
     rows = []
     for rec in recommendations:
         normal = normals.get(rec.comparison[NOMOGRAM_KEY], {})
-        chosen, best = rec.size, rec.best_size
+        chosen, best, band = rec.size, rec.best_size, rec.answer.band
         limit = rec.limiting_member
         rows.append({
             "root_loaded_diameter_mm": rec.comparison[NOMOGRAM_KEY],
@@ -77,6 +79,9 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
             "members": len(rec.members),
             "normal_min_coaptation_mm": normal.get("min_coaptation_height_mm"),
             "normal_competent": normal.get("competent"),
+            "tolerance_mm": rec.tolerance_mm,
+            **{f"band_{what}_{end}_pct": (band[f"{what}_pct"][k] if band else None)
+               for what in ("width", "height") for k, end in enumerate(("min", "max"))},
         })
     return rows
 
@@ -99,9 +104,11 @@ def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],
              f"{', '.join(f'{w:g}' for w in widths)} %; H {', '.join(f'{h:g}' for h in heights)}"
              f" % of the native leaflet) along {len(layout.paths)} numerical path(s) ({paths})"
              + (f"; {uncertain}" if uncertain else "") + ".",
-             f"Recommended: the smallest graft (flat area) that converges, seals and reaches the "
-             f"target ({source}) in every member; margin = least height minus target; under each "
-             "diameter, the normal valve's minimum coaptation height.",
+             f"Read from one response surface over W, H and the diameter: the smallest flat area "
+             f"whose predicted worst case reaches the target ({source}) within the tolerance and "
+             "that seals with probability 0.9 in every member; bars: the band of sizes that also "
+             "qualify; margin = predicted worst case minus target; under each diameter, the "
+             "normal valve's minimum coaptation height.",
              f"Mesh {mesh if mesh is not None else '?'} mm, "
              f"{pressure if pressure is not None else '?'} mmHg, valve_dolfinx "
              f"{(first.get('versions') or {}).get('valve_dolfinx', '?')}."]
