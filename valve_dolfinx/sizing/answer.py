@@ -19,7 +19,9 @@ The one home of the answer that the study, the nomogram and the plan report:
    of highest predicted worst case.  "No graft" only when no size seals, or none comes
    within the tolerance of the target; the closest size's shortfall is then given
    against the tolerance.
-3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer.
+3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer;
+   :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
+   are resampled with replacement and the surfaces refitted.
 
 Nothing here imports DOLFINx.
 """
@@ -53,7 +55,8 @@ from valve_dolfinx.sizing.surface import (
 )
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
-           "sizes_to_confirm", "SEAL_PROBABILITY", "MIN_CELLS"]
+           "sizes_to_confirm", "resample_paths", "bootstrap_stability", "SEAL_PROBABILITY",
+           "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
@@ -432,3 +435,51 @@ def sizes_to_confirm(answer: SizingAnswer, tables: Sequence[MemberTable]
         if tuple(answer.size) not in solved:
             out.append((answer.size, table))
     return out
+
+
+def resample_paths(tables: Sequence[MemberTable], rng: np.random.Generator
+                   ) -> list[MemberTable]:
+    """A bootstrap resample of the replicates: in every cell (a graft at one value of each
+    axis), each path's case is replaced by a case drawn with replacement from the cell's
+    paths.  The normal valves stay as they are."""
+    groups: dict[tuple, list[MemberTable]] = {}
+    for table in tables:
+        groups.setdefault(table.values, []).append(table)
+    drawn: dict[str, list[Mapping]] = {}
+    for group in groups.values():
+        cells: dict[tuple, list[Mapping]] = {}
+        for table in group:
+            for row in _graft_rows(table):
+                cells.setdefault((row["graft_width_pct"], row["graft_height_pct"]), []).append(
+                    row)
+        for table in group:
+            rows = [r for r in table.rows if r.get("graft_width_pct") is None]
+            for row in _graft_rows(table):
+                pool = cells[(row["graft_width_pct"], row["graft_height_pct"])]
+                rows.append(pool[rng.integers(len(pool))])
+            drawn[table.label] = rows
+    return [MemberTable(t.label, drawn[t.label], t.comparison, t.uncertain, t.path)
+            for t in tables]
+
+
+def bootstrap_stability(tables: Sequence[MemberTable], answer: SizingAnswer,
+                        resamples: int = 20, *, points: float = 3.0, seed: int = 0,
+                        target_mm: float | None = None) -> tuple[float, list[GraftSize | None]]:
+    """The share of path resamples (:func:`resample_paths`) whose answer stays within
+    ``points`` per cent of ``answer`` in both W and H (a "no graft" matches only "no graft"),
+    and each resample's answer.  ``tables`` are one comparison value's; each refit skips the
+    cross-validation and reads the same tolerance rule."""
+    rng = np.random.default_rng(seed)
+    sizes = []
+    for _ in range(resamples):
+        drawn = resample_paths(tables, rng)
+        refit = read_answer(fit_study(drawn, ladder=None, cv_folds=0), drawn, target_mm,
+                            comparison=answer.comparison, seal_threshold=answer.seal_threshold)
+        sizes.append(refit.size)
+
+    def close(size: GraftSize | None) -> bool:
+        if size is None or answer.size is None:
+            return size is answer.size
+        return all(abs(a - b) <= points for a, b in zip(size, answer.size, strict=True))
+
+    return sum(close(s) for s in sizes) / resamples, sizes
