@@ -367,7 +367,7 @@ ANSWERS = {
                      "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
     "closest": (PlanRecommendation(closest=GraftSize(27, 40), shortfall_mm=0.4, target_mm=2.3,
                                    target_source="given", members=("a", "b")),
-                ["No graft on the grid is robust", "The closest is W27/H40",
+                ["No graft in the studied range is robust", "The closest is W27/H40",
                  "0.40 mm short"]),
     "cannot": (PlanRecommendation(cannot_seal=free_edge_reach(16.0, 22.0, 80.0).sentence()),
                ["cannot seal this 22.0 mm root whatever the graft", "Nothing was computed"]),
@@ -559,6 +559,7 @@ def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
         markdown)
     assert f"| W14/H13 | {stand_in_height((14.0, 13.0), 23.0, 2):.2f} |" in markdown
     text = _pdf_text(out / "plan.pdf")
+    assert "in all 6 members within the model's resolution" in rec.headline()
     for words in ("Recommended graft W14/H13", "in all 6 members", "root 23.0 mm",
                   "worst case of each graft over its 6 members"):
         assert words in text, words
@@ -622,7 +623,10 @@ def test_a_plan_names_the_closest_graft_when_none_qualifies(tmp_path):
     assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.02)
     assert rec.limiting_member == "root 23.0 mm"
     assert (tmp_path / "template_W14_H27.pdf").is_file()
-    assert "No graft on the grid is robust" in rec.headline()
+    headline = rec.headline()
+    assert "No graft in the studied range is robust" in headline
+    assert f"0.66 mm short in its worst member, in root 23.0 mm (the model's resolution: " \
+        f"{PATH_SCATTER_MM:.2f} mm)" in headline
 
 
 def test_diameters_beyond_the_leaflets_reach_are_not_computed(tmp_path):
@@ -650,7 +654,7 @@ def test_diameters_beyond_the_leaflets_reach_are_not_computed(tmp_path):
     assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.01) and rec.margin_mm is None
     assert rec.limiting_member == "root 25.5 mm"
     headline = rec.headline()
-    assert headline.startswith("No graft on the grid is robust over the root's uncertainty")
+    assert headline.startswith("No graft is robust over the root's uncertainty")
     assert "cannot seal a 26.5 mm root whatever the graft" in headline
     assert "The closest is W14/H27, 0.09 mm short in its worst member" in headline
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -2,15 +2,16 @@
 
 :class:`PlanRecommendation` is the plan's answer as the report prints it, independent of
 how the study behind it is organised: the plan's study (:func:`valve_dolfinx.plan.runner.
-run_plan_study`) maps its own result onto it.  It is one of three answers:
+run_plan_study`) maps the answer read from its response surface
+(:mod:`valve_dolfinx.sizing.answer`) onto it.  It is one of three answers:
 
-* a graft is recommended: the smallest graft that converges, seals and reaches the
-  target in every member of the study (the root diameters and the numerical paths),
-  with its margin over the target in the member that limits it;
-* no graft on the grid is robust: the closest graft and its shortfall -- or, when the
-  only members it fails are root diameters of the uncertainty that the closed-form bound
-  of :mod:`valve_dolfinx.plan.reach` rules out (not computed), the graft that qualifies
-  in every member computed, with its margin there;
+* a graft is recommended: the smallest size whose predicted worst case over the root
+  diameters reaches the target within the model's resolution and that seals (a size off
+  the grid, to 1 %), with its predicted margin in the root diameter that limits it;
+* no graft is robust: the closest size and its shortfall -- or, when some root diameters
+  of the uncertainty are ones that the closed-form bound of :mod:`valve_dolfinx.plan.reach`
+  rules out (not computed), the size that qualifies in every member computed, with its
+  margin there;
 * the native leaflets cannot seal the measured root whatever the graft (the same
   bound): nothing was computed.
 """
@@ -83,6 +84,9 @@ class PlanRecommendation:
     cannot_seal
         The closed-form verdict (one line) when the native leaflets cannot seal the
         measured root whatever the graft; nothing was computed then.
+    tolerance_mm
+        The model's measured resolution (:mod:`valve_dolfinx.sizing.resolution`): a size
+        whose predicted worst case comes within it of the target qualifies.
     """
 
     graft: GraftSize | None = None
@@ -98,6 +102,7 @@ class PlanRecommendation:
     unsealable_roots_mm: tuple[float, ...] = ()
     unsealable_reason: str = ""
     cannot_seal: str | None = None
+    tolerance_mm: float | None = None
 
     def __post_init__(self) -> None:
         answers = sum(x is not None for x in (self.graft, self.closest, self.cannot_seal))
@@ -123,7 +128,7 @@ class PlanRecommendation:
 
     def _unsealable(self) -> str:
         roots = " and ".join(f"{d:.1f}" for d in self.unsealable_roots_mm)
-        return (f"No graft on the grid is robust over the root's uncertainty: the native "
+        return (f"No graft is robust over the root's uncertainty: the native "
                 f"leaflets cannot seal a {roots} mm root whatever the graft (closed-form "
                 "bound; not computed).")
 
@@ -133,30 +138,35 @@ class PlanRecommendation:
             return self.cannot_seal
         n = len(self.members)
         where = f", in {self.limiting_member}" if self.limiting_member else ""
+        resolution = ("" if self.tolerance_mm is None else
+                      f" (the model's resolution: {self.tolerance_mm:.2f} mm)")
         if self.graft is not None:
             scope = f" in all {n} members" if n > 1 else ""
+            within = "" if self.tolerance_mm is None else " within the model's resolution"
             return (f"Recommended graft {self.graft.label} (+{self.graft.width_pct:g} % width, "
                     f"+{self.graft.height_pct:g} % height). It converges, seals and reaches "
-                    f"{self._target()}{scope}; its smallest margin is "
-                    f"{margin_text(self.margin_mm)} mm{where}.")
+                    f"{self._target()}{scope}{within}; its smallest margin is "
+                    f"{margin_text(self.margin_mm)} mm{where}{resolution}.")
         computed = " computed" if self.unsealable_roots_mm else ""
         if self.closest is not None and self.margin_mm is not None:  # fails beyond reach only
             return (f"{self._unsealable()} In the {n} members{computed}, {self.closest.label} "
                     f"(+{self.closest.width_pct:g} % width, +{self.closest.height_pct:g} % "
                     f"height) converges, seals and reaches {self._target()}; its smallest "
-                    f"margin is {margin_text(self.margin_mm)} mm{where}.")
+                    f"margin is {margin_text(self.margin_mm)} mm{where}{resolution}.")
         scope = f" in every one of the {n} members{computed}" if n > 1 else ""
         if self.unsealable_roots_mm:
             text = (f"{self._unsealable()} Nor does any graft converge, seal and reach "
                     f"{self._target()}{scope}.")
         else:
-            text = (f"No graft on the grid is robust: none converges, seals and reaches "
-                    f"{self._target()}{scope}.")
+            text = (f"No graft in the studied range is robust: none converges, seals and "
+                    f"reaches {self._target()}{scope}.")
         if self.closest is None:
-            return f"{text} No graft case produced a coaptation height."
+            return (f"{text} No size could be read: too few solved cases, or no target "
+                    "(the study's report says which).")
         if self.shortfall_mm is not None and self.shortfall_mm > 0:
             d = shortfall_digits(self.shortfall_mm)
-            short = f", {self.shortfall_mm:.{d}f} mm short in its worst member{where}"
+            short = (f", {self.shortfall_mm:.{d}f} mm short in its worst member{where}"
+                     f"{resolution}")
         else:
             state = next((g.state for g in self.grafts if g.graft == self.closest), "")
             short = f" ({state})" if state else ""

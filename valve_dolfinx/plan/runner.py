@@ -254,7 +254,7 @@ def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[f
                   members=tuple(words[m] for m in rec.members),
                   targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
                   unsealable_roots_mm=beyond, unsealable_reason=reason,
-                  limiting_member=limiting)
+                  limiting_member=limiting, tolerance_mm=rec.tolerance_mm)
     if rec.size is not None:
         answer = {"closest": rec.size} if beyond else {"graft": rec.size}
         return PlanRecommendation(**answer, margin_mm=rec.margin_mm, **common)
