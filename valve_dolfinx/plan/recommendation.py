@@ -139,7 +139,7 @@ class PlanRecommendation:
         n = len(self.members)
         where = f", in {self.limiting_member}" if self.limiting_member else ""
         resolution = ("" if self.tolerance_mm is None else
-                      f" (the model's resolution: {self.tolerance_mm:.2f} mm)")
+                      f" (the model's resolution: {margin_text(self.tolerance_mm)} mm)")
         if self.graft is not None:
             scope = f" in all {n} members" if n > 1 else ""
             within = "" if self.tolerance_mm is None else " within the model's resolution"

@@ -384,7 +384,7 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"{answer.height_mm:.1f} mm; flat area {size.area_ratio:.3f} × native), the "
             f"smallest size whose predicted worst case reaches the target minimum coaptation "
             f"height ({answer.target_source}){_every(answer)} within the resolution of "
-            f"{tol:.2f} mm and that seals with a probability of at least "
+            f"{margin_text(tol)} mm and that seals with a probability of at least "
             f"{answer.seal_threshold:g} ({answer.seal_probability:.2f}).")
     target = answer.targets_mm[answer.limiting_member]
     where = _in(answer.limiting_member)
@@ -396,7 +396,7 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
         margin = (f"Its predicted worst case is {margin_text(-answer.margin_mm)} mm short of "
                   f"the target{where} ({answer.predicted_height_mm:.2f} mm against "
                   f"{target:.2f} mm, ± {answer.margin_sd_mm:.2f} mm), within the resolution "
-                  f"of {tol:.2f} mm.")
+                  f"of {margin_text(tol)} mm.")
     band = answer.band
     also = (f"Sizes that also qualify: {band['sizes']} at {STEP_PCT:g} % steps, W "
             f"{band['width_pct'][0]:g}–{band['width_pct'][1]:g} %, H {band['height_pct'][0]:g}"
@@ -418,7 +418,7 @@ def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"resolution while sealing with a probability of at least "
             f"{answer.seal_threshold:g}. The closest is **{best.label}** (free edge "
             f"{free_edge:.1f} mm, height {height:.1f} mm), {margin_text(short)} mm short"
-            f"{_in(answer.limiting_member)}: {times} the resolution of {tol:.2f} mm. "
+            f"{_in(answer.limiting_member)}: {times} the resolution of {margin_text(tol)} mm. "
             + _resolution(answer))
 
 

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from valve_dolfinx.result import margin_text
+
 __all__ = ["Resolution", "path_scatter_mm", "discretisation_error_mm", "MESH_LADDER"]
 
 #: where ``benchmarks/mesh_ladder.py`` writes its table, in the source tree
@@ -112,17 +114,17 @@ class Resolution:
         """One sentence: the tolerance and the figures it is the largest of."""
         paths = ("the scatter between paths not measured (one path)"
                  if self.path_scatter_mm is None else
-                 f"the scatter between paths {self.path_scatter_mm:.2f} mm (pooled over "
+                 f"the scatter between paths {margin_text(self.path_scatter_mm)} mm (pooled over "
                  f"{self.path_cells} cells)")
         noise = ("the surface's noise not measured" if self.surface_noise_mm is None else
-                 f"the surface's noise {self.surface_noise_mm:.2f} mm")
+                 f"the surface's noise {margin_text(self.surface_noise_mm)} mm")
         mesh = ("the mesh's discretisation error " + (
             self.discretisation_source if self.discretisation_mm is None else
-            f"{self.discretisation_mm:.2f} mm ({self.discretisation_source})"))
+            f"{margin_text(self.discretisation_mm)} mm ({self.discretisation_source})"))
         if self.tolerance_mm is None:
             return f"The resolution is not measured: {paths}, {noise}, {mesh}."
-        return (f"Resolution (decision tolerance) {self.tolerance_mm:.2f} mm, the largest of "
-                f"{paths}, {noise} and {mesh}.")
+        return (f"Resolution (decision tolerance) {margin_text(self.tolerance_mm)} mm, the "
+                f"largest of {paths}, {noise} and {mesh}.")
 
     def to_dict(self) -> dict:
         return {**asdict(self), "tolerance_mm": self.tolerance_mm}
