@@ -565,7 +565,8 @@ def test_graft_sweep_demo(tmp_path, quiet_cli, monkeypatch, capsys):
                          "13", "--no-progress"])
     assert len(outcome.computed) == 5
     text = capsys.readouterr().out
-    assert "5 cases:" in text and "Recommended graft: **W7/H13**" in text
+    # W14 does not converge: two solved cells are too few for a surface
+    assert "5 cases:" in text and "No answer: a response surface needs at least 6" in text
     assert (tmp_path / "report.md").is_file() and (tmp_path / "sizing_map.png").is_file()
 
 
@@ -604,6 +605,7 @@ def test_recommendation_reads_the_answer_beside_the_solved_cells():
     assert cell.worst_height_mm == pytest.approx(2.56) and cell.margin_mm == pytest.approx(-0.44)
     assert not cell.qualifies and rec.cell("W14/H0").qualifies
     assert "**W13/H0**" in rec.text and "one numerical path" in rec.text
+    assert rec.confirm == [""]  # W13/H0 is off the grid: solve it in the one member
     # a given target moves the answer up the plane: 0.08 W + 0.03 H >= 1.3 needs H > 0 at
     # W <= 14 (W14 gives 0.08·14 + 0.03 H >= 1.3 for H >= 6)
     higher = recommend(rows, target_mm=3.3, ladder=None)

@@ -16,7 +16,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from valve_dolfinx.sizing.answer import MemberTable, SizingAnswer, fit_study, read_answer
+from valve_dolfinx.sizing.answer import (
+    MemberTable,
+    SizingAnswer,
+    fit_study,
+    read_answer,
+    sizes_to_confirm,
+)
 from valve_dolfinx.sizing.cells import (
     NORMAL_TARGET,
     CellSummary,
@@ -41,9 +47,11 @@ class Recommendation:
     ``members`` and ``targets_mm`` are the study's members (uncertainty values and paths)
     and their targets; ``target_mm`` the target when it is the same in every member, else
     None.  ``answer`` is the answer read from the surface; ``cells`` the worst case of
-    every solved graft.  The properties name the answer as the nomogram and the plan read
-    it: ``size`` (the recommended graft, None without one), ``best_size`` (without a
-    graft: the closest size, with ``shortfall_mm``).
+    every solved graft; ``confirm`` the members (labels) where the answer's size is still
+    to be solved to confirm it (:func:`~valve_dolfinx.sizing.answer.sizes_to_confirm`).
+    The properties name the answer as the nomogram and the plan read it: ``size`` (the
+    recommended graft, None without one), ``best_size`` (without a graft: the closest
+    size, with ``shortfall_mm``).
     """
 
     comparison: dict[str, Any]
@@ -53,6 +61,7 @@ class Recommendation:
     target_source: str
     answer: SizingAnswer
     cells: list[CellSummary] = field(default_factory=list)
+    confirm: list[str] = field(default_factory=list)
     text: str = ""
 
     @property
@@ -106,7 +115,8 @@ class Recommendation:
                 "margin_mm": self.margin_mm, "limiting_member": self.limiting_member,
                 "best": self.best, "shortfall_mm": self.shortfall_mm,
                 "tolerance_mm": self.tolerance_mm, "answer": self.answer.to_dict(),
-                "cells": [c.to_dict() for c in self.cells], "text": self.text}
+                "cells": [c.to_dict() for c in self.cells], "confirm": self.confirm,
+                "text": self.text}
 
 
 def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
@@ -127,7 +137,8 @@ def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
     same = set(targets.values())
     rec = Recommendation(answer.comparison, [t.label for t in tables], targets,
                          next(iter(same)) if len(same) == 1 else None, source, answer,
-                         summarise_cells({t.label: t.rows for t in tables}, targets))
+                         summarise_cells({t.label: t.rows for t in tables}, targets),
+                         [table.label for _, table in sizes_to_confirm(answer, tables)])
     lines = [answer.text]
     if n_paths == 1:
         lines.append("Each cell was solved along one numerical path, so the scatter between "
