@@ -109,9 +109,10 @@ def main(argv: list[str] | None = None):
     # fields and figures), `results.csv`/`results.json` (a row per case, SPEC §7
     # columns first), `coaptation_vs_width.png`, `sizing_map.png`, the panels of
     # the normal valve and of W0/H0, W7/H0 and W21/H27 under `panels/`, and
-    # `report.md` with the table and the sizing recommendation: the smallest
-    # graft (by flat area $(1+W)(1+H)$) that converges, seals and reaches the
-    # normal valve's minimum coaptation height.
+    # `report.md` with the table and the sizing answer, read from a response
+    # surface fitted to every case: the smallest graft size (by flat area
+    # $(1+W)(1+H)$, to 1 %) whose predicted minimum coaptation height reaches the
+    # normal valve's within the model's measured resolution and that seals.
 
     # %%
     if comm.rank == 0:

@@ -111,9 +111,11 @@ def main(argv: list[str] | None = None):
     # cases already done).  Every graft is solved in every member: at each root diameter
     # of the uncertainty (the normal valve once per diameter, its height that member's
     # target) and along each numerical path (a loaded valve can have several resting
-    # states, and the path decides which one a solve reaches).  The recommendation is the
-    # smallest graft that converges, seals and reaches the target in every member; its
-    # margin is the least over the members, and the member where it is taken limits it.
+    # states, and the path decides which one a solve reaches).  The recommendation is read
+    # from a response surface over the graft size and the diameter: the smallest size whose
+    # predicted worst case over the diameters reaches the target within the model's
+    # measured resolution and that seals; its margin is the least over the diameters, and
+    # the diameter where it is taken limits it.
     # A diameter the native leaflets cannot span is not computed (the bound above): no
     # graft would then be robust, and the answer says so.
 
