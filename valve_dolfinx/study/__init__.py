@@ -9,7 +9,8 @@
 * :mod:`~valve_dolfinx.study.store`: case folders and exclusive claims;
 * :mod:`~valve_dolfinx.study.runner`: every case once, over MPI rank groups, resumable;
 * :mod:`~valve_dolfinx.study.table`: ``results.csv`` / ``results.json`` (SPEC §7 schema);
-* :mod:`~valve_dolfinx.study.recommend`: the worst case per graft and the recommendation;
+* :mod:`~valve_dolfinx.study.recommend`: the study's answer (:mod:`valve_dolfinx.sizing`: one
+  response surface over every comparison value) beside the worst case of each solved graft;
 * :mod:`~valve_dolfinx.study.nomogram`: the recommendation against the root diameter;
 * :mod:`~valve_dolfinx.study.report`: tables, figures (:mod:`valve_dolfinx.plotting.study`) and
   report.md.
