@@ -233,3 +233,23 @@ def test_sizing_map_draws_the_answer(tmp_path):
     assert (tmp_path / "sizing_map.png").stat().st_size > 50_000
     labels = [t.get_text() for t in fig.axes[0].texts]
     assert f"answer {rec.recommended}" in labels and len(rec.cells) == 20
+
+
+def test_design_scales_the_inputs_root_first_and_choices_as_indicators():
+    """W, H, then the root diameter before the other axes; a choice is one 0/1 input per
+    value after its first; an input that takes one value is left out; all scaled to [0, 1]."""
+    from valve_dolfinx.sizing.surface import Design, SurfacePoint
+
+    def point(w, h, e, d, tension):
+        return SurfacePoint(w, h, (("bending_modulus_kpa", e), ("root.loaded_diameter", d),
+                                   ("graft_tension_field", tension), ("nodulus_length_mm", 1.0)))
+
+    points = [point(0.0, 0.0, 200.0, 20.0, True), point(27.0, 40.0, 800.0, 22.0, False),
+              point(14.0, 13.0, 200.0, 21.0, True)]
+    design = Design.of(points)
+    assert design.columns == ("graft_width_pct", "graft_height_pct", "root.loaded_diameter",
+                              "bending_modulus_kpa", "graft_tension_field=False")
+    x = design.matrix(points + [point(7.0, 20.0, 500.0, 21.5, False)])
+    assert x.min() == 0.0 and x[:3].max() == 1.0
+    assert x[2] == pytest.approx([14 / 27, 13 / 40, 0.5, 0.0, 0.0])
+    assert x[3] == pytest.approx([7 / 27, 0.5, 0.75, 0.5, 1.0])
