@@ -180,14 +180,19 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         if answer.size is not None:
             ax.plot(*answer.size, marker="*", ms=20, mfc="white", mec="black", mew=1.5,
                     ls="none", zorder=5)
-            ax.annotate(f"answer {answer.size.label}", answer.size, xytext=(8, 8),
-                        textcoords="offset points", fontsize=10, fontweight="bold",
+            left = answer.size.width_pct > lattice.widths_pct.mean()
+            ax.annotate(f"answer {answer.size.label}", answer.size,
+                        xytext=(-8 if left else 8, 8), textcoords="offset points",
+                        ha="right" if left else "left", fontsize=10, fontweight="bold",
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"), zorder=5)
         if answer.highest is not None:
             ax.plot(*answer.highest, marker="^", ms=11, mfc="white", mec="black", mew=1.2,
                     ls="none", zorder=5)
-            ax.annotate(f"highest {answer.highest.label}", answer.highest, xytext=(-8, -16),
-                        textcoords="offset points", ha="right", fontsize=9,
+            # the label on the side of the map's middle, so that it stays inside the axes
+            left = answer.highest.width_pct > lattice.widths_pct.mean()
+            ax.annotate(f"highest {answer.highest.label}", answer.highest,
+                        xytext=(-8 if left else 8, -16), textcoords="offset points",
+                        ha="right" if left else "left", fontsize=9,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"), zorder=5)
     else:
         lines.append(answer.text.split(". ")[0] + ".")
