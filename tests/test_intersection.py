@@ -46,6 +46,7 @@ def test_two_crossing_triangles_give_the_edge_through_each():
     assert where[(3, 4)] == pytest.approx((0.5, 0.5, 0.0), abs=1e-12)
     assert where[(1, 2)] == pytest.approx((0.5, 1.5, 0.0), abs=1e-12)
     assert found.between() == {"a/b": 2}
+    assert found.where() == "no post to measure from (a/b 2)"  # the two share no seam
     assert _library_says(points, cells)
 
 

@@ -115,7 +115,7 @@ class Intersections:
             return ""
         leaflets = ", ".join(f"{label} {n}" for label, n in self.between().items())
         if not np.isfinite(span[1]):
-            return f"({leaflets})"
+            return f"no post to measure from ({leaflets})"
         low, high = span
         distance = f"{low:.2f} mm" if high - low < 0.005 else f"{low:.2f}–{high:.2f} mm"
         return f"{distance} from a post ({leaflets})"
