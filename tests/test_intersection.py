@@ -167,8 +167,9 @@ def test_a_result_with_intersecting_pairs_is_not_competent():
 
 
 def test_result_json_records_the_pairs_and_reads_back(tmp_path):
-    """result.json keeps the count, the pairs per leaflets, the range of distances and
-    the pairs nearest a post (at most ``listed``); it reads back into the same result."""
+    """result.json keeps the count, the pairs per leaflets, the range of distances and at
+    most ``listed`` pairs, nearest a post first and spread over the distances (the nearest
+    and the farthest kept); it reads back into the same result."""
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.output import write_result
 
@@ -176,7 +177,8 @@ def test_result_json_records_the_pairs_and_reads_back(tmp_path):
     record = found.to_dict(listed=3)
     assert record["between"] == {"graft/left-coronary": 4}
     assert record["post_distance_mm"] == [0.2, 2.0]
-    assert [p["post_distance_mm"] for p in record["pairs"]] == [0.2, 0.5, 1.0]
+    assert [p["post_distance_mm"] for p in record["pairs"]] == [0.2, 1.0, 2.0]  # of 4 sorted
+    assert len(found.to_dict(listed=10)["pairs"]) == 4
     assert record["pairs"][0] == {"leaflets": "graft/left-coronary",
                                   "point_mm": [3.0, 0.0, 0.0], "post_distance_mm": 0.2}
     result = CaseResult(21.0, 27.0, converged=True, intersecting_pairs=found.count,

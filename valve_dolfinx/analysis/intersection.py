@@ -41,9 +41,10 @@ __all__ = ["LISTED_PAIRS", "IntersectingPair", "Intersections", "commissure_post
 
 log = logging.getLogger(__name__)
 
-#: ``result.json`` lists at most this many pairs, nearest a post first (the count, the
-#: leaflets and the range of distances cover them all)
-LISTED_PAIRS = 50
+#: ``result.json`` lists at most this many pairs, spread evenly over their distances from a
+#: post, the nearest and the farthest included (the count, the leaflets and the range of
+#: distances cover them all)
+LISTED_PAIRS = 20
 #: nodes closer than this fraction of the surface's size are one node
 WELD_TOLERANCE = 1e-9
 
@@ -122,12 +123,15 @@ class Intersections:
 
     def to_dict(self, listed: int = LISTED_PAIRS) -> dict:
         """``result.json``'s ``intersections``: pairs per leaflets, the range of distances
-        from a post, and the first ``listed`` pairs, nearest a post first."""
+        from a post, and at most ``listed`` pairs, nearest a post first, spread evenly over
+        the pairs in that order (the nearest and the farthest included)."""
         span = self.post_distance_mm()
         order = sorted(self.pairs, key=lambda p: p.post_distance_mm)
+        if len(order) > listed:
+            order = [order[i] for i in np.linspace(0, len(order) - 1, listed).round().astype(int)]
         return {"between": self.between(),
                 "post_distance_mm": None if span is None else [_finite(s) for s in span],
-                "pairs": [p.to_dict() for p in order[:listed]],
+                "pairs": [p.to_dict() for p in order],
                 "candidates": self.candidates,
                 "check_time_s": round(self.time_s, 4)}
 
