@@ -4,7 +4,8 @@
 (step 1), holds the attachment at the distended root and brings the leaflets to
 their static equilibrium under the diastolic pressure with leaflet contact and
 bending (step 2: pseudo-transient continuation, or damped BDF2 dynamics as the
-cross-check), then measures coaptation and writes the result, the configuration,
+cross-check), then measures coaptation, checks that no leaflet passes through another or
+through itself (:func:`check_intersections`) and writes the result, the configuration,
 ParaView fields and figures.  It never raises because a solve failed: a stalled
 or diverged run is reported with ``converged: false`` and where it stopped, and
 whatever was computed is written.  An interrupt, or an exception in one of the
