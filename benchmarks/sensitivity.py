@@ -93,8 +93,9 @@ def _cell(cell) -> str:
 
     if cell.leaking:
         text += f", leaks {cell.largest_orifice_mm2:.2g} mm²" + members(cell.leaking)
-    if cell.crossing:
-        text += f", crosses {cell.longest_crossing_mm:.2f} mm" + members(cell.crossing)
+    if cell.intersecting:
+        text += (f", intersects ({cell.most_intersecting_pairs} edge–triangle pairs)"
+                 + members(cell.intersecting))
     if cell.unconverged or cell.missing:
         text += ", not converged" + members(cell.unconverged + cell.missing)
     return text

@@ -76,7 +76,7 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
     return {"graft_width_pct": w, "graft_height_pct": g.graft_height_pct, "converged": True,
             "min_coaptation_height_mm": figure(config), "competent": not leaks,
             "regurgitant_orifice_area_mm2": 0.5 if leaks else 0.0,
-            "leaflet_intersection_mm": 0.0, "mesh_size_mm": g.mesh_size,
+            "intersecting_pairs": 0, "mesh_size_mm": g.mesh_size,
             "root_diameter_mm": config.root.loaded_diameter or 20.09, "n_ranks": comm.size,
             "start_height_mm": started, "parameters": config.to_dict()}
 

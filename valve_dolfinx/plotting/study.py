@@ -6,7 +6,7 @@
   grafts not sound in every member hollow.
 * :func:`plot_sizing_map`: the W × H grid as a heat map of the same worst case, each
   cell with its spread, its margin over the target and why it is not competent (its
-  ``competence_reason``; with several members, how many leak, cross or did not
+  ``competence_reason``; with several members, how many leak, intersect or did not
   converge); the recommended (or best) graft framed.
 * :func:`plot_nomogram`: the recommended graft and its margin against the loaded root
   diameter (:mod:`valve_dolfinx.study.nomogram`).
@@ -31,7 +31,7 @@ from matplotlib import colormaps
 from matplotlib.patches import Rectangle
 
 from valve_dolfinx.plotting.style import OKABE_ITO, SEQUENTIAL_CMAP, new_figure, save_figure
-from valve_dolfinx.result import margin_text
+from valve_dolfinx.result import INTERSECTION_REASON, margin_text
 
 if TYPE_CHECKING:
     from valve_dolfinx.study.recommend import CellSummary, Recommendation
@@ -125,11 +125,14 @@ def _cell_lines(cell: CellSummary, n: int) -> list[str]:
         lines.append(f"spread {cell.spread_mm:.2f} mm")
     if cell.margin_mm is not None:
         lines.append(f"margin {margin_text(cell.margin_mm, signed=True)} mm")
-    if n == 1:  # why it is not competent, as its result.json says
+    if n == 1:  # why it is not competent, as its result.json says (where leaflets intersect
+        # is too long for a cell: how many pairs)
         for why in cell.reasons.values():
-            lines += (why or "not competent").split("; ")
+            lines += [f"intersects: {cell.most_intersecting_pairs} pairs"
+                      if part.startswith(INTERSECTION_REASON) else part
+                      for part in (why or "not competent").split("; ")]
         return lines + (["missing"] if cell.missing else [])
-    for what, members in (("leaks", cell.leaking), ("crosses", cell.crossing),
+    for what, members in (("leaks", cell.leaking), ("intersects", cell.intersecting),
                           ("not converged", cell.unconverged), ("missing", cell.missing)):
         if members:
             lines.append(f"{what} {len(members)}/{n}")
@@ -168,7 +171,7 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     bar = fig.colorbar(image, ax=ax)
     bar.set_label("worst-case minimum coaptation height (mm)" if n > 1 else
                   "minimum coaptation height (mm)")
-    note = "vermillion hatched: not competent (leaks, crosses or not converged)"
+    note = "vermillion hatched: not competent (leaks, intersects or not converged)"
     if n > 1:
         note += " in some member"
     for t in targets:

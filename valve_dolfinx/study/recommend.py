@@ -9,12 +9,12 @@ members (:class:`CellSummary`):
 * the worst (lowest) minimum coaptation height, the member where it occurs, and
   the spread (highest minus lowest);
 * the members where the graft did not converge, leaks (regurgitant orifice area
-  above 0) or has leaflets crossing (loaded surfaces crossing along a line at
-  least one element long, as ``competent`` counts it);
+  above 0) or has leaflets that intersect (an edge of the loaded surface through one of
+  its triangles, as ``competent`` counts it);
 * the margin: the least, over the members, of its height minus that member's
   target, and the member that sets it (the *limiting* member).
 
-A graft **qualifies** when it converged, is competent (sealed, no crossing) and
+A graft **qualifies** when it converged, is competent (sealed, no intersection) and
 reaches the target in every member: margin ≥ 0 with no member missing.  The
 recommendation is the qualifying graft with the smallest flat area, which is the
 native area times ``(1 + W)(1 + H)`` (ties: narrower, then lower).  If none
@@ -39,7 +39,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from valve_dolfinx.result import leaflets_cross, margin_text, shortfall_digits
+from valve_dolfinx.result import leaflets_intersect, margin_text, shortfall_digits
 
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
            "flat_area_ratio", "cell_state"]
@@ -60,15 +60,6 @@ def _number(row: Mapping | None, key: str) -> float:
     return float(v) if ok else math.nan
 
 
-def _crosses(row: Mapping) -> bool:
-    """Leaflet surfaces cross along at least one element (``competent``'s rule,
-    :func:`valve_dolfinx.result.leaflets_cross`)."""
-    mesh = _number(row, "mesh_size_mm")
-    if math.isnan(mesh):
-        mesh = _number((row.get("parameters") or {}).get("geometry"), "mesh_size")
-    return leaflets_cross(_number(row, "leaflet_intersection_mm"), mesh)
-
-
 @dataclass
 class CellSummary:
     """One graft over the members of its cell (heights in mm, members by label)."""
@@ -81,12 +72,13 @@ class CellSummary:
     missing: list[str] = field(default_factory=list)
     unconverged: list[str] = field(default_factory=list)
     leaking: list[str] = field(default_factory=list)
-    crossing: list[str] = field(default_factory=list)
+    intersecting: list[str] = field(default_factory=list)
     incompetent: list[str] = field(default_factory=list)
     #: why each member in ``incompetent`` is not competent (its ``competence_reason``)
     reasons: dict[str, str] = field(default_factory=dict)
     largest_orifice_mm2: float | None = None
-    longest_crossing_mm: float | None = None
+    #: the most intersecting edge–triangle pairs of a member
+    most_intersecting_pairs: int | None = None
     worst_height_mm: float | None = None
     worst_member: str | None = None
     spread_mm: float | None = None
@@ -131,10 +123,10 @@ def _summarise(width: float, height: float, rows: Mapping[str, Mapping | None],
         if orifice > 0:
             cell.leaking.append(member)
             cell.largest_orifice_mm2 = max(orifice, cell.largest_orifice_mm2 or 0.0)
-        if _crosses(row):
-            cell.crossing.append(member)
-            crossing = _number(row, "leaflet_intersection_mm")
-            cell.longest_crossing_mm = max(crossing, cell.longest_crossing_mm or 0.0)
+        if leaflets_intersect(row):
+            cell.intersecting.append(member)
+            cell.most_intersecting_pairs = max(row["intersecting_pairs"],
+                                               cell.most_intersecting_pairs or 0)
         if not row.get("competent"):
             cell.incompetent.append(member)
             cell.reasons[member] = row.get("competence_reason") or ""
@@ -304,7 +296,7 @@ def cell_state(cell: CellSummary) -> str:
         return f"converged and competent in all {n} members"
     parts = [f"{what} in {len(members)} of {n} members" for what, members in (
         ("not computed", cell.missing), ("not converged", cell.unconverged),
-        ("leaking", cell.leaking), ("leaflets crossing", cell.crossing)) if members]
+        ("leaking", cell.leaking), ("leaflets intersecting", cell.intersecting)) if members]
     return ", ".join(parts) or f"not sealed in {len(cell.incompetent)} of {n} members"
 
 
@@ -382,7 +374,7 @@ def recommend(tables: Mapping[str, Sequence[Mapping]] | Sequence[Mapping],
         ``{member label: rows}``, the rows of each member (the normal valve and the
         grafts: ``graft_width_pct`` and ``graft_height_pct`` (None for the normal valve),
         ``converged``, ``competent``, ``min_coaptation_height_mm``,
-        ``regurgitant_orifice_area_mm2``, ``leaflet_intersection_mm``, ``mesh_size_mm``);
+        ``regurgitant_orifice_area_mm2``, ``intersecting_pairs``);
         a plain list of rows is a study of one member.
     target_mm
         Minimum coaptation height to reach in every member; None takes each member's

@@ -168,11 +168,11 @@ def _worst_case_table(rec: Recommendation) -> list[str]:
     """One line per graft: its worst case over the members."""
     n = len(rec.members)
     head = ("graft", "worst min h (mm)", "spread (mm)", "margin (mm)", "limiting member",
-            "not converged", "leaks", "crosses", "qualifies")
+            "not converged", "leaks", "intersects", "qualifies")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for c in rec.cells:
         counts = [f"{len(m)}/{n}" if m else "–" for m in (c.unconverged + c.missing,
-                                                          c.leaking, c.crossing)]
+                                                          c.leaking, c.intersecting)]
         cells = (c.label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
                  "–" if c.margin_mm is None else margin_text(c.margin_mm, signed=True),
                  c.limiting_member or "–", *counts, _fmt(c.qualifies))
