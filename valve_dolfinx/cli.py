@@ -373,7 +373,8 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
     indices = None if args.case_index is None else [args.case_index]
     with _case_progress(comm, not args.no_progress and indices is None) as progress:
         outcome = run_study(settings, args.out, comm, case_indices=indices,
-                            progress=progress, report=indices is None)
+                            progress=progress, report=indices is None,
+                            wait=not args.no_wait)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
@@ -382,10 +383,17 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
             print(f"report: {args.out / 'report.md'}")
             if (args.out / "nomogram.png").is_file():
                 print(f"nomogram: {args.out / 'nomogram.png'}, {args.out / 'nomogram.csv'}")
+    if outcome.in_progress:
+        held = ", ".join(f"{name} ({who})" for name, who in outcome.in_progress.items())
+        raise StudyIncompleteError(f"{len(outcome.in_progress)} case(s) in progress in another "
+                                   f"process: {held}; no answer written (--no-wait): rerun "
+                                   "without --no-wait to wait for them")
     if outcome.failed:
         raise StudyIncompleteError(f"{len(outcome.failed)} case(s) failed: "
                                    f"{', '.join(outcome.failed)}; the report gives each reason "
                                    "(a rerun skips them: delete their folders to retry)")
+    if outcome.report is not None and not outcome.report.complete:
+        raise StudyIncompleteError(f"{args.out}: {outcome.report.incomplete_text}")
     return 0
 
 
@@ -406,11 +414,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
     print(report.text)
     print(f"report: {args.dir / 'report.md'}")
     if not report.complete:
-        held = sum(len(names) for names in report.unfinished.values())
         raise StudyIncompleteError(
-            f"{args.dir}: the study is incomplete ({held} case(s) without a result; "
-            "report.md lists them and why)" if report.rows else
-            f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out {args.dir}`")
+            f"{args.dir}: {report.incomplete_text} report.md lists them and why" if report.rows
+            else f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out "
+            f"{args.dir}`")
     return 0
 
 
@@ -448,6 +455,9 @@ def _add_grid_args(p: argparse.ArgumentParser) -> None:
                    help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--no-progress", action="store_true",
                    help="plain log lines, no progress bar (batch jobs)")
+    p.add_argument("--no-wait", action="store_true",
+                   help="do not wait for the cases another process is computing in --out: "
+                   "end with status 9 naming them, writing no answer (default: wait)")
 
 
 def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
@@ -488,6 +498,7 @@ _PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root
                   "widths": "graft_widths_pct", "heights": "graft_heights_pct",
                   "target_coaptation": "target_coaptation_mm",
                   "graft_fibre_angle": "graft_fibre_angle_deg", "paths": "paths",
+                  "mesh_size": "mesh_size_mm", "wall_time_limit": "wall_time_limit_s",
                   "label": "label"}
 
 
@@ -508,7 +519,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
     templates = [GraftSize.parse(text) for text in args.template]
-    plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
+    plan_study_settings(patient)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.plan.runner import run_plan
 
@@ -517,9 +528,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     logging.getLogger("valve_dolfinx.plan").setLevel(
         logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
     with _case_progress(comm, not args.no_progress) as progress:
-        outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
-                           wall_time_limit_s=args.wall_time_limit, templates=templates,
-                           force=args.force, progress=progress)
+        outcome = run_plan(patient, args.out, comm, templates=templates, force=args.force,
+                           progress=progress, wait=not args.no_wait)
     if comm.rank == 0:
         _print_plan(outcome)
     return 0
