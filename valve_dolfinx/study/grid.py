@@ -33,7 +33,7 @@ from valve_dolfinx.study.axes import (
     check_axes,
 )
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyCase, case_name
-from valve_dolfinx.study.paths import study_paths
+from valve_dolfinx.study.paths import START_FROM_NORMAL, study_paths
 
 if TYPE_CHECKING:
     from valve_dolfinx.study.layout import StudyLayout
@@ -206,6 +206,25 @@ class StudySettings:
         axes = check_axes(vary, uncertain, self.base_case(), self._fixed_keys())
         set_(self, "vary", {a.key: a.values for a in axes if a.kind == COMPARISON})
         set_(self, "uncertain", {a.key: a.values for a in axes if a.kind == UNCERTAINTY})
+        self._check_warm_starts()
+
+    def _check_warm_starts(self) -> None:
+        """Raise if a path that starts the grafts from the loaded normal valve meets a solver
+        that cannot start from a loaded valve (BDF2 starts from the unloaded valve)."""
+        from valve_dolfinx.config import config_from_dict
+
+        warm = [p for p in study_paths(self.paths) if p.start == START_FROM_NORMAL]
+        if not warm:
+            return
+        solvers = ({**self.vary, **self.uncertain}.get("solver")
+                   or (config_from_dict(self.base_case(), source="study case settings").solver,))
+        if "bdf2" in solvers:
+            raise ParameterError(f"solver = 'bdf2' with the numerical {warm[0].label}: that "
+                                 "path starts every graft from the loaded normal valve, and a "
+                                 "closure that starts from a loaded valve needs solver = "
+                                 "'ptc' (BDF2 starts from the unloaded valve); every study "
+                                 "takes path 1, so run the BDF2 cross-check case by case with "
+                                 "`valve-dolfinx run --solver bdf2`")
 
     def base_case(self) -> dict:
         """The case settings every case starts from: ``case``, then the mesh size and the
