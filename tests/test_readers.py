@@ -296,3 +296,89 @@ def test_a_plan_whose_study_ran_with_other_settings_needs_force(tmp_path):
     write_patient(out / "patient.toml", _patient())
     with pytest.raises(OutputConflictError, match="computed with other settings"):
         run_plan(_patient(), out, MPI.COMM_SELF, case_function=no_case)
+
+
+# --- 5, 6. inputs checked before computing, in words that name the problem -------------------
+@pytest.mark.parametrize("label", ["fee $5 or $6", "plan $\\frac$ 7"])
+def test_a_label_with_dollars_is_plain_text_everywhere(tmp_path, label):
+    """A plan label with paired `$` is drawn as written on the template and the report: not
+    typeset as math (the dollars gone), nor, when it is no valid math, a crash after the
+    study."""
+    from test_plan import _pdf_text
+
+    from valve_dolfinx.plan.runner import run_plan
+
+    out = tmp_path / "plan"
+    run_plan(_patient(label=label), out, MPI.COMM_SELF, mesh_size_mm=2.0,
+             case_function=plan_case)
+    assert f"Repair plan: {label}" in _pdf_text(out / "plan.pdf")
+    assert f"Graft template: {label}" in _pdf_text(out / "template_W14_H13.pdf")
+
+
+def test_patient_and_configuration_files_are_read_with_a_byte_order_mark(tmp_path):
+    from valve_dolfinx.config import load_config
+    from valve_dolfinx.plan.patient import read_patient
+
+    patient = tmp_path / "PATIENT.toml"
+    patient.write_bytes(b"\xef\xbb\xbfroot_diameter_mm = 22.0\n")
+    assert read_patient(patient).root_diameter_mm == 22.0
+    config = tmp_path / "case.toml"
+    config.write_bytes(b"\xef\xbb\xbfpressure_mmhg = 90.0\n")
+    assert load_config(config).pressure_mmhg == 90.0
+
+
+@pytest.mark.parametrize("command,expect", [
+    (["plan", "{dir}", "--out", "{out}"], "{dir} is a folder, not a patient file"),
+    (["sweep", "--config", "{dir}", "--out", "{out}"], "{dir} is a folder, not a configuration"),
+    (["run", "--config", "{dir}", "--out", "{out}"], "{dir} is a folder, not a configuration"),
+])
+def test_a_folder_given_as_a_file_is_named_as_a_folder(tmp_path, caplog, quiet_cli, command,
+                                                       expect):
+    from valve_dolfinx.cli import main
+
+    where = {"dir": str(tmp_path), "out": str(tmp_path / "out")}
+    assert main([part.format(**where) for part in command]) == ExitCode.INPUT
+    assert expect.format(**where) in caplog.text
+    assert not (tmp_path / "out").exists()
+
+
+def test_report_names_a_plan_folder_without_its_patient_file(tmp_path, caplog, quiet_cli):
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.plan.runner import run_plan
+
+    out = tmp_path / "plan"
+    run_plan(_patient(), out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=plan_case)
+    (out / "patient.toml").unlink()
+    assert main(["report", str(out)]) == ExitCode.INPUT
+    assert f"{out} holds a plan's study/ but no patient.toml" in caplog.text
+
+
+def test_report_into_a_folder_it_cannot_write_names_the_folder(tmp_path, caplog, quiet_cli,
+                                                               monkeypatch):
+    """A folder that refuses new files (a read-only one: mkstemp's PermissionError, raised
+    here since the tests may run as root) is named, not the hidden temporary file."""
+    import tempfile
+
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    run_study(_settings(), out, MPI.COMM_SELF, case_function=study_case, report=False)
+
+    def refuse(prefix="", suffix="", dir=None):
+        raise PermissionError(13, "Permission denied", f"{dir}/{prefix}x1y2{suffix}")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    assert main(["report", str(out)]) == ExitCode.OUTPUT_NOT_WRITABLE
+    (error,) = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert f"{out} cannot be written (Permission denied)" in error and "x1y2" not in error
+
+
+@pytest.mark.parametrize("command", [["sweep", "--widths", "7", "--heights", "0"],
+                                     ["plan", "--root-diameter", "22"]])
+def test_one_target_range_everywhere(tmp_path, caplog, quiet_cli, command):
+    from valve_dolfinx.cli import main
+
+    out = tmp_path / "out"
+    assert main([*command, "--target-coaptation", "12", "--out", str(out)]) == ExitCode.USAGE
+    assert "(0, 10] mm" in caplog.text and not out.exists()

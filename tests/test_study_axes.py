@@ -504,15 +504,22 @@ def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, cap
 
 
 # --- the nomogram -----------------------------------------------------------------------------
-def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli):
+@pytest.mark.parametrize("diameters", [["21", "22"], ["22", "21"]])
+def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli, diameters):
     """Two diameters, two paths: nomogram.csv holds each diameter's recommendation as
     summary.json has it and as :func:`margin` gives it by hand (21 mm: W14/H13, margin
-    0.10 mm on path 2; 22 mm: nothing qualifies, W14/H13 0.10 mm short)."""
+    0.10 mm on path 2; 22 mm: nothing qualifies, W14/H13 0.10 mm short).  Diameters given
+    out of order are sorted, so the figure's axis and shading follow the diameter."""
+    from valve_dolfinx.study.nomogram import nomogram_rows
+    from valve_dolfinx.study.report import build_report
     from valve_dolfinx.study.table import read_csv_rows
 
     out = tmp_path / "nomogram"
-    assert _main(["nomogram", "--root-diameters", "21", "22", *GRID, "--mesh-size", "2",
+    assert _main(["nomogram", "--root-diameters", *diameters, *GRID, "--mesh-size", "2",
                   "--out", str(out), "--no-progress"]) == 0
+    report = build_report(out)
+    backwards = nomogram_rows(report.recommendations[::-1], report.rows)
+    assert [r["root_loaded_diameter_mm"] for r in backwards] == [21.0, 22.0]
     printed = capsys.readouterr().out
     assert "nomogram.png" in printed and "[root.loaded_diameter=21]" in printed
     rows = read_csv_rows(out / "nomogram.csv")

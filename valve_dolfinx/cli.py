@@ -347,6 +347,7 @@ def _cmd_nomogram(args: argparse.Namespace) -> int:
     if None in diameters:
         raise ParameterError("--root-diameters: give loaded root diameters in mm (10-40); "
                              "'none', the root distended by its wall law, has no diameter")
+    diameters = tuple(sorted(diameters))  # the study and its figure by increasing diameter
     settings = _study_settings(args, {NOMOGRAM_KEY: diameters})
     if list(settings.vary) != [NOMOGRAM_KEY]:
         raise ParameterError(f"{args.config} [study] vary: the nomogram's comparison axis is the "
@@ -398,14 +399,24 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from valve_dolfinx.exceptions import check_range
+    from valve_dolfinx.exceptions import InputFileError, check_range
     from valve_dolfinx.plan.patient import PATIENT_FILE
+
+    from valve_dolfinx.plan.runner import STUDY_DIR
+    from valve_dolfinx.study.grid import TARGET_COAPTATION_MAX_MM
+    from valve_dolfinx.study.store import CASES_DIR
 
     target = args.target_coaptation
     if (args.dir / PATIENT_FILE).is_file():
         return _report_plan(args)
     if target is not None:
-        check_range("--target-coaptation", target, 0.0, 20.0, low_open=True, unit="mm")
+        check_range("--target-coaptation", target, 0.0, TARGET_COAPTATION_MAX_MM,
+                    low_open=True, unit="mm")
+    if (args.dir / STUDY_DIR).is_dir() and not (args.dir / CASES_DIR).is_dir():
+        raise InputFileError(f"{args.dir} holds a plan's {STUDY_DIR}/ but no {PATIENT_FILE}: a "
+                             f"plan folder is reported from its {PATIENT_FILE} (rerun "
+                             f"`valve-dolfinx plan PATIENT.toml --out {args.dir}`), or give the "
+                             f"study folder itself ({args.dir / STUDY_DIR})")
     from valve_dolfinx.study.report import build_report
 
     report = build_report(args.dir, target_mm=target)

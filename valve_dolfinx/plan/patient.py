@@ -33,7 +33,12 @@ from typing import Any
 from valve_dolfinx.exceptions import ConfigurationError, InputFileError, ParameterError, check_range
 from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.io import atomic_write
-from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, parse_percentages
+from valve_dolfinx.study.grid import (
+    STUDY_HEIGHTS_PCT,
+    STUDY_WIDTHS_PCT,
+    TARGET_COAPTATION_MAX_MM,
+    parse_percentages,
+)
 from valve_dolfinx.study.paths import study_paths
 
 __all__ = [
@@ -97,7 +102,7 @@ FIELDS: dict[str, Field] = {
                                "cent of the measured height"),
     "target_coaptation_mm": Field(
         "--target-coaptation", "mm", "minimum coaptation height a graft must reach (unset: "
-        "the normal valve's at the same root)", 0.0, 10.0, low_open=True,
+        "the normal valve's at the same root)", 0.0, TARGET_COAPTATION_MAX_MM, low_open=True,
         why="a normal valve coapts 3-4 mm at its centre"),
     "graft_fibre_angle_deg": Field(
         "--graft-fibre-angle", "deg", "fibre direction of the graft from its free edge",
@@ -250,12 +255,15 @@ def read_patient(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     """The patient file at ``path`` (TOML, keys of :data:`FIELDS`), with ``overrides``
     (e.g. the command line's flags) set over it."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a patient file: give the TOML file "
+                             f"(a plan folder's is {path / PATIENT_FILE})")
     if not path.is_file():
         raise InputFileError(f"{path}: no such patient file; write one with the keys of "
                              "docs/plan.md (root_diameter_mm = 22.0, ...), or give the "
                              "values as flags (--root-diameter D ...)")
-    try:
-        data = tomllib.loads(path.read_text())
+    try:  # utf-8-sig: a byte-order mark, as some editors write, is not part of the TOML
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigurationError(f"{path} is not valid TOML ({err})") from None
     data.update(overrides or {})

@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 __all__ = [
     "STUDY_WIDTHS_PCT",
     "STUDY_HEIGHTS_PCT",
+    "TARGET_COAPTATION_MAX_MM",
     "DEFAULT_PANEL_CASES",
     "NORMAL_CASE",
     "StudyCase",
@@ -57,6 +58,9 @@ STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
 #: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
+#: the range (mm) of a target minimum coaptation height, in every command: above 0, at
+#: most this (a normal valve coapts 3-4 mm at its centre)
+TARGET_COAPTATION_MAX_MM = 10.0
 #: every solver stage's wall-clock limit (``wall_time_limit_s`` sets them all)
 _WALL_CLOCK_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
 #: how messages name the case settings as what sets a key
@@ -191,7 +195,8 @@ class StudySettings:
                 low_open=True, unit="s", hint="the wall-clock limit of each case in seconds"))
         if self.target_coaptation_mm is not None:
             set_(self, "target_coaptation_mm", check_range(
-                "target_coaptation", self.target_coaptation_mm, 0.0, 20.0, low_open=True,
+                "target_coaptation", self.target_coaptation_mm, 0.0, TARGET_COAPTATION_MAX_MM,
+                low_open=True,
                 unit="mm", hint="a minimum coaptation height in mm; a normal valve coapts "
                 "3-4 mm (omit it to use the normal valve's)"))
         ranks = self.ranks_per_case
