@@ -382,3 +382,32 @@ def test_one_target_range_everywhere(tmp_path, caplog, quiet_cli, command):
     out = tmp_path / "out"
     assert main([*command, "--target-coaptation", "12", "--out", str(out)]) == ExitCode.USAGE
     assert "(0, 10] mm" in caplog.text and not out.exists()
+
+
+def test_a_target_from_a_normal_valve_that_leaks_is_said_so(tmp_path):
+    """The normal valve at 23 mm leaks: the plan's answer and the study's recommendation say
+    that the target there comes from a valve that is not competent."""
+    from test_plan import _words
+
+    from valve_dolfinx.plan.runner import run_plan
+
+    def leaking_at_23(config, out_dir, comm, *, start=None):
+        result = plan_case(config, out_dir, comm, start=start)
+        if not config.geometry.has_graft and config.root.loaded_diameter == 23.0:
+            result.update(competent=False, regurgitant_orifice_area_mm2=0.4,
+                          competence_reason="leaks 0.40 mm²")
+        return result
+
+    out = tmp_path / "plan"
+    outcome = run_plan(_patient(), out, MPI.COMM_SELF, mesh_size_mm=2.0,
+                       case_function=leaking_at_23)
+    warning = f"the normal valve is not competent (leaks 0.40 mm²) at {_words(23.0, 1)}"
+    assert warning in outcome.recommendation.headline()
+    assert warning in json.loads((out / "summary.json").read_text())["recommendation"][
+        "headline"]
+    (study,) = json.loads((out / "study" / "summary.json").read_text())["recommendations"]
+    assert "Caution: the target is the height of a normal valve that is not competent" in (
+        study["text"])
+    assert list(study["incompetent_targets"]) == [
+        "root.loaded_diameter=23, path 1 (from the closed valve)",
+        "root.loaded_diameter=23, path 2 (from the open valve)"]

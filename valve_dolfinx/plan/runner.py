@@ -268,6 +268,8 @@ def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[f
                    for c in rec.cells)
     source = ("the normal valve's at the same root" if rec.target_source.startswith(
         NORMAL_TARGET) else "given in the plan's inputs")
+    for member, why in rec.incompetent_targets.items():
+        source += f"; caution, the normal valve is {why} at {words[member]}"
     common = dict(target_mm=rec.target_mm, target_source=source,
                   members=tuple(words[m] for m in rec.members),
                   targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
