@@ -590,10 +590,11 @@ _EXIT_STATUS = """exit status:
   3    run: the case ran but did not converge (results written with converged: false)
   4    an input file is missing, unreadable or not what it should be
   5    a solver failed, or raised in one of its callbacks: no result written
-  6    --out holds another case's results (nothing computed; run --force overwrites)
+  6    --out holds another case's results or plan (nothing computed; --force overwrites)
   7    --out, or a folder above it, is a file (nothing computed)
-  8    --out cannot be created or written (nothing computed)
-  9    sweep, report: a case failed, is damaged or has not run (report.md says why)
+  8    --out (or report's DIR) cannot be created or written (nothing computed)
+  9    sweep, nomogram, plan, report: a case failed, is damaged, stale, not run or in
+       progress in another process: no answer written (report.md says which and why)
   130  interrupted (SIGINT, Ctrl-C): nothing unfinished recorded; rerun to continue
   143  terminated (SIGTERM): the same
 Under mpirun, an error on any rank ends every rank with that status."""

@@ -32,8 +32,8 @@ from valve_dolfinx.config import (
 from valve_dolfinx.exceptions import InputFileError, MeshError, ValveError
 
 __all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "CaseResult", "CaseCheck",
-           "LoadedCase", "check_case", "competence", "file_digest", "competence_text", "leaflets_cross",
-           "load_case", "margin_text", "shortfall_digits"]
+           "LoadedCase", "check_case", "competence", "competence_text", "file_digest",
+           "leaflets_cross", "load_case", "margin_text", "shortfall_digits"]
 
 #: a case folder's result (written last: its presence means the case finished)
 RESULT_FILE = "result.json"
