@@ -96,6 +96,22 @@ def test_report_over_an_interrupted_rerun_with_other_settings_is_no_answer(tmp_p
     assert json.loads((out / "summary.json").read_text())["complete"] is True
 
 
+def test_a_folder_without_study_json_is_read_without_an_expected_identity(tmp_path, quiet_cli):
+    """Without study.json there are no settings to expect: every whole case counts (the grid
+    is guessed from the folders), as before; a damaged one still does not."""
+    from valve_dolfinx.cli import main
+    from valve_dolfinx.study.runner import run_study
+
+    out = tmp_path / "study"
+    run_study(_settings(mesh_size_mm=1.9), out, MPI.COMM_SELF, case_function=study_case)
+    (out / "study.json").unlink()
+    assert main(["report", str(out)]) == 0
+    assert {row["status"] for row in _rows(out).values()} == {"finished"}
+    _edit_same_size(out / "cases" / "W0_H0" / "result.json")
+    assert main(["report", str(out)]) == ExitCode.STUDY_INCOMPLETE
+    assert _rows(out)["W0_H0"]["status"] == "damaged"
+
+
 # --- 1, 5. damaged and missing cases ---------------------------------------------------------
 def _edit_same_size(path: Path) -> None:
     """Change one digit of result.json's minimum coaptation height, keeping the file's size."""

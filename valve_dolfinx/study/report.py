@@ -351,7 +351,9 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         target_mm = settings.target_coaptation_mm
     report = StudyReport(out, rows, layout, [])
     if layout is not None:
-        report.rows = rows = case_rows(out, layout)
+        # the cases' identity is checked against the settings the study ran with, not
+        # against a grid guessed from the folders (a folder without study.json)
+        report.rows = rows = case_rows(out, layout, identity=settings is not None)
         counted = {r["case"] for r in rows if r.get("status") not in ("damaged", "stale")}
         report.missing = [c.name for c in layout.cases if c.name not in counted]
         owners = {name: claim_owner(out, name) for name in report.missing}

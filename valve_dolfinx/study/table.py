@@ -67,12 +67,13 @@ def _reason(record: dict, result: dict) -> str:
     return ""
 
 
-def case_rows(out: Path, layout: StudyLayout | None = None) -> list[dict]:
+def case_rows(out: Path, layout: StudyLayout | None = None, *, identity: bool = True
+              ) -> list[dict]:
     """Rows of every case folder under ``out/cases``.
 
-    With ``layout`` (the study's cases): in its order, then any other case folder, and each
-    of its cases checked against the identity the layout expects; without it, the normal
-    valve first, then by W and H, every whole case taken as it is.  A case whose files are
+    With ``layout`` (the study's cases): in its order, then any other case folder, and (with
+    ``identity``) each of its cases checked against the identity the layout expects;
+    without it, the normal valve first, then by W and H, every whole case taken as it is.  A case whose files are
     missing, unreadable or disagree is a row with status ``damaged`` and the reason, one of
     other settings a row with status ``stale``; a folder whose name is no case's is skipped
     with a warning.
@@ -87,7 +88,7 @@ def case_rows(out: Path, layout: StudyLayout | None = None) -> list[dict]:
             log.warning("skipping %s: not a case folder of a study", folder)
             continue
         name = folder.name
-        if layout is not None and name in layout.configs:
+        if identity and layout is not None and name in layout.configs:
             check = check_study_case(out, name, layout.configs[name], layout.digests[name])
         else:
             check = check_study_case(out, name)
