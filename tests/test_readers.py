@@ -12,17 +12,20 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import re
 import signal
 import socket
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
 from test_plan import _patient, no_case
 from test_plan import stand_in_case as plan_case
-from test_study import _settings, cli_with
+from test_study import ROOT, SMALL_GRID, _runs, _settings, _sweep_cmd, cli_with
 from test_study import stand_in_case as study_case
 
 from valve_dolfinx._compat import MPI
@@ -94,6 +97,36 @@ def test_report_over_an_interrupted_rerun_with_other_settings_is_no_answer(tmp_p
     assert sorted(ran) == ["W0_H0", "W7_H0"]
     assert main(["report", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["complete"] is True
+
+
+def test_sigint_to_a_rerun_with_another_setting_then_report_is_no_answer(tmp_path):
+    """The issue's reproduction with real processes and a real SIGINT: a sweep, then its
+    rerun with --set bending_modulus_kpa=100 interrupted once its first case is recomputed;
+    `report` ends with status 9 naming the stale cases, and states no recommendation."""
+    out, run_log = tmp_path / "study", tmp_path / "runs.log"
+    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "0.05"}
+    sweep = [*SMALL_GRID, "--mesh-size", "2", "--out", str(out), "--no-progress"]
+    first = subprocess.run(_sweep_cmd(*sweep), env=env, cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)
+    assert first.returncode == 0, first.stderr[-2000:]
+    env["STUDY_STAND_IN_SLEEP"] = "1.0"
+    proc = subprocess.Popen(_sweep_cmd(*sweep, "--set", "bending_modulus_kpa=100"), env=env,
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    for line in proc.stderr:  # the normal valve recomputed: the first graft is in flight
+        if "[1/3] normal" in line:
+            proc.send_signal(signal.SIGINT)
+            break
+    proc.communicate(timeout=60)
+    assert proc.returncode == ExitCode.INTERRUPTED
+    assert _runs(run_log)[3:] == ["normal", "W7_H0"]
+    report = subprocess.run([sys.executable, "-m", "valve_dolfinx.cli", "report", str(out)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert report.returncode == ExitCode.STUDY_INCOMPLETE, report.stderr[-2000:]
+    assert "stale: W0_H0, W7_H0" in report.stderr and "Traceback" not in report.stderr
+    assert "No answer: the study is incomplete" in report.stdout
+    assert json.loads((out / "summary.json").read_text())["recommendations"] == []
+    assert not (out / "sizing_map.png").exists()
 
 
 def test_a_folder_without_study_json_is_read_without_an_expected_identity(tmp_path, quiet_cli):
@@ -222,6 +255,36 @@ def test_no_wait_names_the_case_another_process_computes(tmp_path, caplog, quiet
     assert main(["report", str(out)]) == ExitCode.STUDY_INCOMPLETE
     assert f"in progress: W7_H0 (pid {holder.proc.pid} on" in caplog.text
     assert json.loads((out / "summary.json").read_text())["complete"] is False
+
+
+def test_a_second_sweep_waits_for_the_case_the_first_computes(tmp_path):
+    """Two real sweeps on one folder, the second started while the first computes the last
+    case (held at a gate until the second says it waits): the second waits for it, and both
+    end with the whole answer, each case computed once."""
+    out, run_log, gate = tmp_path / "study", tmp_path / "runs.log", tmp_path / "gate"
+    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_GATE": str(gate)}
+    sweep = _sweep_cmd("--widths", "7", "--heights", "0", "--mesh-size", "2", "--out",
+                       str(out), "--no-progress")
+    first = subprocess.Popen(sweep, env=env, cwd=ROOT, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while len(_runs(run_log)) < 2 and time.time() < deadline:  # W7_H0 is at the gate
+        time.sleep(0.02)
+    second = subprocess.Popen(sweep, env=env, cwd=ROOT, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    waited = ""
+    for line in second.stderr:
+        if "waiting for" in line:
+            waited = line
+            break
+    gate.touch()
+    out_second, _ = second.communicate(timeout=60)
+    first.communicate(timeout=60)
+    assert first.returncode == second.returncode == 0
+    assert re.search(rf"waiting for W7_H0: pid {first.pid} on \S+ computes it", waited), waited
+    assert _runs(run_log) == ["normal", "W7_H0"]  # each computed once, by the first
+    assert "0 case(s) computed" in out_second and "No answer" not in out_second
+    assert json.loads((out / "summary.json").read_text())["complete"] is True
 
 
 def test_a_sweep_waits_for_a_case_another_process_holds(tmp_path, caplog, quiet_cli, holder):
