@@ -576,7 +576,8 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--template", action="append", default=[], metavar="W/H",
                    help="also draw the template of this graft, e.g. 21/27 (repeatable)")
     p.add_argument("--force", action="store_true",
-                   help="replace the plan of other inputs in --out")
+                   help="replace the plan of other inputs or settings in --out: its answer, "
+                   "templates and study report are removed before anything is computed")
 
 
 #: seconds an MPI rank that fails waits, after writing its error line, before it aborts
