@@ -1,11 +1,13 @@
-"""Nothing false from `report`, from a second process or from a rerun (issue 55).
+"""Nothing false from `report`, from a second process or from a rerun.
 
 Every reader of a study's cases -- `sweep`, `plan`, `nomogram`, `report` -- counts a case
 only when it is the case the study's layout expects (settings hash and start), finished,
 and intact by the SHA-256 of each file recorded at commit; a study with any other case
-writes no answer and ends with status 9 naming it.  Each test is a reproduction of the
-issue on the stand-in case functions of ``test_study`` and ``test_plan`` (a real process
-holds the claims), so that it takes seconds.
+writes no answer and ends with status 9 naming it.  Each test reproduces a way an answer
+went wrong before (an interrupted rerun with another setting, a damaged or missing case, a
+case another process holds, an interrupted --force, the documented plan rerun, inputs that
+failed late), on the stand-in case functions of ``test_study`` and ``test_plan``, with real
+processes and signals where the way needs them, so that it takes seconds.
 """
 
 from __future__ import annotations
