@@ -58,6 +58,9 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
         with open(log, "a") as fh:
             fh.write(f"{'normal' if w is None else f'W{w:g}_H{h:g}'} {os.getpid()}\n")
     time.sleep(float(os.environ.get("STUDY_STAND_IN_SLEEP", "0.05")))
+    gate = os.environ.get("STUDY_STAND_IN_GATE")
+    while gate and w is not None and not Path(gate).exists():  # a graft waits for the gate
+        time.sleep(0.02)
     if comm.rank == 0:
         for name in ("closed_valve_ventricular.png", "cut_planes.png", "coaptation_map.png"):
             _picture(Path(out_dir) / name, 0.0 if w is None else w + h)

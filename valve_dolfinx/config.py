@@ -358,11 +358,14 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = (),
 def read_config_file(path: str | Path) -> dict:
     """The TOML file at ``path`` as a dict (errors name the file)."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a configuration file (--config): give "
+                             "the TOML file; `valve-dolfinx config > case.toml` writes one")
     if not path.is_file():
         raise InputFileError(f"{path}: no such configuration file (--config); "
                              "`valve-dolfinx config > case.toml` writes one to start from")
-    try:
-        return tomllib.loads(path.read_text())
+    try:  # utf-8-sig: a byte-order mark, as some editors write, is not part of the TOML
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigurationError(f"{path} is not valid TOML ({err})") from None
 

@@ -11,6 +11,7 @@ that show it.  Nothing here imports DOLFINx.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import zipfile
@@ -32,7 +33,7 @@ from valve_dolfinx.exceptions import InputFileError, MeshError, ValveError
 
 __all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "INTERSECTION_REASON", "CaseResult",
            "CaseCheck", "LoadedCase", "check_case", "competence", "competence_text",
-           "leaflets_intersect", "load_case", "margin_text", "shortfall_digits"]
+           "file_digest", "leaflets_intersect", "load_case", "margin_text", "shortfall_digits"]
 
 #: a case folder's result (written last: its presence means the case finished)
 RESULT_FILE = "result.json"
@@ -223,7 +224,8 @@ def check_case(folder: str | Path, config: CaseConfig | None = None, *,
     case's result is not computed again) and of the sweep (``record=True``: a study's case
     folder, with its ``case.json``).  A finished case needs every one of its files:
     ``result.json`` parses; ``case.json`` parses and agrees with it (settings, graft size,
-    convergence) and every file it lists is there with the size it was written with;
+    convergence) and every file it lists is there with the size and content it was written
+    with;
     unless the case failed, ``loaded_state.npz`` loads with the result's number of nodes
     and ``config.toml`` loads with the result's settings (a study's case: those of them
     its record lists).  Without ``config`` a whole case is ``"finished"``.
@@ -291,13 +293,26 @@ def _read_record(folder: Path, result: dict, settings: str) -> dict:
         if rec.get(key) != value:
             raise _Damaged(f"{RECORD_FILE} and {RESULT_FILE} disagree on {key} "
                            f"({rec.get(key)!r} and {value!r})")
+    digests = rec.get("sha256") or {}
     for name, size in (rec.get("files") or {}).items():
         path = folder / name
         if not path.is_file():
             raise _Damaged(f"{name} is missing")
         if path.stat().st_size != size:
             raise _Damaged(f"{name} has {path.stat().st_size} bytes, {size} were written")
+        if name in digests and file_digest(path) != digests[name]:
+            raise _Damaged(f"{name} has changed since it was written (its SHA-256 differs "
+                           f"from the one in {RECORD_FILE})")
     return rec
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's content (hex): what a study's ``case.json`` records per file."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def _check_outputs(folder: Path, result: dict, settings: str, rec: dict | None) -> None:

@@ -39,7 +39,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from valve_dolfinx.result import leaflets_intersect, margin_text, shortfall_digits
+from valve_dolfinx.result import competence_text, leaflets_intersect, margin_text, shortfall_digits
 
 __all__ = ["CellSummary", "Recommendation", "recommend", "summarise_cells", "member_targets",
            "flat_area_ratio", "cell_state"]
@@ -222,6 +222,9 @@ class Recommendation:
     median_neighbour_step_mm: float | None = None
     qualifying: list[str] = field(default_factory=list)
     cells: list[CellSummary] = field(default_factory=list)
+    #: members whose target is the height of a normal valve that is not competent, with why
+    #: (``competence_text``): a target no sound valve set
+    incompetent_targets: dict[str, str] = field(default_factory=dict)
     text: str = ""
 
     def cell(self, label: str | None) -> CellSummary | None:
@@ -350,6 +353,27 @@ def _best_text(rec: Recommendation, best: CellSummary | None) -> str:
             f"{rec.targets_mm[limit]:.{d}f} mm).")
 
 
+def _incompetent_normals(tables: Mapping[str, Sequence[Mapping]]) -> dict[str, str]:
+    """``{member: competence_text}`` of the members whose normal valve is not competent."""
+    out = {}
+    for member, rows in tables.items():
+        normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+        if normal is not None and not normal.get("competent"):
+            out[member] = competence_text(normal)
+    return out
+
+
+def _incompetent_text(rec: Recommendation) -> list[str]:
+    """The sentence that says a target comes from a normal valve that is not competent."""
+    if not rec.incompetent_targets:
+        return []
+    which = "; ".join(f"{_member(m)}: {why}" if m else why
+                      for m, why in rec.incompetent_targets.items())
+    return [f"Caution: the target is the height of a normal valve that is not competent "
+            f"({which}), not that of a sound valve; give --target-coaptation to measure the "
+            "grafts against a height of your choice."]
+
+
 def _best(cells: Sequence[CellSummary]) -> CellSummary | None:
     """The graft closest to qualifying: sound everywhere, else converged everywhere, else any;
     then the largest margin (the largest worst-case height without a target)."""
@@ -412,6 +436,9 @@ def recommend(tables: Mapping[str, Sequence[Mapping]] | Sequence[Mapping],
             if centre.margin_mm is not None and None not in targets.values():
                 rec.shortfall_mm = -centre.margin_mm
         lines = [_best_text(rec, centre)]
+    if target_mm is None:
+        rec.incompetent_targets = _incompetent_normals(tables)
+        lines += _incompetent_text(rec)
     if centre is not None and n_paths == 1:
         lines.append("Each cell was solved along one numerical path; `--paths 2` solves it "
                      "along a second one too and takes the worse (docs/study.md, \"Paths\").")
