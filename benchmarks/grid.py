@@ -6,7 +6,7 @@ each case in its own single-process subprocess (``--jobs N`` at a time, default 
 through :func:`valve_dolfinx.case.run_case` with an output folder (a temporary one,
 or ``--keep DIR``), as ``valve-dolfinx run`` does.  Prints a line per case as it ends,
 then a Markdown table in grid order: converged, static residual (mN), penetration (mm),
-the length along which two leaflets' surfaces cross (``leaflet_intersection_mm``), figure
+the intersecting edge–triangle pairs of the loaded surface (``intersecting_pairs``), figure
 of merit (``min_coaptation_height_mm``), raw minimum, central height, coaptation area,
 regurgitant orifice area, root diameter, Newton iterations, wall time (s, the case's own, output
 included).  ``--out FILE.md`` and ``--json FILE`` keep the table and the figures.
@@ -42,7 +42,7 @@ from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_n
 #: columns of the table: (header, result key, format)
 COLUMNS = [("converged", "converged", "s"), ("residual mN", "equilibrium_residual_mN", ".3g"),
            ("penetration mm", "max_penetration_mm", ".3f"),
-           ("crossing mm", "leaflet_intersection_mm", ".2f"),
+           ("intersecting pairs", "intersecting_pairs", "d"),
            ("min h mm", "min_coaptation_height_mm", ".2f"),
            ("raw min mm", "min_coaptation_height_raw_mm", ".2f"),
            ("central mm", "central_coaptation_height_mm", ".2f"),

@@ -1,13 +1,15 @@
-"""Where the loaded leaflets' mid-surfaces pass through one another, case by case.
+"""Which leaflets pass through one another or through themselves, case by case.
 
-Prints, for every pair of leaflets of each case folder, the length of the lines along which
-their loaded surfaces cross (:func:`valve_dolfinx.analysis.intersection.leaflet_intersections`),
-the part inside the valve (more than ``--wall-band`` from the root wall: the attachment
-lines meet at the commissures by construction) and where that part lies; ``result.json``
-keeps the largest inner length as ``leaflet_intersection_mm``.
+Checks the loaded state of every case folder given with the intersection check of the
+result (:func:`valve_dolfinx.analysis.intersection.valve_intersections`: the IPC Toolkit's
+exact edge–triangle test on the whole loaded surface) and prints one line per case: the
+intersecting edge–triangle pairs, per pair of leaflets (``graft/self``: the graft through
+itself), their distance from the nearest commissure post, what the case's ``result.json``
+recorded, and the time the check took.  For case folders written before the check was
+part of the result, and to check a state again.
 
-Reads the ``loaded_state.npz`` and ``result.json`` (the root diameter) of case folders
-written by ``valve-dolfinx run`` or a study (``results/graft_sweep/cases/*``)::
+Reads the case folders written by ``valve-dolfinx run`` or a study
+(``results/graft_sweep/cases/*``), rebuilding each valve mesh from its configuration::
 
     .venv/bin/python benchmarks/intersections.py results/graft_sweep/cases/*
 """
@@ -15,45 +17,36 @@ written by ``valve-dolfinx run`` or a study (``results/graft_sweep/cases/*``)::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from valve_dolfinx.analysis.intersection import leaflet_intersections
+from valve_dolfinx.analysis.intersection import valve_intersections
+from valve_dolfinx.exceptions import ValveError
+from valve_dolfinx.result import load_case
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("cases", nargs="+", type=Path, help="case folders (loaded_state.npz)")
-    parser.add_argument("--wall-band", type=float, default=1.0,
-                        help="band at the root wall left out of the inner length (mm)")
+    parser.add_argument("cases", nargs="+", type=Path, help="finished case folders")
     args = parser.parse_args()
-    print("| case | leaflets | intersection (mm) | of it inside the valve (mm) | "
-          "r of the inner part (mm) | z of the inner part (mm) |")
-    print("|---|---|---:|---:|---|---|")
-    missing = []
+    print("| case | pairs | leaflets | from a post (mm) | recorded | check (s) |")
+    print("|---|---:|---|---|---:|---:|")
+    unread = []
     for folder in args.cases:
-        state = folder / "loaded_state.npz"
-        if not (state.is_file() and (folder / "result.json").is_file()):
-            missing.append(str(folder))
+        try:
+            case = load_case(folder)
+        except (FileNotFoundError, ValveError) as err:
+            unread.append(f"{folder}: {err}")
             continue
-        data = np.load(state)
-        result = json.loads((folder / "result.json").read_text())
-        root_radius = 0.5 * result["root_diameter_mm"]
-        for pair in leaflet_intersections(data["positions"], data["cells"], data["cell_tags"],
-                                          root_radius, args.wall_band):
-            r = "" if pair.inner_radius_mm is None else "{:.1f}–{:.1f}".format(
-                *pair.inner_radius_mm)
-            z = "" if pair.inner_height_mm is None else "{:.1f}–{:.1f}".format(
-                *pair.inner_height_mm)
-            a, b = pair.leaflets
-            print(f"| {folder.name} | {a}–{b} | {pair.total_mm:.2f} | {pair.inner_mm:.2f} "
-                  f"| {r} | {z} |", flush=True)
-    if missing:
-        sys.exit(f"no loaded_state.npz and result.json in {', '.join(missing)}: pass case "
-                 "folders written by `valve-dolfinx run` or a study")
+        found = valve_intersections(case.positions, case.valve)
+        span = found.post_distance_mm()
+        where = "" if span is None else "{:.2f}–{:.2f}".format(*span)
+        leaflets = ", ".join(f"{k} {n}" for k, n in found.between().items())
+        recorded = case.result.intersecting_pairs
+        print(f"| {folder.name} | {found.count} | {leaflets} | {where} "
+              f"| {'' if recorded is None else recorded} | {found.time_s:.3f} |", flush=True)
+    if unread:
+        sys.exit("not checked:\n" + "\n".join(unread))
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ Runs into one results folder (``--out``, default ``results/sensitivity``):
   values as a comparison axis (``vary``); its default value is the ``defaults/`` study.
 
 Then prints, per choice, a Markdown table per cell (the minimum coaptation height, and
-whether it leaks, has leaflets crossing or did not converge; the worst case over the
+whether it leaks, has leaflets that intersect or did not converge; the worst case over the
 members with ``--paths 2``), a row of the recommendation each value gives, and the wall
 time of its study.  Every study is resumable: a rerun with the same ``--out`` computes only what is
 missing.
@@ -93,8 +93,9 @@ def _cell(cell) -> str:
 
     if cell.leaking:
         text += f", leaks {cell.largest_orifice_mm2:.2g} mm²" + members(cell.leaking)
-    if cell.crossing:
-        text += f", crosses {cell.longest_crossing_mm:.2f} mm" + members(cell.crossing)
+    if cell.intersecting:
+        text += (f", intersects ({cell.most_intersecting_pairs} edge–triangle pairs)"
+                 + members(cell.intersecting))
     if cell.unconverged or cell.missing:
         text += ", not converged" + members(cell.unconverged + cell.missing)
     return text

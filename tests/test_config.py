@@ -187,6 +187,17 @@ def test_settings_hash_is_the_physics_and_numerics():
         base.settings_hash()
 
 
+def test_a_case_analysed_under_an_earlier_rule_is_another_identity(monkeypatch):
+    """A result judged by an earlier analysis (e.g. before the intersection check decided
+    competence) must not be resumed or reported as today's: the analysis version is part
+    of the settings hash."""
+    import valve_dolfinx.config as config_module
+
+    today = CaseConfig().settings_hash()
+    monkeypatch.setattr(config_module, "ANALYSIS_VERSION", config_module.ANALYSIS_VERSION - 1)
+    assert CaseConfig().settings_hash() != today
+
+
 # --- the package -------------------------------------------------------------------------------
 def _python(code: str) -> subprocess.CompletedProcess:
     """Run ``code`` in a fresh interpreter from the repository root; it must succeed."""

@@ -1,9 +1,10 @@
 """Figures: no global plotting state, every figure of a case written, the orifice drawn to scale.
 
 The case figures are drawn once per session from a real closure at 1.6 mm of the
-width-only graft W27/H0, which leaks at that mesh (17 mm²): the drawn orifice is
-measured from the figures' own geometry (polygon areas in mm²) and compared with
-the area the analysis reported.
+width-only graft W27/H0, which leaks at that mesh (17 mm²) and folds through its
+neighbours: the drawn orifice is measured from the figures' own geometry (polygon areas
+in mm²) and compared with the area the analysis reported; the intersections drawn are the
+ones the result counts.
 """
 
 from __future__ import annotations
@@ -100,6 +101,32 @@ def test_drawn_synthetic_orifice_has_its_area(tmp_path):
     assert area == pytest.approx(np.pi * 16 + 0.4 + 0.01, rel=0.02)
 
 
+def _yellow_pixels(image: np.ndarray) -> int:
+    """Pixels of the intersection marks' hue (Okabe & Ito's yellow, 56°, lit or shaded; the
+    orange leaflet's is 41°)."""
+    from matplotlib.colors import rgb_to_hsv
+
+    hsv = rgb_to_hsv(image[..., :3] / 255.0)
+    return int(np.sum((np.abs(hsv[..., 0] * 360 - 56) < 6) & (hsv[..., 1] > 0.5)
+                      & (hsv[..., 2] > 0.3)))
+
+
+def test_an_intersection_is_marked_in_the_3d_view():
+    """A point given as an intersection, on the left-coronary leaflet's belly, is drawn as a
+    yellow ball over the leaflet, which has no yellow of its own."""
+    from valve_dolfinx.geometry.valve import build_valve
+    from valve_dolfinx.plotting import plot_valve_3d
+
+    valve = build_valve(mesh_size=2.0)
+    x = valve.points[valve.leaflets[0].nodes]
+    middle = np.abs(x[:, 2] - x[:, 2].mean()) + np.abs(np.arctan2(x[:, 1], x[:, 0]))
+    mark = x[[np.argmin(middle)]]
+    plain = plot_valve_3d(valve.points, valve, view="side")
+    marked = plot_valve_3d(valve.points, valve, view="side", intersections=mark)
+    assert _yellow_pixels(plain) == 0
+    assert _yellow_pixels(marked) > 100  # a ball 0.6 mm across, half of it in the leaflet
+
+
 @pytest.fixture(scope="module")
 def leaking_case(tmp_path_factory):
     """W27/H0 closed at 1.6 mm through run_case, its figures written; what they were drawn
@@ -112,7 +139,8 @@ def leaking_case(tmp_path_factory):
     real = plotting.write_case_figures
 
     def record(out_dir, positions, valve, coaptation, result, **kwargs):
-        drawn.update(positions=positions, valve=valve, coaptation=coaptation)
+        drawn.update(positions=positions, valve=valve, coaptation=coaptation,
+                     intersections=kwargs.get("intersections"))
         return real(out_dir, positions, valve, coaptation, result, **kwargs)
 
     config = CaseConfig(geometry=ValveParameters(mesh_size=1.6)).with_graft(27.0, 0.0)
@@ -129,6 +157,19 @@ def test_every_case_figure_is_written(leaking_case):
     for name in CASE_FIGURES:
         assert (out / name).stat().st_size > 20_000, name
     assert json.loads((out / "result.json").read_text())["graft_width_pct"] == 27.0
+
+
+@pytest.mark.slow
+def test_case_figures_mark_every_intersection(leaking_case):
+    """The graft folds through its neighbours at 1.6 mm: the 3-D views are given every
+    intersecting pair the result counts, where the check finds them."""
+    from valve_dolfinx.analysis.intersection import valve_intersections
+
+    _, result, drawn = leaking_case
+    assert result.intersecting_pairs > 0
+    assert len(drawn["intersections"]) == result.intersecting_pairs
+    found = valve_intersections(drawn["positions"], drawn["valve"])
+    assert np.array_equal(drawn["intersections"], found.points)
 
 
 @pytest.mark.slow

@@ -58,6 +58,9 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
         with open(log, "a") as fh:
             fh.write(f"{'normal' if w is None else f'W{w:g}_H{h:g}'} {os.getpid()}\n")
     time.sleep(float(os.environ.get("STUDY_STAND_IN_SLEEP", "0.05")))
+    gate = os.environ.get("STUDY_STAND_IN_GATE")
+    while gate and w is not None and not Path(gate).exists():  # a graft waits for the gate
+        time.sleep(0.02)
     if comm.rank == 0:
         for name in ("closed_valve_ventricular.png", "cut_planes.png", "coaptation_map.png"):
             _picture(Path(out_dir) / name, 0.0 if w is None else w + h)
@@ -661,14 +664,29 @@ def test_margin_text_shows_a_thin_margin_and_hides_round_off(margin, plain, sign
 
 
 # --- run_case itself --------------------------------------------------------------------------
-#: the crossing given to the real case (standing in for the 1.97 mm of W14/H27 at 1.6 mm)
-CROSSING_MM = 2.5
+#: the intersection given to the real case (standing in for W21/H27's 30 pairs, 0.17–0.28 mm
+#: from a post, at the default mesh): three pairs at three of its nodes, this far from a post
+INTERSECTION_POST_MM = (0.5, 1.0, 2.0)
+INTERSECTION_REASON = ("leaflets intersect: 3 edge–triangle pairs, 0.50–2.00 mm from a post "
+                       "(left-coronary/right-coronary 3)")
+
+
+def _intersecting(state):
+    """Edge–triangle pairs made up on the real loaded valve (see INTERSECTION_POST_MM)."""
+    from valve_dolfinx.analysis.intersection import IntersectingPair, Intersections
+
+    _, positions = state.shown()
+    pairs = tuple(IntersectingPair((0, 1), 0, ("left-coronary", "right-coronary"),
+                                   tuple(positions[50 * (k + 1)]), d)
+                  for k, d in enumerate(INTERSECTION_POST_MM))
+    return Intersections(pairs, candidates=1000, time_s=0.0)
 
 
 @pytest.fixture(scope="module")
 def real_sweep(tmp_path_factory):
     """One real closure through the sweep path: the normal valve on a 2 mm mesh (a minute or
-    less), its leaflets made to cross by CROSSING_MM, so that it is not competent; the
+    less), its leaflets made to intersect (:func:`_intersecting`), so that it is not
+    competent; the
     outcome, the study folder and the log records of the case and of the sweep."""
     import valve_dolfinx.case as case
     from valve_dolfinx._compat import MPI
@@ -684,7 +702,7 @@ def real_sweep(tmp_path_factory):
     library.setLevel(logging.INFO)
     try:
         with pytest.MonkeyPatch.context() as patch:
-            patch.setattr(case, "leaflet_crossing_mm", lambda state: CROSSING_MM)
+            patch.setattr(case, "check_intersections", _intersecting)
             outcome = run_study(_settings(widths_pct=(0,), wall_time_limit_s=90.0), out,
                                 MPI.COMM_SELF, case_indices=[0], poll_s=0.05)
     finally:
@@ -721,8 +739,8 @@ def test_real_case_through_the_sweep(real_sweep):
 
 
 @pytest.mark.timeout(300)
-def test_competence_agrees_everywhere_when_leaflets_cross(real_sweep):
-    """A case whose leaflets cross is not competent, with the same reason in the case's and
+def test_competence_agrees_everywhere_when_leaflets_intersect(real_sweep):
+    """A case whose leaflets intersect is not competent, with the same reason in the case's and
     the sweep's log lines, result.json, results.csv, report.md and the figure titles."""
     from valve_dolfinx.plotting import key_numbers
     from valve_dolfinx.result import competence_text
@@ -731,7 +749,8 @@ def test_competence_agrees_everywhere_when_leaflets_cross(real_sweep):
     _, out, records = real_sweep
     result = json.loads((out / "cases" / "normal" / "result.json").read_text())
     assert result["competent"] is False
-    assert result["competence_reason"].endswith(f"leaflets cross {CROSSING_MM:.2f} mm")
+    assert result["competence_reason"].endswith(INTERSECTION_REASON)
+    assert result["intersecting_pairs"] == 3
     verdict = competence_text(result)
     assert verdict == f"not competent ({result['competence_reason']})"
     lines = [r.getMessage() for r in records if r.name in ("valve_dolfinx.case",

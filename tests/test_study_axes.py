@@ -76,7 +76,7 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
     return {"graft_width_pct": w, "graft_height_pct": g.graft_height_pct, "converged": True,
             "min_coaptation_height_mm": figure(config), "competent": not leaks,
             "regurgitant_orifice_area_mm2": 0.5 if leaks else 0.0,
-            "leaflet_intersection_mm": 0.0, "mesh_size_mm": g.mesh_size,
+            "intersecting_pairs": 0, "mesh_size_mm": g.mesh_size,
             "root_diameter_mm": config.root.loaded_diameter or 20.09, "n_ranks": comm.size,
             "start_height_mm": started, "parameters": config.to_dict()}
 
@@ -385,6 +385,13 @@ def test_worst_case_of_each_graft_on_constructed_tables():
     (["--paths", "2", "--set", "geometry.graft_placement=billowed"],
      ["path 2 (billowed)", "geometry.graft_placement"]),
     (["--paths", "2", "--uncertain", "geometry.billow_mm=1,2"], ["geometry.billow_mm", "path"]),
+    # a wall-clock limit is not an axis: its values would share one case folder
+    (["--vary", "pseudo_transient.wall_time_limit_s=0.5,200"],
+     ["--vary pseudo_transient.wall_time_limit_s", "wall-clock limit", "not an axis"]),
+    (["--uncertain", "dynamics.wall_time_limit_s=10,20"],
+     ["--uncertain dynamics.wall_time_limit_s", "not an axis"]),
+    # serial: three ranks per case cannot run, and the folder is not created
+    (["--ranks-per-case", "3"], ["ranks_per_case = 3 does not divide the 1 MPI ranks"]),
 ])
 def test_bad_axes_stop_before_computing(tmp_path, caplog, quiet_cli, monkeypatch, args, expect):
     """Every bad axis stops the sweep at once with one line naming it; nothing is computed
@@ -402,6 +409,21 @@ def test_bad_axes_stop_before_computing(tmp_path, caplog, quiet_cli, monkeypatch
     assert len(err) == 1 and "\n" not in err[0], err
     for text in expect:
         assert text in err[0], err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args", [["--set", "solver=bdf2"], ["--uncertain", "solver=ptc,bdf2"],
+                                  ["--vary", "solver=bdf2,ptc"]])
+def test_bdf2_on_a_path_with_a_warm_start_stops_before_computing(tmp_path, caplog, quiet_cli,
+                                                                 warm_paths, args):
+    """BDF2 cannot start from a loaded valve: with a path that starts its grafts from the
+    normal valve it is refused at once, not computed as normal valves whose every graft then
+    fails."""
+    out = tmp_path / "study"
+    assert _main(["sweep", *GRID, "--out", str(out), *args]) == 2
+    err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(err) == 1 and "solver = 'bdf2' with the numerical path 1" in err[0], err
+    assert "needs solver = 'ptc'" in err[0]
     assert not out.exists()
 
 
@@ -490,19 +512,26 @@ def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, cap
 
 
 # --- the nomogram -----------------------------------------------------------------------------
-def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli):
+@pytest.mark.parametrize("diameters", [["21", "22"], ["22", "21"]])
+def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli, diameters):
     """Two diameters, two paths: nomogram.csv holds each diameter's answer as summary.json
     has it and as worked out by hand from :func:`margin`.  Path 2 is 0.1 mm below path 1 in
     every cell, so the paths' pooled scatter is 0.1/√2 = 0.071 mm, and the surface (their
     mean, 0.05 mm below path 1) is the plane ``margin + 0.05``; W0 leaks.  At 21 mm a size
     qualifies when -0.95 + 0.06 W + 0.02 H >= -0.071: along that line the flat area falls
     with W, so the answer sits at the widest graft, W14, with H >= 1.96 %: W14/H2.  At
-    22 mm (0.1 mm lower): H >= 6.96 %, W14/H7."""
+    22 mm (0.1 mm lower): H >= 6.96 %, W14/H7.  Diameters given out of order are sorted, so
+    the figure's axis and shading follow the diameter."""
+    from valve_dolfinx.study.nomogram import nomogram_rows
+    from valve_dolfinx.study.report import build_report
     from valve_dolfinx.study.table import read_csv_rows
 
     out = tmp_path / "nomogram"
-    assert _main(["nomogram", "--root-diameters", "21", "22", *GRID, "--mesh-size", "2",
+    assert _main(["nomogram", "--root-diameters", *diameters, *GRID, "--mesh-size", "2",
                   "--out", str(out), "--no-progress"]) == 0
+    report = build_report(out)
+    backwards = nomogram_rows(report.recommendations[::-1], report.rows)
+    assert [r["root_loaded_diameter_mm"] for r in backwards] == [21.0, 22.0]
     printed = capsys.readouterr().out
     assert "nomogram.png" in printed and "[root.loaded_diameter=21]" in printed
     rows = read_csv_rows(out / "nomogram.csv")

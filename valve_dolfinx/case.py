@@ -4,7 +4,8 @@
 (step 1), holds the attachment at the distended root and brings the leaflets to
 their static equilibrium under the diastolic pressure with leaflet contact and
 bending (step 2: pseudo-transient continuation, or damped BDF2 dynamics as the
-cross-check), then measures coaptation and writes the result, the configuration,
+cross-check), then measures coaptation, checks that no leaflet passes through another or
+through itself (:func:`check_intersections`) and writes the result, the configuration,
 ParaView fields and figures.  It never raises because a solve failed: a stalled
 or diverged run is reported with ``converged: false`` and where it stopped, and
 whatever was computed is written.  An interrupt, or an exception in one of the
@@ -26,6 +27,7 @@ import numpy as np
 
 from valve_dolfinx._compat import MPI, dolfinx, package_versions
 from valve_dolfinx._version import __version__, git_commit
+from valve_dolfinx.analysis.intersection import Intersections, valve_intersections
 from valve_dolfinx.config import CaseConfig, case_name
 from valve_dolfinx.contact import PlaneContact, SurfaceContact
 from valve_dolfinx.exceptions import ParameterError
@@ -45,7 +47,7 @@ from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
 from valve_dolfinx.solvers.report import SolveReport
 
 __all__ = ["CaseState", "closure_model", "leaflet_rigidity", "leaflet_bending_matrix",
-           "solve_case", "analyse_case", "leaflet_crossing_mm", "run_case"]
+           "solve_case", "analyse_case", "check_intersections", "run_case"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
@@ -138,6 +140,8 @@ class CaseState:
     contact_forces: np.ndarray  # (N, 3)
     report: SolveReport
     coaptation: object | None = None
+    #: the intersecting edge–triangle pairs of the loaded valve (:func:`check_intersections`)
+    intersections: Intersections | None = None
     #: (valve, positions) to draw: the valve itself, or the single leaflet of the symmetric
     #: reference with its two mirror images
     display: tuple | None = None
@@ -304,15 +308,12 @@ def _start_record(start: ValveState | None) -> dict:
             "wall_time_s": start.wall_time_s}
 
 
-def leaflet_crossing_mm(state: CaseState) -> float:
-    """Length of the lines along which two leaflets' loaded surfaces cross, more than 1 mm
-    from the root wall (largest over the pairs of leaflets)."""
-    from valve_dolfinx.analysis.intersection import leaflet_intersections
-
+def check_intersections(state: CaseState) -> Intersections:
+    """Every edge of the loaded valve, as drawn (:meth:`CaseState.shown`), that passes
+    through one of its triangles: between leaflets or within one
+    (:func:`~valve_dolfinx.analysis.intersection.valve_intersections`)."""
     valve, positions = state.shown()
-    pairs = leaflet_intersections(positions, valve.cells, valve.cell_tags,
-                                  0.5 * state.root.diameter)
-    return max((p.inner_mm for p in pairs), default=0.0)
+    return valve_intersections(positions, valve)
 
 
 def analyse_case(state: CaseState, config: CaseConfig):
@@ -365,10 +366,10 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
     report = state.report
     last = report.history[-1] if report.history else {}
     fields_ = coaptation.result_fields()
-    crossing = leaflet_crossing_mm(state)
+    state.intersections = intersections = check_intersections(state)
     orifice = fields_["regurgitant_orifice_area_mm2"]
-    competent, why = competence(bool(report.converged),
-                                np.nan if orifice is None else orifice, crossing, g.mesh_size)
+    competent, why = competence(bool(report.converged), np.nan if orifice is None else orifice,
+                                intersections.count, intersections.where())
     result = CaseResult(
         graft_width_pct=g.graft_width_pct, graft_height_pct=g.graft_height_pct,
         converged=bool(report.converged),
@@ -382,7 +383,8 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         root_diameter_mm=state.root.diameter,
         max_penetration_mm=float(last.get("max_penetration_mm", 0.0)),
         max_contact_layer_overlap_mm=float(last.get("max_layer_overlap_mm", 0.0)),
-        leaflet_intersection_mm=crossing,
+        intersecting_pairs=intersections.count,
+        intersections=intersections.to_dict(),
         n_dofs=state.model.V.dofmap.index_map.size_global * 3,
         n_ranks=comm.size,
         mesh_size_mm=g.mesh_size,

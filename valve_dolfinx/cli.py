@@ -347,6 +347,7 @@ def _cmd_nomogram(args: argparse.Namespace) -> int:
     if None in diameters:
         raise ParameterError("--root-diameters: give loaded root diameters in mm (10-40); "
                              "'none', the root distended by its wall law, has no diameter")
+    diameters = tuple(sorted(diameters))  # the study and its figure by increasing diameter
     settings = _study_settings(args, {NOMOGRAM_KEY: diameters})
     if list(settings.vary) != [NOMOGRAM_KEY]:
         raise ParameterError(f"{args.config} [study] vary: the nomogram's comparison axis is the "
@@ -373,7 +374,8 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
     indices = None if args.case_index is None else [args.case_index]
     with _case_progress(comm, not args.no_progress and indices is None) as progress:
         outcome = run_study(settings, args.out, comm, case_indices=indices,
-                            progress=progress, report=indices is None)
+                            progress=progress, report=indices is None,
+                            wait=not args.no_wait)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
@@ -382,22 +384,38 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
             print(f"report: {args.out / 'report.md'}")
             if (args.out / "nomogram.png").is_file():
                 print(f"nomogram: {args.out / 'nomogram.png'}, {args.out / 'nomogram.csv'}")
+    if outcome.in_progress:
+        held = ", ".join(f"{name} ({who})" for name, who in outcome.in_progress.items())
+        raise StudyIncompleteError(f"{len(outcome.in_progress)} case(s) in progress in another "
+                                   f"process: {held}; no answer written (--no-wait): rerun "
+                                   "without --no-wait to wait for them")
     if outcome.failed:
         raise StudyIncompleteError(f"{len(outcome.failed)} case(s) failed: "
                                    f"{', '.join(outcome.failed)}; the report gives each reason "
                                    "(a rerun skips them: delete their folders to retry)")
+    if outcome.report is not None and not outcome.report.complete:
+        raise StudyIncompleteError(f"{args.out}: {outcome.report.incomplete_text}")
     return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from valve_dolfinx.exceptions import check_range
+    from valve_dolfinx.exceptions import InputFileError, check_range
     from valve_dolfinx.plan.patient import PATIENT_FILE
+    from valve_dolfinx.plan.runner import STUDY_DIR
+    from valve_dolfinx.study.grid import TARGET_COAPTATION_MAX_MM
+    from valve_dolfinx.study.store import CASES_DIR
 
     target = args.target_coaptation
     if (args.dir / PATIENT_FILE).is_file():
         return _report_plan(args)
     if target is not None:
-        check_range("--target-coaptation", target, 0.0, 20.0, low_open=True, unit="mm")
+        check_range("--target-coaptation", target, 0.0, TARGET_COAPTATION_MAX_MM,
+                    low_open=True, unit="mm")
+    if (args.dir / STUDY_DIR).is_dir() and not (args.dir / CASES_DIR).is_dir():
+        raise InputFileError(f"{args.dir} holds a plan's {STUDY_DIR}/ but no {PATIENT_FILE}: a "
+                             f"plan folder is reported from its {PATIENT_FILE} (rerun "
+                             f"`valve-dolfinx plan PATIENT.toml --out {args.dir}`), or give the "
+                             f"study folder itself ({args.dir / STUDY_DIR})")
     from valve_dolfinx.study.report import build_report
 
     report = build_report(args.dir, target_mm=target)
@@ -406,11 +424,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
     print(report.text)
     print(f"report: {args.dir / 'report.md'}")
     if not report.complete:
-        held = sum(len(names) for names in report.unfinished.values())
         raise StudyIncompleteError(
-            f"{args.dir}: the study is incomplete ({held} case(s) without a result; "
-            "report.md lists them and why)" if report.rows else
-            f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out {args.dir}`")
+            f"{args.dir}: {report.incomplete_text} report.md lists them and why" if report.rows
+            else f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out "
+            f"{args.dir}`")
     return 0
 
 
@@ -448,6 +465,9 @@ def _add_grid_args(p: argparse.ArgumentParser) -> None:
                    help="wall-clock limit of each case (default: the case default)")
     p.add_argument("--no-progress", action="store_true",
                    help="plain log lines, no progress bar (batch jobs)")
+    p.add_argument("--no-wait", action="store_true",
+                   help="do not wait for the cases another process is computing in --out: "
+                   "end with status 9 naming them, writing no answer (default: wait)")
 
 
 def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
@@ -488,6 +508,7 @@ _PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root
                   "widths": "graft_widths_pct", "heights": "graft_heights_pct",
                   "target_coaptation": "target_coaptation_mm",
                   "graft_fibre_angle": "graft_fibre_angle_deg", "paths": "paths",
+                  "mesh_size": "mesh_size_mm", "wall_time_limit": "wall_time_limit_s",
                   "label": "label"}
 
 
@@ -508,7 +529,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
     templates = [GraftSize.parse(text) for text in args.template]
-    plan_study_settings(patient, args.mesh_size, args.wall_time_limit)
+    plan_study_settings(patient)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.plan.runner import run_plan
 
@@ -517,9 +538,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     logging.getLogger("valve_dolfinx.plan").setLevel(
         logging.getLogger("valve_dolfinx.study").getEffectiveLevel())
     with _case_progress(comm, not args.no_progress) as progress:
-        outcome = run_plan(patient, args.out, comm, mesh_size_mm=args.mesh_size,
-                           wall_time_limit_s=args.wall_time_limit, templates=templates,
-                           force=args.force, progress=progress)
+        outcome = run_plan(patient, args.out, comm, templates=templates, force=args.force,
+                           progress=progress, wait=not args.no_wait)
     if comm.rank == 0:
         _print_plan(outcome)
     return 0
@@ -555,7 +575,8 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--template", action="append", default=[], metavar="W/H",
                    help="also draw the template of this graft, e.g. 21/27 (repeatable)")
     p.add_argument("--force", action="store_true",
-                   help="replace the plan of other inputs in --out")
+                   help="replace the plan of other inputs or settings in --out: its answer, "
+                   "templates and study report are removed before anything is computed")
 
 
 #: seconds an MPI rank that fails waits, after writing its error line, before it aborts
@@ -569,10 +590,11 @@ _EXIT_STATUS = """exit status:
   3    run: the case ran but did not converge (results written with converged: false)
   4    an input file is missing, unreadable or not what it should be
   5    a solver failed, or raised in one of its callbacks: no result written
-  6    --out holds another case's results (nothing computed; run --force overwrites)
+  6    --out holds another case's results or plan (nothing computed; --force overwrites)
   7    --out, or a folder above it, is a file (nothing computed)
-  8    --out cannot be created or written (nothing computed)
-  9    sweep, report: a case failed, is damaged or has not run (report.md says why)
+  8    --out (or report's DIR) cannot be created or written (nothing computed)
+  9    sweep, nomogram, plan, report: a case failed, is damaged, stale, not run or in
+       progress in another process: no answer written (report.md says which and why)
   130  interrupted (SIGINT, Ctrl-C): nothing unfinished recorded; rerun to continue
   143  terminated (SIGTERM): the same
 Under mpirun, an error on any rank ends every rank with that status."""

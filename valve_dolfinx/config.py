@@ -59,6 +59,7 @@ __all__ = [
     "config_toml",
     "write_config",
     "settings_hash",
+    "ANALYSIS_VERSION",
     "wall_clock_limits",
     "canonical_hash",
 ]
@@ -85,6 +86,12 @@ CONFIG_FILE = "config.toml"
 STUDY_TABLE = "study"
 #: settings that bound the run's wall-clock time, not its result (left out of settings_hash)
 _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
+
+#: version of what a case's result holds and how it is judged (its analysis, competence
+#: included); part of every settings hash, so that a case analysed under an earlier rule is
+#: another identity: a rerun recomputes it and a report counts it as stale.  Raise it when
+#: the analysis of a loaded state changes what a result says.
+ANALYSIS_VERSION = 2
 
 #: settings that only a graft uses (dotted keys; a key that names a table covers all of it):
 #: the normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`),
@@ -358,11 +365,14 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = (),
 def read_config_file(path: str | Path) -> dict:
     """The TOML file at ``path`` as a dict (errors name the file)."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a configuration file (--config): give "
+                             "the TOML file; `valve-dolfinx config > case.toml` writes one")
     if not path.is_file():
         raise InputFileError(f"{path}: no such configuration file (--config); "
                              "`valve-dolfinx config > case.toml` writes one to start from")
-    try:
-        return tomllib.loads(path.read_text())
+    try:  # utf-8-sig: a byte-order mark, as some editors write, is not part of the TOML
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigurationError(f"{path} is not valid TOML ({err})") from None
 
@@ -620,8 +630,8 @@ def settings_hash(config: Mapping[str, Any]) -> str:
     """SHA-256 of the settings that determine a result, from the :meth:`CaseConfig.to_dict`
     layout (other keys, such as ``result.json``'s ``root_state``, are ignored).
 
-    Every physical and numerical setting enters it; the wall-clock limits do not (they
-    decide whether a run finishes, not where it lands).  Integers count as the equal
+    Every physical and numerical setting enters it, and :data:`ANALYSIS_VERSION`; the
+    wall-clock limits do not (they decide whether a run finishes, not where it lands).  Integers count as the equal
     real numbers.  Output paths, figures and
     logging are not part of a :class:`CaseConfig`.
     """
@@ -633,6 +643,7 @@ def settings_hash(config: Mapping[str, Any]) -> str:
         if isinstance(value, Mapping):
             value = {k: _as_float(v) for k, v in value.items() if k not in _WALL_CLOCK_KEYS}
         data[key] = _as_float(value)
+    data["analysis_version"] = ANALYSIS_VERSION
     return canonical_hash(data)
 
 

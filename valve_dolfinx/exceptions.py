@@ -43,7 +43,7 @@ class ExitCode(IntEnum):
     OUTPUT_CONFLICT = 6  #: the output folder holds another case's results; nothing computed
     OUTPUT_NOT_FOLDER = 7  #: the output path, or a folder above it, is a file
     OUTPUT_NOT_WRITABLE = 8  #: the output folder cannot be created or written
-    STUDY_INCOMPLETE = 9  #: a study's case is missing, failed or damaged (the report lists it)
+    STUDY_INCOMPLETE = 9  #: a study's case failed, is damaged, stale, not run or running: no answer
     INTERRUPTED = 130  #: Ctrl-C (SIGINT): 128 + 2; nothing unfinished is recorded
     TERMINATED = 143  #: SIGTERM (kill, a batch system's time limit): 128 + 15
 
@@ -107,7 +107,8 @@ class OutputNotWritableError(ValveError, PermissionError):
 
 
 class StudyIncompleteError(ValveError):
-    """A study has cases that are missing, failed or damaged; its report lists them."""
+    """A study has cases without a result that counts (failed, damaged, stale, not run, in
+    progress in another process): it has no answer, and its report lists them."""
 
     exit_code = ExitCode.STUDY_INCOMPLETE
 

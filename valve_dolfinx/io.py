@@ -64,10 +64,20 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     old file or the new one.  The file is flushed to disk before the rename (and
     the folder after it), and gets the mode a plain ``open`` would give it under
     the user's umask (0644 under umask 022), not the temporary file's 0600.
+
+    Raises
+    ------
+    OutputNotWritableError
+        If the folder does not let the file be created, naming the folder.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    except PermissionError as err:
+        raise OutputNotWritableError(
+            f"{path.parent} cannot be written ({err.strerror or err}): {path.name} was not "
+            "written; fix the folder's permissions, or copy it somewhere writable") from None
     os.close(fd)
     try:
         write(Path(tmp))

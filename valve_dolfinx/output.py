@@ -142,6 +142,8 @@ def _write_figures(out: Path, state, result) -> None:
     valve, positions = state.shown()
     try:
         write_case_figures(out, positions, valve, state.coaptation, result,
+                           intersections=None if state.intersections is None
+                           else state.intersections.points,
                            mirrored=state.display is not None)
     except Exception as err:  # a figure must never cost the computed result
         log.error("could not draw the figures of %s: %s", out, err)

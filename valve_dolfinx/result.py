@@ -11,6 +11,7 @@ that show it.  Nothing here imports DOLFINx.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import zipfile
@@ -30,9 +31,9 @@ from valve_dolfinx.config import (
 )
 from valve_dolfinx.exceptions import InputFileError, MeshError, ValveError
 
-__all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "CaseResult", "CaseCheck",
-           "LoadedCase", "check_case", "competence", "competence_text", "leaflets_cross",
-           "load_case", "margin_text", "shortfall_digits"]
+__all__ = ["RESULT_FILE", "POSITIONS_FILE", "RECORD_FILE", "INTERSECTION_REASON", "CaseResult",
+           "CaseCheck", "LoadedCase", "check_case", "competence", "competence_text",
+           "file_digest", "leaflets_intersect", "load_case", "margin_text", "shortfall_digits"]
 
 #: a case folder's result (written last: its presence means the case finished)
 RESULT_FILE = "result.json"
@@ -48,16 +49,22 @@ def _area(value: float) -> str:
     return f"{value:.2f}" if value >= 0.005 else f"{value:.1g}"
 
 
-def competence(converged: bool, orifice_mm2: float, crossing_mm: float,
-               element_mm: float) -> tuple[bool, str]:
+#: how :func:`competence` starts the reason of an intersection
+INTERSECTION_REASON = "leaflets intersect"
+
+
+def competence(converged: bool, orifice_mm2: float, intersecting_pairs: int,
+               where: str = "") -> tuple[bool, str]:
     """Whether a closed valve is competent (SPEC §6), and if not, why.
 
     Competent: the solve converged to the equilibrium, the regurgitant orifice area is
-    0 (the leaflets seal all round) and no two leaflets pass through each other (the
-    lines along which their loaded surfaces cross are shorter than one element,
-    ``element_mm``; a crossing makes the coaptation figures meaningless).  The reason
-    lists every condition that fails, e.g. ``"leaks 0.40 mm²; leaflets cross 1.97 mm"``,
-    and is empty for a competent valve.
+    0 (the leaflets seal all round) and no leaflet passes through another or through
+    itself: no edge of the loaded surface passes through one of its triangles
+    (``intersecting_pairs``, :mod:`valve_dolfinx.analysis.intersection`).  An intersection
+    makes the coaptation figures meaningless.  The reason lists every condition that fails,
+    e.g. ``"leaks 0.40 mm²; leaflets intersect: 30 edge–triangle pairs, 0.20–1.30 mm from a
+    post (graft/left-coronary 30)"`` (``where`` says where they are), and is empty for a
+    competent valve.
     """
     reasons = []
     if not converged:
@@ -66,19 +73,24 @@ def competence(converged: bool, orifice_mm2: float, crossing_mm: float,
         reasons.append("no orifice area")
     elif orifice_mm2 > 0.0:
         reasons.append(f"leaks {_area(orifice_mm2)} mm²")
-    if leaflets_cross(crossing_mm, element_mm):
-        reasons.append(f"leaflets cross {crossing_mm:.2f} mm")
+    if intersecting_pairs > 0:
+        pairs = "1 edge–triangle pair" if intersecting_pairs == 1 else (
+            f"{intersecting_pairs} edge–triangle pairs")
+        reasons.append(f"{INTERSECTION_REASON}: {pairs}" + (f", {where}" if where else ""))
     return not reasons, "; ".join(reasons)
 
 
-def leaflets_cross(crossing_mm: float, element_mm: float) -> bool:
-    """Whether two leaflets pass through each other: their loaded surfaces cross along a
-    line at least one element long (False when either length is unknown)."""
-    return math.isfinite(crossing_mm) and crossing_mm >= element_mm
+def leaflets_intersect(result: CaseResult | Mapping) -> bool:
+    """Whether a result (a :class:`CaseResult` or ``result.json``'s dict) has leaflets
+    passing through each other or through themselves: at least one intersecting
+    edge–triangle pair, as :func:`competence` counts them (False when not checked)."""
+    data = result if isinstance(result, Mapping) else asdict(result)
+    pairs = data.get("intersecting_pairs")
+    return isinstance(pairs, int) and not isinstance(pairs, bool) and pairs > 0
 
 
 def competence_text(result: CaseResult | Mapping) -> str:
-    """``competent``, or ``not competent (leaflets cross 1.97 mm)``: the verdict of a
+    """``competent``, or ``not competent (leaks 0.40 mm²)``: the verdict of a
     result (a :class:`CaseResult` or ``result.json``'s dict) in the words of every log
     line, figure and report."""
     data = result if isinstance(result, Mapping) else asdict(result)
@@ -126,9 +138,12 @@ class CaseResult:
     root_diameter_mm: float = float("nan")
     max_penetration_mm: float = float("nan")
     max_contact_layer_overlap_mm: float = float("nan")
-    #: length of the lines along which two leaflets' loaded surfaces cross, away from the
-    #: root wall (:func:`valve_dolfinx.analysis.intersection.leaflet_intersections`)
-    leaflet_intersection_mm: float = float("nan")
+    #: edges of the loaded surface that pass through one of its triangles, between
+    #: leaflets or within one (:mod:`valve_dolfinx.analysis.intersection`; None: not checked)
+    intersecting_pairs: int | None = None
+    #: where they are: pairs per leaflets, distance from the nearest commissure post, the
+    #: pairs nearest a post (:meth:`~valve_dolfinx.analysis.intersection.Intersections.to_dict`)
+    intersections: dict = field(default_factory=dict)
     n_dofs: int = 0
     n_ranks: int = 1
     wall_time_s: float = 0.0
@@ -209,7 +224,8 @@ def check_case(folder: str | Path, config: CaseConfig | None = None, *,
     case's result is not computed again) and of the sweep (``record=True``: a study's case
     folder, with its ``case.json``).  A finished case needs every one of its files:
     ``result.json`` parses; ``case.json`` parses and agrees with it (settings, graft size,
-    convergence) and every file it lists is there with the size it was written with;
+    convergence) and every file it lists is there with the size and content it was written
+    with;
     unless the case failed, ``loaded_state.npz`` loads with the result's number of nodes
     and ``config.toml`` loads with the result's settings (a study's case: those of them
     its record lists).  Without ``config`` a whole case is ``"finished"``.
@@ -277,13 +293,26 @@ def _read_record(folder: Path, result: dict, settings: str) -> dict:
         if rec.get(key) != value:
             raise _Damaged(f"{RECORD_FILE} and {RESULT_FILE} disagree on {key} "
                            f"({rec.get(key)!r} and {value!r})")
+    digests = rec.get("sha256") or {}
     for name, size in (rec.get("files") or {}).items():
         path = folder / name
         if not path.is_file():
             raise _Damaged(f"{name} is missing")
         if path.stat().st_size != size:
             raise _Damaged(f"{name} has {path.stat().st_size} bytes, {size} were written")
+        if name in digests and file_digest(path) != digests[name]:
+            raise _Damaged(f"{name} has changed since it was written (its SHA-256 differs "
+                           f"from the one in {RECORD_FILE})")
     return rec
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's content (hex): what a study's ``case.json`` records per file."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def _check_outputs(folder: Path, result: dict, settings: str, rec: dict | None) -> None:

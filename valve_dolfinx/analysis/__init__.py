@@ -1,4 +1,5 @@
-"""Analysis of the loaded valve: coaptation region, heights, area and competence (SPEC §6)."""
+"""Analysis of the loaded valve: coaptation region, heights, area, intersections and
+competence (SPEC §6)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,11 @@ from valve_dolfinx.analysis.coaptation import (
     region_area,
     regurgitant_orifice_area,
 )
+from valve_dolfinx.analysis.intersection import (
+    Intersections,
+    find_intersections,
+    valve_intersections,
+)
 from valve_dolfinx.analysis.orifice import orifice_leak_map, rasterise_footprint
 from valve_dolfinx.analysis.sealing import through_flow
 
@@ -23,10 +29,12 @@ __all__ = [
     "DEFAULT_PIXEL_MM",
     "DEFAULT_THRESHOLD_MM",
     "CoaptationResult",
+    "Intersections",
     "LeafletCoaptation",
     "analyse_coaptation",
     "coaptation_height_profile",
     "distance_to_surface",
+    "find_intersections",
     "fraction_below",
     "leaflet_pair_gaps",
     "orifice_leak_map",
@@ -35,4 +43,5 @@ __all__ = [
     "through_flow",
     "region_area",
     "regurgitant_orifice_area",
+    "valve_intersections",
 ]

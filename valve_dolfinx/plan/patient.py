@@ -7,7 +7,10 @@ A plan takes what the surgeon measures before cutting the graft:
   flat (optional: the SPEC §1 leaflet by default);
 * optionally the diastolic pressure, the graft grid, the target coaptation height, the
   graft's fibre angle, the number of numerical paths each graft is solved along and a
-  label printed on the template and the report.
+  label printed on the template and the report;
+* the numerics the plan's cases run with, when not the defaults: the mesh size and the
+  wall-clock limit of each case.  ``patient.toml`` keeps them with the rest, so that
+  ``valve-dolfinx plan DIR/patient.toml --out DIR`` runs the plan it records.
 
 Every length carries its unit in its key (``root_diameter_mm``), in ``PATIENT.toml`` as
 in :class:`PatientInput`; the same values come from ``valve-dolfinx plan`` flags
@@ -30,7 +33,12 @@ from typing import Any
 from valve_dolfinx.exceptions import ConfigurationError, InputFileError, ParameterError, check_range
 from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.io import atomic_write
-from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, parse_percentages
+from valve_dolfinx.study.grid import (
+    STUDY_HEIGHTS_PCT,
+    STUDY_WIDTHS_PCT,
+    TARGET_COAPTATION_MAX_MM,
+    parse_percentages,
+)
 from valve_dolfinx.study.paths import study_paths
 
 __all__ = [
@@ -94,17 +102,27 @@ FIELDS: dict[str, Field] = {
                                "cent of the measured height"),
     "target_coaptation_mm": Field(
         "--target-coaptation", "mm", "minimum coaptation height a graft must reach (unset: "
-        "the normal valve's at the same root)", 0.0, 10.0, low_open=True,
+        "the normal valve's at the same root)", 0.0, TARGET_COAPTATION_MAX_MM, low_open=True,
         why="a normal valve coapts 3-4 mm at its centre"),
     "graft_fibre_angle_deg": Field(
         "--graft-fibre-angle", "deg", "fibre direction of the graft from its free edge",
         -90.0, 90.0, why="0 lays the fibres parallel to the free edge"),
     "paths": Field("--paths", "", "numerical paths every graft is solved along (the first N "
                    "of the study's; the recommendation takes the worst)"),
+    "mesh_size_mm": Field(
+        "--mesh-size", "mm", "target triangle edge length of every case (unset: the case "
+        "default, 0.8 mm)", 0.05, 2.5,
+        why="0.8 mm is the default, 1.6-2.5 mm a quick coarse plan"),
+    "wall_time_limit_s": Field(
+        "--wall-time-limit", "s", "wall-clock limit of each case (unset: the solver's)", 0.0,
+        30 * 24 * 3600.0, low_open=True, why="the wall-clock limit of each case in seconds"),
 }
 #: keys whose value is a length, pressure or angle
 _NUMBERS = ("root_diameter_mm", "root_uncertainty_mm", "leaflet_free_edge_mm",
-            "leaflet_height_mm", "pressure_mmhg", "target_coaptation_mm", "graft_fibre_angle_deg")
+            "leaflet_height_mm", "pressure_mmhg", "target_coaptation_mm", "graft_fibre_angle_deg",
+            "mesh_size_mm", "wall_time_limit_s")
+#: numbers that may be unset (None: the default)
+_OPTIONAL = ("target_coaptation_mm", "mesh_size_mm", "wall_time_limit_s")
 _LEAFLET = ("leaflet_free_edge_mm", "leaflet_height_mm")
 _LABEL_LENGTH = 60
 
@@ -129,13 +147,15 @@ class PatientInput:
     target_coaptation_mm: float | None = None
     graft_fibre_angle_deg: float = 0.0
     paths: int = 2
+    mesh_size_mm: float | None = None
+    wall_time_limit_s: float | None = None
     label: str = "patient"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise in place once
         for key in _NUMBERS:
             value = getattr(self, key)
-            if value is None and key == "target_coaptation_mm":
+            if value is None and key in _OPTIONAL:
                 continue
             set_(self, key, _checked_number(key, value))
         for key, what in (("graft_widths_pct", "width"), ("graft_heights_pct", "height")):
@@ -235,12 +255,15 @@ def read_patient(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     """The patient file at ``path`` (TOML, keys of :data:`FIELDS`), with ``overrides``
     (e.g. the command line's flags) set over it."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a patient file: give the TOML file "
+                             f"(a plan folder's is {path / PATIENT_FILE})")
     if not path.is_file():
         raise InputFileError(f"{path}: no such patient file; write one with the keys of "
                              "docs/plan.md (root_diameter_mm = 22.0, ...), or give the "
                              "values as flags (--root-diameter D ...)")
-    try:
-        data = tomllib.loads(path.read_text())
+    try:  # utf-8-sig: a byte-order mark, as some editors write, is not part of the TOML
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigurationError(f"{path} is not valid TOML ({err})") from None
     data.update(overrides or {})

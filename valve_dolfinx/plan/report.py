@@ -224,7 +224,8 @@ def _picture(fig, box: tuple[float, float, float, float], path: Path | None, cap
     import matplotlib.image
 
     x, y, w, h = box
-    fig.text(x / _A4[0], (y + h + 1.0) / _A4[1], caption, fontsize=8, fontweight="bold")
+    fig.text(x / _A4[0], (y + h + 1.0) / _A4[1], caption, fontsize=8, fontweight="bold",
+             parse_math=False)
     ax = _axes_mm(fig, x, y, w, h)
     ax.set_axis_off()
     if path is not None and Path(path).is_file():
@@ -233,7 +234,7 @@ def _picture(fig, box: tuple[float, float, float, float], path: Path | None, cap
         return
     ax.add_patch(_rounded(0.0, 0.0, 1.0, 1.0, "#eeeeee", "#bbbbbb", ax.transAxes))
     ax.text(0.5, 0.5, textwrap.fill(missing, 38), ha="center", va="center", fontsize=8,
-            color="#555555", transform=ax.transAxes)
+            color="#555555", transform=ax.transAxes, parse_math=False)
 
 
 def _rounded(x, y, w, h, face, edge, transform):
@@ -245,8 +246,10 @@ def _rounded(x, y, w, h, face, edge, transform):
 
 def _text(fig, x: float, y: float, text: str, size: float = 9.0, spacing: float = 1.3,
           **kw) -> float:
-    """Text whose first line's top is at ``y`` (mm); returns the y below its last line."""
-    fig.text(x / _A4[0], y / _A4[1], text, fontsize=size, va="top", linespacing=spacing, **kw)
+    """Text whose first line's top is at ``y`` (mm), as written (a ``$`` is a dollar sign, not
+    math); returns the y below its last line."""
+    fig.text(x / _A4[0], y / _A4[1], text, fontsize=size, va="top", linespacing=spacing,
+             parse_math=False, **kw)
     return y - (text.count("\n") + 1) * size * spacing * 25.4 / 72.0
 
 

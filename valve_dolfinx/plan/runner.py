@@ -39,7 +39,12 @@ from typing import TYPE_CHECKING
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import config_from_dict, set_dotted
-from valve_dolfinx.exceptions import InputFileError, OutputConflictError, ParameterError
+from valve_dolfinx.exceptions import (
+    InputFileError,
+    OutputConflictError,
+    ParameterError,
+    StudyIncompleteError,
+)
 from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
@@ -112,7 +117,9 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
                         wall_time_limit_s: float | None = None) -> StudySettings:
     """The study settings of a plan, every case setting validated (no DOLFINx imported).
 
-    The case settings are the patient's valve (:meth:`PatientInput.case_settings`); the
+    The mesh size and wall-clock limit are the patient's (``mesh_size_mm``,
+    ``wall_time_limit_s``) unless given here.  The case settings are the patient's valve
+    (:meth:`PatientInput.case_settings`); the
     loaded root diameter is an uncertainty axis over the plan's diameters that the native
     leaflets can span (:func:`reachable_roots`), and every graft is solved along the
     patient's number of numerical paths.  (A plan whose measured root they cannot span
@@ -124,6 +131,9 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
         A mesh size the measured leaflet cannot take (its commissures must carry two
         edges), a grid value or a setting out of range -- before any computation.
     """
+    mesh_size_mm = patient.mesh_size_mm if mesh_size_mm is None else mesh_size_mm
+    if wall_time_limit_s is None:
+        wall_time_limit_s = patient.wall_time_limit_s
     data = patient.case_settings()
     if mesh_size_mm is not None:
         set_dotted(data, "geometry.mesh_size", mesh_size_mm)
@@ -140,7 +150,8 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
 # --- the plan's study ----------------------------------------------------------------------
 def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
                    comm: MPI.Comm, *, case_function: Callable | None = None,
-                   progress: Callable[[dict], None] | None = None) -> PlanStudy | None:
+                   progress: Callable[[dict], None] | None = None,
+                   wait: bool = True) -> PlanStudy | None:
     """Solve the plan's cases into ``out`` and turn them into the plan's answer.
 
     This is the single place where the plan decides what to compute; everything around
@@ -163,17 +174,28 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
         The study folder (created; resumable like a sweep's).
     comm
         The ranks that share the study (collective).
-    case_function, progress
-        Passed to ``run_study`` (a stand-in case function in tests; the progress bar).
+    case_function, progress, wait
+        Passed to ``run_study`` (a stand-in case function in tests; the progress bar;
+        whether to wait for the cases another process computes).
 
     Returns
     -------
     PlanStudy or None
         The answer, the pictures and what was run on rank 0; None on the other ranks.
+
+    Raises
+    ------
+    StudyIncompleteError
+        On every rank, when a case has no result that counts (it failed, or another
+        process computes it and ``wait`` is false): there is no answer.
     """
     from valve_dolfinx.study.runner import run_study
 
-    outcome = run_study(settings, out, comm, case_function=case_function, progress=progress)
+    outcome = run_study(settings, out, comm, case_function=case_function, progress=progress,
+                        wait=wait)
+    why = comm.bcast(outcome.report.incomplete_text if comm.rank == 0 else None, root=0)
+    if why:
+        raise StudyIncompleteError(f"{out}: {why}")
     if comm.rank != 0:
         return None
     return plan_study_answer(patient, outcome.report)
@@ -250,6 +272,8 @@ def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[f
                    for c in rec.cells)
     source = ("the normal valve's at the same root" if rec.target_source.startswith(
         NORMAL_TARGET) else "given in the plan's inputs")
+    for member, why in rec.incompetent_targets.items():
+        source += f"; caution, the normal valve is {why} at {words[member]}"
     common = dict(target_mm=rec.target_mm, target_source=source,
                   members=tuple(words[m] for m in rec.members),
                   targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
@@ -265,9 +289,19 @@ def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[f
 
 
 # --- the plan ----------------------------------------------------------------------------
-def _check_folder(out: Path, patient: PatientInput, force: bool) -> None:
-    """Refuse a folder that cannot hold the plan (``check_output_folder``), or that holds
-    another patient's plan (unless ``force``)."""
+#: the files of a plan that state its answer (glob patterns): removed by ``--force`` before
+#: anything is computed, and when the plan's study turns out incomplete
+ANSWER_FILES = ("plan.md", "plan.pdf", SUMMARY_FILE)
+#: the templates a plan draws (``--force`` removes them with the answer: they are cut
+#: from the old inputs' leaflet)
+TEMPLATE_FILES = ("template_*.svg", "template_*.pdf", "template_*.png")
+
+
+def _check_folder(out: Path, patient: PatientInput, settings: StudySettings,
+                  force: bool) -> None:
+    """Refuse a folder that cannot hold the plan (``check_output_folder``), that holds
+    another patient's plan, or whose study was computed with other settings (unless
+    ``force``)."""
     check_output_folder(out)
     saved = out / PATIENT_FILE
     if force or not saved.is_file():
@@ -279,13 +313,31 @@ def _check_folder(out: Path, patient: PatientInput, force: bool) -> None:
     if not same:
         raise OutputConflictError(f"--out {out} holds the plan of other inputs ({saved} "
                                   "differs); give another folder, or --force to replace it")
+    from valve_dolfinx.study.report import read_settings
+
+    try:
+        ran = read_settings(out / STUDY_DIR)
+    except (ValueError, OSError):  # an unreadable study.json: the study is rewritten
+        ran = None
+    if ran is not None and ran != settings:
+        raise OutputConflictError(
+            f"--out {out}: its study was computed with other settings than these inputs "
+            f"give ({out / STUDY_DIR / SETTINGS_FILE}: mesh {ran.mesh_size_mm or 'default'}, "
+            f"wall-clock limit {ran.wall_time_limit_s or 'default'}); rerun it with "
+            f"`valve-dolfinx plan {saved} --out {out}`, or give --force to recompute it")
+
+
+def _remove_answer(out: Path, patterns: Sequence[str]) -> None:
+    for pattern in patterns:
+        for path in out.glob(pattern):
+            path.unlink(missing_ok=True)
 
 
 def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = None, *,
              mesh_size_mm: float | None = None, wall_time_limit_s: float | None = None,
              templates: Sequence[GraftSize] = (), force: bool = False,
              case_function: Callable | None = None,
-             progress: Callable[[dict], None] | None = None) -> PlanOutcome:
+             progress: Callable[[dict], None] | None = None, wait: bool = True) -> PlanOutcome:
     """Plan one patient's repair into the folder ``out`` (see the module docstring).
 
     Parameters
@@ -297,28 +349,41 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
     comm
         The ranks that share the study (default ``COMM_WORLD``).
     mesh_size_mm, wall_time_limit_s
-        The cases' mesh and wall-clock limit (default: the case defaults).
+        The cases' mesh and wall-clock limit, set over the patient's (default: the
+        patient's, else the case defaults); ``patient.toml`` records them.
     templates
         Grafts to draw besides the recommended (or closest) one (and those whose templates
         are in ``out`` already, which are redrawn).
     force
-        Replace the plan of other inputs in ``out``.
-    case_function, progress
+        Replace the plan of other inputs, or of other settings, in ``out``: the previous
+        answer (plan, summary, templates, the study's report) is removed before anything
+        is computed, and the cases of other settings are computed again.
+    case_function, progress, wait
         Passed to the study (:func:`run_plan_study`).
 
     Raises
     ------
     ParameterError, OutputConflictError, OutputNotFolderError, OutputNotWritableError
         Before any computation: a setting out of range, an unusable ``out``.
+    StudyIncompleteError
+        When a case of the study has no result (it failed, or another process computes it
+        and ``wait`` is false): no answer is written, and that of an earlier run removed.
     """
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(out)
     t0 = time.perf_counter()
-    settings = plan_study_settings(patient, mesh_size_mm, wall_time_limit_s)
+    numerics = {"mesh_size_mm": mesh_size_mm, "wall_time_limit_s": wall_time_limit_s}
+    patient = replace(patient, **{k: v for k, v in numerics.items() if v is not None})
+    settings = plan_study_settings(patient)
     error = None
     if comm.rank == 0:
         try:
-            _check_folder(out, patient, force)
+            _check_folder(out, patient, settings, force)
+            if force:
+                from valve_dolfinx.study.report import remove_report
+
+                _remove_answer(out, (*ANSWER_FILES, *TEMPLATE_FILES))
+                remove_report(out / STUDY_DIR)
             write_patient(out / PATIENT_FILE, patient)
         except (OutputConflictError, OSError) as err:
             error = err
@@ -329,8 +394,13 @@ def run_plan(patient: PatientInput, out: str | Path, comm: MPI.Comm | None = Non
                             patient.pressure_mmhg)
     study = None
     if reach.can_seal:
-        study = run_plan_study(patient, settings, out / STUDY_DIR, comm,
-                               case_function=case_function, progress=progress)
+        try:
+            study = run_plan_study(patient, settings, out / STUDY_DIR, comm,
+                                   case_function=case_function, progress=progress, wait=wait)
+        except StudyIncompleteError:
+            if comm.rank == 0:
+                _remove_answer(out, ANSWER_FILES)
+            raise
     elif comm.rank == 0:
         log.warning("%s", reach.sentence())
     outcome = None
@@ -353,6 +423,10 @@ def rebuild_plan(out: str | Path) -> PlanOutcome:
     InputFileError
         ``out`` holds no ``patient.toml``, or its study folder is missing or was run with
         other settings than ``patient.toml`` gives (rerun ``valve-dolfinx plan``).
+    StudyIncompleteError
+        A case of the study has no result that counts (not run, in progress, stale,
+        damaged or failed: :func:`~valve_dolfinx.study.report.build_report`): the plan's
+        answer is removed, not written.
     """
     from valve_dolfinx.study.report import build_report, read_settings
 
@@ -369,11 +443,19 @@ def rebuild_plan(out: str | Path) -> PlanOutcome:
         if saved is None:
             raise InputFileError(f"{folder}: no study with its {SETTINGS_FILE} and "
                                  f"{CASES_DIR}/ folder; {rerun}")
-        expected = plan_study_settings(patient, saved.mesh_size_mm, saved.wall_time_limit_s)
+        expected = plan_study_settings(patient)
+        if patient.mesh_size_mm is None and patient.wall_time_limit_s is None:
+            # a patient.toml written before it recorded the numerics: the study's
+            expected = plan_study_settings(patient, saved.mesh_size_mm, saved.wall_time_limit_s)
         if saved != expected:
             raise InputFileError(f"{folder / SETTINGS_FILE}: the study was run with other "
                                  f"settings than {out / PATIENT_FILE} gives; {rerun}")
-        study = plan_study_answer(patient, build_report(folder, saved))
+        report = build_report(folder, saved)
+        if not report.complete:
+            _remove_answer(out, ANSWER_FILES)
+            raise StudyIncompleteError(f"{folder}: {report.incomplete_text} No plan is written: "
+                                       f"{rerun}")
+        study = plan_study_answer(patient, report)
     return _write_plan(out, patient, reach, study, ())
 
 

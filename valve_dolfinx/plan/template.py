@@ -394,7 +394,8 @@ def _figure(page: Drawing):
     for t in page.texts:
         ax.text(t.x, t.y, t.text, fontsize=t.size_pt, ha={"start": "left", "middle": "center",
                                                           "end": "right"}[t.anchor],
-                va="baseline", color=t.colour, fontweight="bold" if t.bold else "normal")
+                va="baseline", color=t.colour, fontweight="bold" if t.bold else "normal",
+                parse_math=False)  # a label is plain text: a $ is a dollar sign
     return fig
 
 

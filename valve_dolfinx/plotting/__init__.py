@@ -54,6 +54,7 @@ from valve_dolfinx.plotting.study import (
 )
 from valve_dolfinx.plotting.style import (
     GRAFT_COLOUR,
+    INTERSECTION_COLOUR,
     LEAFLET_COLOURS,
     ORIFICE_COLOUR,
     key_numbers,
@@ -64,6 +65,7 @@ from valve_dolfinx.plotting.style import (
 __all__ = [
     "CASE_FIGURES",
     "GRAFT_COLOUR",
+    "INTERSECTION_COLOUR",
     "LEAFLET_COLOURS",
     "ORIFICE_COLOUR",
     "PANEL_IMAGES",

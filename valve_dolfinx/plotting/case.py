@@ -58,6 +58,7 @@ def case_label(result) -> str:
 
 
 def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation, result, *,
+                       intersections: np.ndarray | None = None,
                        mirrored: bool = False) -> list[Path]:
     """Draw the figures of :data:`CASE_FIGURES` of a closed valve into ``out``.
 
@@ -65,7 +66,9 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     its :class:`~valve_dolfinx.analysis.coaptation.CoaptationResult` (the
     orifice raster in ``coaptation.orifice``), ``result`` the case result
     (``CaseResult`` or its dict) whose key numbers go into the titles;
-    ``mirrored`` says the valve is one solved leaflet and its mirror images.
+    ``intersections`` ``(K, 3)`` the points where an edge passes through a triangle
+    (:attr:`~valve_dolfinx.analysis.intersection.Intersections.points`), marked in the
+    3-D views; ``mirrored`` says the valve is one solved leaflet and its mirror images.
     The coaptation figures need at least two leaflets.  Returns the files
     written.
     """
@@ -74,7 +77,7 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
     orifice = getattr(coaptation, "orifice", None) if coaptation is not None else None
     coapted = coaptation is not None and len(valve.leaflets) > 1
     written = _write_views(out, positions, valve, coaptation if coapted else None, result,
-                           name, orifice)
+                           name, orifice, intersections)
     plot_cut_planes(positions, valve, out / "cut_planes.png", title=name, result=result)
     plot_cross_sections(positions, valve, out / "cross_sections.png", title=name,
                         result=result, orifice=orifice)
@@ -94,7 +97,7 @@ def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation
 
 
 def _write_views(out: Path, positions: np.ndarray, valve, coaptation, result, name: str,
-                 orifice: dict | None) -> list[Path]:
+                 orifice: dict | None, intersections: np.ndarray | None) -> list[Path]:
     """The 3-D figures of a case, in one off-screen window closed before the 2-D ones are
     drawn; the gap view only if ``coaptation`` is given."""
     numbers = key_numbers(result)
@@ -107,7 +110,7 @@ def _write_views(out: Path, positions: np.ndarray, valve, coaptation, result, na
                                   "from the ventricle")):
             plot_valve_3d(positions, valve, out / file, view=view,
                           title=f"{name}: {closed}, {what}\n{numbers}", orifice=orifice,
-                          views=views)
+                          intersections=intersections, views=views)
             written.append(out / file)
         if coaptation is not None:
             plot_gap_3d(positions, valve, coaptation, out / "coaptation_gap.png",
@@ -119,15 +122,17 @@ def _write_views(out: Path, positions: np.ndarray, valve, coaptation, result, na
 
 def draw_closed_views(case_folder: str | Path, out: str | Path) -> tuple[Path, Path]:
     """The closed valve of a finished case folder seen from the aorta and from the
-    ventricle (with its regurgitant orifice), drawn from its loaded state into ``out``
-    as ``<case>_aortic.png`` and ``<case>_ventricular.png``: for a case that drew no
-    figures of its own (a study draws only its panel cases')."""
+    ventricle (with its regurgitant orifice and its intersections), drawn from its loaded
+    state into ``out`` as ``<case>_aortic.png`` and ``<case>_ventricular.png``: for a case
+    that drew no figures of its own (a study draws only its panel cases')."""
     from valve_dolfinx.analysis import analyse_coaptation
+    from valve_dolfinx.analysis.intersection import valve_intersections
     from valve_dolfinx.result import load_case
 
     case = load_case(case_folder)
     coaptation = analyse_coaptation(case.positions, case.valve,
                                     threshold_mm=case.config.coaptation_threshold_mm)
+    intersections = valve_intersections(case.positions, case.valve).points
     name = case_label(case.result)
     numbers = key_numbers(case.result)
     written = []
@@ -136,6 +141,7 @@ def draw_closed_views(case_folder: str | Path, out: str | Path) -> tuple[Path, P
             path = Path(out) / f"{Path(case_folder).name}_{view}.png"
             plot_valve_3d(case.positions, case.valve, path, view=view,
                           title=f"{name}: {_closed(case.result)}, {what}\n{numbers}",
-                          orifice=coaptation.orifice, views=views)
+                          orifice=coaptation.orifice, intersections=intersections,
+                          views=views)
             written.append(path)
     return written[0], written[1]

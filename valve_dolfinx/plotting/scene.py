@@ -7,7 +7,8 @@ nearer the side: the open valve's shape), ``"aortic"``
 camera uses a parallel projection, so the scale bar (5 mm) holds everywhere in
 the picture.  Each leaflet is drawn in its colour and labelled (LC, RC, NC,
 graft); the regurgitant orifice, when given and not empty, is drawn in front of
-the leaflets in the axial views.
+the leaflets in the axial views; where an edge of the loaded surface passes through one
+of its triangles (:mod:`valve_dolfinx.analysis.intersection`), a yellow ball.
 
 The figure functions return the rendered picture as an ``(h, w, 3)`` array
 (show it with ``PIL.Image.fromarray`` or ``matplotlib``'s ``imshow``) and write
@@ -30,6 +31,7 @@ import numpy as np
 
 from valve_dolfinx.plotting.orifice import orifice_outline, orifice_rectangles
 from valve_dolfinx.plotting.style import (
+    INTERSECTION_COLOUR,
     ORIFICE_COLOUR,
     SEQUENTIAL_CMAP,
     leaflet_colour,
@@ -52,6 +54,9 @@ VIEW_TITLES = {"iso": "oblique view from the aortic side", "side": "oblique view
                "aortic": "seen from the aorta",
                "ventricular": "seen from the ventricle"}
 SCALE_BAR_MM = 5.0
+#: radius of the ball that marks an intersecting edge–triangle pair (mm): larger than the
+#: contact gap, so that it shows on both sides of the leaflets it pierces
+INTERSECTION_MARK_MM = 0.3
 #: colour range of the gap view (mm): gaps wider than this are drawn in the top colour
 GAP_RANGE_MM = (0.0, 3.0)
 
@@ -137,6 +142,17 @@ def _add_labels(plotter, positions: np.ndarray, valve, view: str) -> None:
                                  margin=5, show_points=False, always_visible=True)
 
 
+def _add_intersections(plotter, points: np.ndarray) -> None:
+    """A ball at each point where an edge passes through a triangle, and what they are."""
+    pv = _pv()
+    balls = pv.PolyData(points).glyph(geom=pv.Sphere(radius=INTERSECTION_MARK_MM),
+                                      orient=False, scale=False)
+    plotter.add_mesh(balls, color=INTERSECTION_COLOUR, ambient=0.4)
+    n = len(points)
+    plotter.add_text(f"yellow: {n} intersecting edge–triangle pair{'s' if n > 1 else ''}",
+                     position="lower_left", font_size=10, color="black")
+
+
 def _place_camera(plotter, view: str, zoom: float) -> None:
     vector, up = VIEWS[view]
     plotter.enable_parallel_projection()
@@ -148,7 +164,8 @@ def _place_camera(plotter, view: str, zoom: float) -> None:
 def valve_plotter(positions: np.ndarray, valve, *, view: str = "iso", title: str = "",
                   scalars: np.ndarray | None = None, scalar_title: str = "",
                   clim: tuple[float, float] | None = None, contour: float | None = None,
-                  orifice: dict | None = None, labels: bool = True, scale_bar: bool = True,
+                  orifice: dict | None = None, intersections: np.ndarray | None = None,
+                  labels: bool = True, scale_bar: bool = True,
                   scalar_bar: bool = True,
                   window: tuple[int, int] = (1000, 850), off_screen: bool = True,
                   plotter=None, zoom: float = 1.25):
@@ -158,8 +175,9 @@ def valve_plotter(positions: np.ndarray, valve, *, view: str = "iso", title: str
     colours, with a colour bar titled ``scalar_title`` (unless ``scalar_bar``
     is false) and, if ``contour`` is given, a black line where the field
     equals it.  ``orifice`` is the orifice
-    raster's diagnostics.  Pass ``plotter`` to draw into a subplot of an
-    existing one.
+    raster's diagnostics; ``intersections`` ``(K, 3)`` the points where an edge passes
+    through a triangle, each marked with a ball.  Pass ``plotter`` to draw into a subplot
+    of an existing one.
     """
     if view not in VIEWS:
         raise ValueError(f"view = {view!r}; use one of {', '.join(VIEWS)}")
@@ -202,6 +220,8 @@ def valve_plotter(positions: np.ndarray, valve, *, view: str = "iso", title: str
             plotter.add_text(f"vermillion: regurgitant orifice {quads.area:.2f} mm² "
                              "(projected along the axis)", position="lower_right",
                              font_size=10, color="black")
+    if intersections is not None and len(intersections):
+        _add_intersections(plotter, np.asarray(intersections, float))
     if labels and scalars is None:
         _add_labels(plotter, positions, valve, view)
     if scale_bar:
@@ -277,18 +297,20 @@ def _window(views: ViewRenderer | None) -> Iterator[ViewRenderer]:
 
 def plot_valve_3d(positions: np.ndarray, valve, path: str | Path | None = None, *,
                   view: str = "iso", title: str = "", orifice: dict | None = None,
+                  intersections: np.ndarray | None = None,
                   window: tuple[int, int] = (1000, 850),
                   views: ViewRenderer | None = None) -> np.ndarray:
     """The valve in one view, leaflets coloured and labelled, with a scale bar.
 
     ``positions`` are the node positions to draw (``valve.points`` for the
     valve as built); ``orifice`` (the orifice raster's diagnostics) draws the
-    regurgitant orifice in the axial views; ``views`` renders it in a shared
-    window.  Returns the picture; writes it to ``path`` if given.
+    regurgitant orifice in the axial views; ``intersections`` ``(K, 3)`` marks where an
+    edge of the surface passes through one of its triangles; ``views`` renders it in a
+    shared window.  Returns the picture; writes it to ``path`` if given.
     """
     def draw(plotter) -> None:
         valve_plotter(positions, valve, view=view, title=title, orifice=orifice,
-                      plotter=plotter)
+                      intersections=intersections, plotter=plotter)
 
     with _window(views) as shared:
         return _written(shared.picture(window, draw), path)

@@ -3,7 +3,7 @@
 Colours are Okabe & Ito's palette (2008), distinguishable under the common
 colour-vision deficiencies: the three native leaflets orange, sky blue and
 bluish green, the graft always reddish purple, the regurgitant orifice
-vermillion, the coaptation region grey.  Sequential fields use viridis.
+vermillion, the coaptation region grey, intersections yellow.  Sequential fields use viridis.
 
 Figures are :class:`matplotlib.figure.Figure` objects drawn on their own Agg
 canvas, never through :mod:`matplotlib.pyplot`: nothing here touches
@@ -26,6 +26,7 @@ __all__ = [
     "LEAFLET_COLOURS",
     "GRAFT_COLOUR",
     "ORIFICE_COLOUR",
+    "INTERSECTION_COLOUR",
     "COAPTATION_COLOUR",
     "SEQUENTIAL_CMAP",
     "LEAFLET_LABELS",
@@ -49,6 +50,8 @@ LEAFLET_COLOURS = {"left_coronary": OKABE_ITO["orange"],
                    "non_coronary": OKABE_ITO["bluish_green"]}
 GRAFT_COLOUR = OKABE_ITO["reddish_purple"]
 ORIFICE_COLOUR = OKABE_ITO["vermillion"]
+#: the marks where a leaflet passes through another or through itself
+INTERSECTION_COLOUR = OKABE_ITO["yellow"]
 COAPTATION_COLOUR = "#555555"
 SEQUENTIAL_CMAP = "viridis"
 LEAFLET_LABELS = {"left_coronary": "LC", "right_coronary": "RC", "non_coronary": "NC"}
@@ -87,13 +90,18 @@ def _mm(value, unit: str = "mm", digits: int = 2) -> str:
     return f"{value:.{digits}f} {unit}"
 
 
+#: characters of the key numbers' line in a figure's title (:func:`key_numbers`)
+KEY_NUMBERS_WIDTH = 100
+
+
 def key_numbers(result) -> str:
     """``min coaptation 1.67 mm · central 2.17 mm · orifice 0.00 mm² · competent``.
 
     ``result`` is a case result (``result.json`` as a dict, or a ``CaseResult``): its
     verdict is :func:`~valve_dolfinx.result.competence_text`, the reason included; or a
     :class:`~valve_dolfinx.analysis.coaptation.CoaptationResult`, which knows only whether
-    the valve is sealed.
+    the valve is sealed.  A verdict that would make the line longer than
+    :data:`KEY_NUMBERS_WIDTH` characters (where leaflets intersect) gets a line of its own.
     """
     from valve_dolfinx.result import competence_text
 
@@ -108,8 +116,10 @@ def key_numbers(result) -> str:
         verdict = "sealed" if _get(result, "sealed") else "leaks"
     else:
         verdict = competence_text(result)
-    return (f"min coaptation {_mm(low)} · central {_mm(central)} · "
-            f"orifice {_mm(orifice, 'mm²')} · {verdict}")
+    numbers = (f"min coaptation {_mm(low)} · central {_mm(central)} · "
+               f"orifice {_mm(orifice, 'mm²')}")
+    together = f"{numbers} · {verdict}"
+    return together if len(together) <= KEY_NUMBERS_WIDTH else f"{numbers}\n{verdict}"
 
 
 def new_figure(width_in: float, height_in: float, **kwargs) -> Figure:

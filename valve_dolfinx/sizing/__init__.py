@@ -30,6 +30,7 @@ from valve_dolfinx.sizing.cells import (
     GraftSize,
     cell_state,
     flat_area_ratio,
+    incompetent_normals,
     member_targets,
     summarise_cells,
 )
@@ -47,6 +48,7 @@ __all__ = [
     "cell_state",
     "fit_study",
     "flat_area_ratio",
+    "incompetent_normals",
     "member_targets",
     "read_answer",
     "sizes_to_confirm",

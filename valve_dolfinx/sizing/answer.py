@@ -166,7 +166,8 @@ class SizingAnswer:
 # --- fitting ----------------------------------------------------------------------------
 def _graft_rows(table: MemberTable):
     for row in table.rows:
-        if row.get("graft_width_pct") is not None and row.get("status") != "damaged":
+        if (row.get("graft_width_pct") is not None
+                and row.get("status") not in ("damaged", "stale")):
             yield row
 
 

@@ -9,8 +9,8 @@ members (:class:`CellSummary`):
 * the worst (lowest) minimum coaptation height, the member where it occurs, and
   the spread (highest minus lowest);
 * the members where the graft did not converge, leaks (regurgitant orifice area
-  above 0) or has leaflets crossing (loaded surfaces crossing along a line at
-  least one element long, as ``competent`` counts it);
+  above 0) or has leaflets that intersect (an edge of the loaded surface through one of
+  its triangles, as ``competent`` counts it);
 * the margin: the least, over the members, of its height minus that member's
   target, and the member that sets it (the *limiting* member).
 
@@ -31,10 +31,10 @@ from typing import NamedTuple
 
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
-from valve_dolfinx.result import leaflets_cross
+from valve_dolfinx.result import competence_text, leaflets_intersect
 
 __all__ = ["FIGURE", "NORMAL_TARGET", "GraftSize", "CellSummary", "summarise_cells",
-           "member_targets", "flat_area_ratio", "cell_state"]
+           "member_targets", "incompetent_normals", "flat_area_ratio", "cell_state"]
 
 FIGURE = "min_coaptation_height_mm"
 #: the normal valve's figure, as the target says where it comes from
@@ -90,15 +90,6 @@ def _number(row: Mapping | None, key: str) -> float:
     return float(v) if ok else math.nan
 
 
-def _crosses(row: Mapping) -> bool:
-    """Leaflet surfaces cross along at least one element (``competent``'s rule,
-    :func:`valve_dolfinx.result.leaflets_cross`)."""
-    mesh = _number(row, "mesh_size_mm")
-    if math.isnan(mesh):
-        mesh = _number((row.get("parameters") or {}).get("geometry"), "mesh_size")
-    return leaflets_cross(_number(row, "leaflet_intersection_mm"), mesh)
-
-
 @dataclass
 class CellSummary:
     """One graft over the members of its cell (heights in mm, members by label)."""
@@ -111,12 +102,13 @@ class CellSummary:
     missing: list[str] = field(default_factory=list)
     unconverged: list[str] = field(default_factory=list)
     leaking: list[str] = field(default_factory=list)
-    crossing: list[str] = field(default_factory=list)
+    intersecting: list[str] = field(default_factory=list)
     incompetent: list[str] = field(default_factory=list)
     #: why each member in ``incompetent`` is not competent (its ``competence_reason``)
     reasons: dict[str, str] = field(default_factory=dict)
     largest_orifice_mm2: float | None = None
-    longest_crossing_mm: float | None = None
+    #: the most intersecting edge–triangle pairs of a member
+    most_intersecting_pairs: int | None = None
     worst_height_mm: float | None = None
     worst_member: str | None = None
     spread_mm: float | None = None
@@ -165,10 +157,10 @@ def _summarise(width: float, height: float, rows: Mapping[str, Mapping | None],
         if orifice > 0:
             cell.leaking.append(member)
             cell.largest_orifice_mm2 = max(orifice, cell.largest_orifice_mm2 or 0.0)
-        if _crosses(row):
-            cell.crossing.append(member)
-            crossing = _number(row, "leaflet_intersection_mm")
-            cell.longest_crossing_mm = max(crossing, cell.longest_crossing_mm or 0.0)
+        if leaflets_intersect(row):
+            cell.intersecting.append(member)
+            cell.most_intersecting_pairs = max(row["intersecting_pairs"],
+                                               cell.most_intersecting_pairs or 0)
         if not row.get("competent"):
             cell.incompetent.append(member)
             cell.reasons[member] = row.get("competence_reason") or ""
@@ -213,6 +205,17 @@ def member_targets(tables: Mapping[str, Sequence[Mapping]] | Sequence[Mapping],
     return targets, source
 
 
+def incompetent_normals(tables: Mapping[str, Sequence[Mapping]] | Sequence[Mapping]
+                        ) -> dict[str, str]:
+    """``{member: competence_text}`` of the members whose normal valve is not competent."""
+    out = {}
+    for member, rows in _as_tables(tables).items():
+        normal = next((r for r in rows if r.get("graft_width_pct") is None), None)
+        if normal is not None and not normal.get("competent"):
+            out[member] = competence_text(normal)
+    return out
+
+
 def summarise_cells(tables: Mapping[str, Sequence[Mapping]] | Sequence[Mapping],
                     targets: Mapping[str, float | None]) -> list[CellSummary]:
     """The worst case of every graft over the members (``{member: rows}``; a list of rows is
@@ -242,5 +245,5 @@ def cell_state(cell: CellSummary) -> str:
         return f"converged and competent in all {n} members"
     parts = [f"{what} in {len(members)} of {n} members" for what, members in (
         ("not computed", cell.missing), ("not converged", cell.unconverged),
-        ("leaking", cell.leaking), ("leaflets crossing", cell.crossing)) if members]
+        ("leaking", cell.leaking), ("leaflets intersecting", cell.intersecting)) if members]
     return ", ".join(parts) or f"not sealed in {len(cell.incompetent)} of {n} members"

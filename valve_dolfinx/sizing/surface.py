@@ -14,7 +14,7 @@ The numerical path is not an input: the paths of a cell are replicates.
   K-fold cross-validation (all cases of a cell held out together) gives its
   out-of-sample error.
 * :class:`SealingModel`: the probability that a graft case converges, seals and has no
-  leaflets crossing (``competent``): scikit-learn's ``LogisticRegression`` on the
+  leaflets that intersect (``competent``): scikit-learn's ``LogisticRegression`` on the
   quadratic features of the scaled inputs (a sealing boundary that is a smooth conic in
   W, H and the axes: it can bend, and seal only in a middle band, as wide grafts of low
   height leak), its L2 regularisation chosen by a grouped, stratified cross-validation.
@@ -248,7 +248,8 @@ def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
 
 @dataclass
 class SealingModel:
-    """The probability that a graft case converges, seals and has no leaflets crossing.
+    """The probability that a graft case converges, seals and has no leaflets
+    that intersect.
 
     ``model`` is the fitted pipeline (quadratic features of the scaled inputs, then an
     L2-regularised logistic regression whose strength ``C`` the grouped cross-validation

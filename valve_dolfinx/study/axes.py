@@ -50,6 +50,9 @@ PATH_KEY = "path"
 #: case settings a study sets itself, and the option that sets them
 _GRID_KEYS = {"geometry.graft_width_pct": "--widths (study.widths)",
               "geometry.graft_height_pct": "--heights (study.heights)"}
+#: case settings that bound how long a case may run, not what it computes: the settings
+#: hash leaves them out, so their values would share one case folder; no axis may set them
+_RUN_LIMIT_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]")
 
 
@@ -144,6 +147,11 @@ def _check_key(option: str, key: str) -> None:
     if key == PATH_KEY:
         raise ParameterError(f"{option} path: the numerical paths are set with --paths N "
                              "(study.paths)")
+    if key in _RUN_LIMIT_KEYS:
+        raise ParameterError(f"{option} {key}: a wall-clock limit bounds how long a case may "
+                             "run, not what it computes, so it is not an axis (its values "
+                             "would share one case folder); give one limit with "
+                             "--wall-time-limit (study.wall_time_limit) or --set")
     defaults = CaseConfig().to_dict()
     try:
         default = get_dotted(defaults, key)

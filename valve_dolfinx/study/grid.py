@@ -33,7 +33,7 @@ from valve_dolfinx.study.axes import (
     check_axes,
 )
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyCase, case_name
-from valve_dolfinx.study.paths import study_paths
+from valve_dolfinx.study.paths import START_FROM_NORMAL, study_paths
 
 if TYPE_CHECKING:
     from valve_dolfinx.study.layout import StudyLayout
@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 __all__ = [
     "STUDY_WIDTHS_PCT",
     "STUDY_HEIGHTS_PCT",
+    "TARGET_COAPTATION_MAX_MM",
     "DEFAULT_PANEL_CASES",
     "NORMAL_CASE",
     "StudyCase",
@@ -57,6 +58,9 @@ STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
 #: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
+#: the range (mm) of a target minimum coaptation height, in every command: above 0, at
+#: most this (a normal valve coapts 3-4 mm at its centre)
+TARGET_COAPTATION_MAX_MM = 10.0
 #: every solver stage's wall-clock limit (``wall_time_limit_s`` sets them all)
 _WALL_CLOCK_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
 #: how messages name the case settings as what sets a key
@@ -191,7 +195,8 @@ class StudySettings:
                 low_open=True, unit="s", hint="the wall-clock limit of each case in seconds"))
         if self.target_coaptation_mm is not None:
             set_(self, "target_coaptation_mm", check_range(
-                "target_coaptation", self.target_coaptation_mm, 0.0, 20.0, low_open=True,
+                "target_coaptation", self.target_coaptation_mm, 0.0, TARGET_COAPTATION_MAX_MM,
+                low_open=True,
                 unit="mm", hint="a minimum coaptation height in mm; a normal valve coapts "
                 "3-4 mm (omit it to use the normal valve's)"))
         ranks = self.ranks_per_case
@@ -206,6 +211,25 @@ class StudySettings:
         axes = check_axes(vary, uncertain, self.base_case(), self._fixed_keys())
         set_(self, "vary", {a.key: a.values for a in axes if a.kind == COMPARISON})
         set_(self, "uncertain", {a.key: a.values for a in axes if a.kind == UNCERTAINTY})
+        self._check_warm_starts()
+
+    def _check_warm_starts(self) -> None:
+        """Raise if a path that starts the grafts from the loaded normal valve meets a solver
+        that cannot start from a loaded valve (BDF2 starts from the unloaded valve)."""
+        from valve_dolfinx.config import config_from_dict
+
+        warm = [p for p in study_paths(self.paths) if p.start == START_FROM_NORMAL]
+        if not warm:
+            return
+        solvers = ({**self.vary, **self.uncertain}.get("solver")
+                   or (config_from_dict(self.base_case(), source="study case settings").solver,))
+        if "bdf2" in solvers:
+            raise ParameterError(f"solver = 'bdf2' with the numerical {warm[0].label}: that "
+                                 "path starts every graft from the loaded normal valve, and a "
+                                 "closure that starts from a loaded valve needs solver = "
+                                 "'ptc' (BDF2 starts from the unloaded valve); every study "
+                                 "takes path 1, so run the BDF2 cross-check case by case with "
+                                 "`valve-dolfinx run --solver bdf2`")
 
     def base_case(self) -> dict:
         """The case settings every case starts from: ``case``, then the mesh size and the

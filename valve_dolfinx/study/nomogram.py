@@ -53,8 +53,9 @@ def is_nomogram(layout: StudyLayout) -> bool:
 
 def nomogram_rows(recommendations: Sequence[Recommendation],
                   results: Sequence[dict] = ()) -> list[dict]:
-    """One row per diameter (:data:`NOMOGRAM_COLUMNS`), in the order given; the normal
-    valve's columns come from the study's result rows ``results`` (empty without them)."""
+    """One row per diameter (:data:`NOMOGRAM_COLUMNS`), by increasing diameter (the figure's
+    axis); the normal valve's columns come from the study's result rows ``results`` (empty
+    without them)."""
     normals = {row.get(NOMOGRAM_KEY): row for row in results
                if row.get("graft_width_pct") is None and row.get("status") == "finished"}
     rows = []
@@ -83,7 +84,7 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
             **{f"band_{what}_{end}_pct": (band[f"{what}_pct"][k] if band else None)
                for what in ("width", "height") for k, end in enumerate(("min", "max"))},
         })
-    return rows
+    return sorted(rows, key=lambda row: row["root_loaded_diameter_mm"])
 
 
 def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],

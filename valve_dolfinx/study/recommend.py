@@ -28,6 +28,7 @@ from valve_dolfinx.sizing.cells import (
     CellSummary,
     GraftSize,
     cell_state,
+    incompetent_normals,
     member_targets,
     summarise_cells,
 )
@@ -48,7 +49,9 @@ class Recommendation:
     and their targets; ``target_mm`` the target when it is the same in every member, else
     None.  ``answer`` is the answer read from the surface; ``cells`` the worst case of
     every solved graft; ``confirm`` the members (labels) where the answer's size is still
-    to be solved to confirm it (:func:`~valve_dolfinx.sizing.answer.sizes_to_confirm`).
+    to be solved to confirm it (:func:`~valve_dolfinx.sizing.answer.sizes_to_confirm`);
+    ``incompetent_targets`` the members whose target is the height of a normal valve that
+    is not competent, with why (``competence_text``): a target no sound valve set.
     The properties name the answer as the nomogram and the plan read it: ``size`` (the
     recommended graft, None without one), ``best_size`` (without a graft: the closest
     size, with ``shortfall_mm``).
@@ -62,6 +65,7 @@ class Recommendation:
     answer: SizingAnswer
     cells: list[CellSummary] = field(default_factory=list)
     confirm: list[str] = field(default_factory=list)
+    incompetent_targets: dict[str, str] = field(default_factory=dict)
     text: str = ""
 
     @property
@@ -116,14 +120,14 @@ class Recommendation:
                 "best": self.best, "shortfall_mm": self.shortfall_mm,
                 "tolerance_mm": self.tolerance_mm, "answer": self.answer.to_dict(),
                 "cells": [c.to_dict() for c in self.cells], "confirm": self.confirm,
-                "text": self.text}
+                "incompetent_targets": self.incompetent_targets, "text": self.text}
 
 
 def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
                   ) -> list[MemberTable]:
     """The member tables of one comparison value of a study, from the rows at hand (a case
-    not finished yet, or damaged, is left out)."""
-    by_name = {r["case"]: r for r in rows if r.get("status") != "damaged"}
+    not finished yet, damaged or stale is left out)."""
+    by_name = {r["case"]: r for r in rows if r.get("status") not in ("damaged", "stale")}
     members = {m.label: m for m in layout.members}
     return [MemberTable(label, [by_name[name] for name in cases.values() if name in by_name],
                         comparison=layout.comparisons[comparison],
@@ -140,12 +144,25 @@ def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
                          summarise_cells({t.label: t.rows for t in tables}, targets),
                          [table.label for _, table in sizes_to_confirm(answer, tables)])
     lines = [answer.text]
+    if target_mm is None:
+        rec.incompetent_targets = incompetent_normals({t.label: t.rows for t in tables})
+        lines += _incompetent_text(rec)
     if n_paths == 1:
         lines.append("Each cell was solved along one numerical path, so the scatter between "
                      "paths is not measured; `--paths 2` solves every cell along a second one "
                      "(docs/study.md, \"Paths\").")
     rec.text = " ".join(lines)
     return rec
+
+
+def _incompetent_text(rec: Recommendation) -> list[str]:
+    """The sentence that says a target comes from a normal valve that is not competent."""
+    if not rec.incompetent_targets:
+        return []
+    which = "; ".join(f"`{m}`: {why}" if m else why for m, why in rec.incompetent_targets.items())
+    return [f"Caution: the target is the height of a normal valve that is not competent "
+            f"({which}), not that of a sound valve; give --target-coaptation to measure the "
+            "grafts against a height of your choice."]
 
 
 def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | None = None,

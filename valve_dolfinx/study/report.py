@@ -31,16 +31,22 @@ from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
 from valve_dolfinx.study.recommend import Recommendation, layout_tables, recommend_all
-from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE
+from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE, claim_owner, owner_text
 from valve_dolfinx.study.table import case_rows, write_tables
 
 __all__ = ["StudyReport", "build_report", "read_settings", "member_tables", "figure_suffix",
-           "SWEEP_LOG"]
+           "remove_report", "SWEEP_LOG", "ANSWER_FILES", "REPORT_FILES"]
 
 log = logging.getLogger(__name__)
 
 #: one JSON line per sweep run (start, end, ranks), appended by the runner
 SWEEP_LOG = "sweeps.jsonl"
+#: the files of a study that state its answer (glob patterns): written only for a complete
+#: study, and removed by a report of an incomplete one
+ANSWER_FILES = ("coaptation_vs_width*.png", "sizing_map*.png", "nomogram.csv", "nomogram.png")
+#: every file :func:`build_report` writes (glob patterns)
+REPORT_FILES = (*ANSWER_FILES, "summary.json", "report.md", "results.csv", "results.json",
+                "panels/*.png")
 
 
 @dataclass
@@ -48,10 +54,12 @@ class StudyReport:
     """What :func:`build_report` wrote and found.
 
     ``recommendations`` holds one :class:`Recommendation` per comparison value (one in a
-    study that varies nothing), in the order of ``layout.comparisons``.  ``missing`` are
-    the study's cases with no folder yet; :attr:`unfinished` lists them with the cases that
-    failed or whose files are damaged (the table says why): a study with any of them, or
-    without any case, is not :attr:`complete`.
+    study that varies nothing), in the order of ``layout.comparisons``, and only for a
+    :attr:`complete` study.  ``missing`` are the study's cases with no result that counts
+    (no folder, or one whose result is stale or damaged); ``in_progress`` those of them a
+    live process computes right now, with who.  :attr:`unfinished` lists every case without
+    a result that counts, by why (the table says why for each): a study with any of them, or
+    without any case, is not :attr:`complete`, and has no answer.
     """
 
     out: Path
@@ -59,14 +67,21 @@ class StudyReport:
     layout: StudyLayout | None
     recommendations: list[Recommendation]
     missing: list[str] = field(default_factory=list)
+    in_progress: dict[str, str] = field(default_factory=dict)
     files: list[Path] = field(default_factory=list)
 
     @property
     def unfinished(self) -> dict[str, list[str]]:
-        """The cases that hold no result, by why: ``failed``, ``damaged``, ``not run yet``."""
-        groups = {status: [r["case"] for r in self.rows if r.get("status") == status]
-                  for status in ("failed", "damaged")}
-        groups["not run yet"] = list(self.missing)
+        """The cases that hold no result that counts, by why: ``failed``, ``damaged``,
+        ``stale`` (computed with other settings), ``in progress`` (a live process computes
+        it), ``not run yet``."""
+        groups = {status: [r["case"] for r in self.rows if r.get("status") == status
+                           and r["case"] not in self.in_progress]
+                  for status in ("failed", "damaged", "stale")}
+        groups["in progress"] = list(self.in_progress)
+        have = {r["case"] for r in self.rows}
+        groups["not run yet"] = [name for name in self.missing
+                                 if name not in have and name not in self.in_progress]
         return {why: names for why, names in groups.items() if names}
 
     @property
@@ -74,8 +89,28 @@ class StudyReport:
         return bool(self.rows) and not self.unfinished
 
     @property
+    def incomplete_text(self) -> str:
+        """Why the study has no answer, naming its cases (empty for a complete study)."""
+        if self.complete:
+            return ""
+        if not self.rows:
+            return "No answer: no case has finished yet."
+        groups = self.unfinished
+        held = sum(len(names) for names in groups.values())
+        parts = []
+        for why, names in groups.items():
+            if why == "in progress":
+                names = [f"{n} ({self.in_progress[n]})" for n in names]
+            parts.append(f"{why}: {', '.join(names)}")
+        return (f"No answer: the study is incomplete ({held} case(s) without a result that "
+                f"counts: {'; '.join(parts)}).")
+
+    @property
     def text(self) -> str:
-        """Every recommendation's text, each headed by its comparison values."""
+        """Every recommendation's text, each headed by its comparison values; or why there
+        is no answer."""
+        if not self.complete:
+            return self.incomplete_text
         parts = []
         for rec in self.recommendations:
             head = axis_label(rec.comparison.items())
@@ -105,8 +140,8 @@ def _settings_from_rows(rows: list[dict]) -> StudySettings | None:
 def member_tables(layout: StudyLayout, comparison: int, rows: list[dict]
                   ) -> dict[str, list[dict]]:
     """``{member label: rows}`` of one comparison value: each member's normal valve and
-    grafts, from the rows at hand (a case not finished yet, or damaged, is left out)."""
-    by_name = {r["case"]: r for r in rows if r.get("status") != "damaged"}
+    grafts, from the rows at hand (a case not finished yet, damaged or stale is left out)."""
+    by_name = {r["case"]: r for r in rows if r.get("status") not in ("damaged", "stale")}
     return {member: [by_name[name] for name in cases.values() if name in by_name]
             for member, cases in layout.member_cases(comparison).items()}
 
@@ -168,11 +203,11 @@ def _worst_case_table(rec: Recommendation) -> list[str]:
     """One line per graft: its worst case over the members."""
     n = len(rec.members)
     head = ("graft", "worst min h (mm)", "spread (mm)", "margin (mm)", "limiting member",
-            "not converged", "leaks", "crosses", "qualifies")
+            "not converged", "leaks", "intersects", "qualifies")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for c in rec.cells:
         counts = [f"{len(m)}/{n}" if m else "–" for m in (c.unconverged + c.missing,
-                                                          c.leaking, c.crossing)]
+                                                          c.leaking, c.intersecting)]
         cells = (c.label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
                  "–" if c.margin_mm is None else margin_text(c.margin_mm, signed=True),
                  c.limiting_member or "–", *counts, _fmt(c.qualifies))
@@ -225,10 +260,15 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
              "Normal valve and pericardial grafts of the non-coronary leaflet, closed under "
              f"{_fmt(params.get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
              "## What was run", "",
-             *_what_was_run(out, rows, report.layout, settings, report.unfinished), "",
-             "## Recommendation", ""]
-    if not report.recommendations:
-        lines += ["No cases yet.", ""]
+             *_what_was_run(out, rows, report.layout, settings, report.unfinished), ""]
+    if report.complete:
+        lines += ["## Recommendation", ""]
+    else:
+        lines += ["## No answer: the study is incomplete", "", report.incomplete_text, "",
+                  "No recommendation, sizing map or nomogram is written until every case has "
+                  "a result computed with the study's settings: run the sweep again with the "
+                  "study's settings (it computes exactly those cases), then `valve-dolfinx "
+                  "report`.", ""]
     for rec in report.recommendations:
         head = axis_label(rec.comparison.items())
         suffix = figure_suffix(rec)
@@ -241,7 +281,7 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
                   f"![minimum coaptation height against graft width{', ' + head if head else ''}]"
                   f"(coaptation_vs_width{suffix}.png)", "",
                   f"![sizing map{', ' + head if head else ''}](sizing_map{suffix}.png)", ""]
-    if nomogram:
+    if nomogram and report.complete:
         lines += ["## Nomogram", "", "![sizing nomogram](nomogram.png)", "",
                   "Numbers: [nomogram.csv](nomogram.csv).", ""]
     lines += ["## Results", "", *_table(rows), "",
@@ -255,15 +295,16 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
     return atomic_write(out / "report.md", lambda tmp: tmp.write_text(text))
 
 
-def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None) -> list[Path]:
+def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None,
+            skip: list[str]) -> list[Path]:
     """The panel of the first case (in the study's order) of the normal valve and of each
-    panel graft (``W0_H0``)."""
+    panel graft (``W0_H0``), unless it is one of the cases ``skip`` (no result that counts)."""
     panels = []
     wanted = [NORMAL_CASE, *(settings.panel_cases if settings else DEFAULT_PANEL_CASES)]
     for base in dict.fromkeys(wanted):
         case = next((c for c in layout.cases if case_name(c.width_pct, c.height_pct) == base),
                     None)
-        if case is None:
+        if case is None or case.name in skip:
             continue
         panel = out / "panels" / f"{case.name}.png"
         title = _panel_title(case.width_pct, case.height_pct)
@@ -289,6 +330,14 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     target_mm
         Minimum coaptation height every graft must reach in every member; default: the
         settings' ``target_coaptation_mm``, else each member's normal valve's.
+
+    Every reader of a study's cases reads them this way: a case counts only when its folder
+    holds it finished, whole (each file's SHA-256 as recorded) and with the identity the
+    study's layout expects (:func:`~valve_dolfinx.result.check_case`, as the sweep resumes).
+    A study with a case that does not count (:attr:`StudyReport.unfinished`: failed,
+    damaged, stale, in progress, not run) gets its tables and a ``report.md`` that names
+    them, but no answer: no recommendation, sizing map, coaptation plot or nomogram (those of
+    an earlier report are removed), and ``summary.json`` says ``complete: false``.
     """
     out = Path(out)
     if not (out / CASES_DIR).is_dir():
@@ -302,17 +351,25 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         target_mm = settings.target_coaptation_mm
     report = StudyReport(out, rows, layout, [])
     if layout is not None:
-        report.rows = rows = case_rows(out, [c.name for c in layout.cases])
-        have = {r["case"] for r in rows}
-        report.missing = [c.name for c in layout.cases if c.name not in have]
-        report.recommendations = recommend_all(
-            [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
-            target_mm, n_paths=len(layout.paths))
+        # the cases' identity is checked against the settings the study ran with, not
+        # against a grid guessed from the folders (a folder without study.json)
+        report.rows = rows = case_rows(out, layout, identity=settings is not None)
+        counted = {r["case"] for r in rows if r.get("status") not in ("damaged", "stale")}
+        report.missing = [c.name for c in layout.cases if c.name not in counted]
+        owners = {name: claim_owner(out, name) for name in report.missing}
+        report.in_progress = {name: owner_text(owner) for name, owner in owners.items()
+                              if owner is not None}
+        if report.complete:
+            report.recommendations = recommend_all(
+                [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
+                target_mm, n_paths=len(layout.paths))
     files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
-        "settings": settings.to_dict() if settings else None,
+        "settings": settings.to_dict() if settings else None, "complete": report.complete,
         "recommendations": [rec.to_dict() for rec in report.recommendations],
         "cases": len(rows), "missing": report.missing, "unfinished": report.unfinished}))
+    if not report.complete:
+        remove_report(out, ANSWER_FILES)
     for rec in report.recommendations:
         head = axis_label(rec.comparison.items())
         suffix = figure_suffix(rec)
@@ -320,9 +377,9 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
                            ("sizing_map", plot_sizing_map)):
             plot(rec, out / f"{name}{suffix}.png", title=head)
             files.append(out / f"{name}{suffix}.png")
-    panels = _panels(out, layout, settings) if layout is not None else []
+    panels = _panels(out, layout, settings, report.missing) if layout is not None else []
     files += panels
-    nomogram = layout is not None and is_nomogram(layout)
+    nomogram = layout is not None and is_nomogram(layout) and report.complete
     if nomogram:
         files += write_nomogram(out, report.recommendations, layout, rows)
     files.append(_write_markdown(out, report, settings, panels, nomogram))
@@ -330,6 +387,13 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     log.debug("report: %d cases, %d recommendation(s) -> %s", len(rows),
               len(report.recommendations), out / "report.md")
     return report
+
+
+def remove_report(out: Path, patterns: tuple[str, ...] = REPORT_FILES) -> None:
+    """Remove the study report's files matching ``patterns`` from ``out`` (the cases stay)."""
+    for pattern in patterns:
+        for path in Path(out).glob(pattern):
+            path.unlink(missing_ok=True)
 
 
 def _panel_title(width_pct: float | None, height_pct: float | None) -> str:

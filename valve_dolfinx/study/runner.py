@@ -54,6 +54,7 @@ import shutil
 import socket
 import threading
 import time
+import uuid
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,7 +74,9 @@ from valve_dolfinx.study.store import (
     ClaimHeartbeat,
     case_dir,
     check_study_case,
+    claim_owner,
     commit_case,
+    owner_text,
     prepare_output,
     staging_dir,
 )
@@ -236,6 +239,9 @@ class SweepOutcome:
     report: StudyReport | None = None
     #: the cases of the selection recorded as failed (they raised): the study is incomplete
     failed: list[str] = field(default_factory=list)
+    #: the cases of the selection left unfinished to another live process (``wait=False``),
+    #: with who computes them
+    in_progress: dict[str, str] = field(default_factory=dict)
 
 
 def _check(out: Path, layout: StudyLayout, name: str):
@@ -243,12 +249,13 @@ def _check(out: Path, layout: StudyLayout, name: str):
     return check_study_case(out, name, layout.configs[name], layout.digests[name])
 
 
-def _decide(out: Path, case: StudyCase, layout: StudyLayout, beat: ClaimHeartbeat
+def _decide(out: Path, case: StudyCase, layout: StudyLayout, beat: ClaimHeartbeat, run: str
             ) -> tuple[CaseClaim | None, Path | None]:
-    """Leader: claim the case if it is unfinished and unclaimed; its staging folder."""
+    """Leader: claim the case (for the run ``run``) if it is unfinished and unclaimed; its
+    staging folder."""
     if _check(out, layout, case.name).finished:
         return None, None
-    claim = CaseClaim.for_case(out, case.name)
+    claim = CaseClaim.for_case(out, case.name, run)
     if not claim.acquire():
         log.debug("%s is being computed by another process", case.name)
         return None, None
@@ -311,23 +318,42 @@ class _Scheduler:
     its longest cases start first; the order changes no result, since every case's start
     is fixed by the study): a finished case is dropped; a case whose source
     (``start_from``) has not finished waits, unless the source can be claimed, which
-    is then computed first; any other case is claimed, or dropped if another process
-    holds its claim (that process computes it).  When only waiting cases are left, it
-    polls the study folder every ``poll_s`` until their sources are done.
+    is then computed first; any other case is claimed.  A case another process holds
+    waits until that process has finished it (or, if the process ends without finishing
+    it, is claimed here); with ``wait`` false, a case that a process of another run holds
+    is dropped instead (``held``: its name and who holds it; the groups of this run still
+    wait for each other).  When only waiting cases are left, it polls the study folder
+    every ``poll_s``.
     """
 
     def __init__(self, out: Path, cases: list[StudyCase], layout: StudyLayout,
-                 beat: ClaimHeartbeat, poll_s: float) -> None:
+                 beat: ClaimHeartbeat, poll_s: float, run: str, wait: bool) -> None:
         self.out, self.layout = out, layout
         self.todo = sorted(cases, key=_longest_first)
         self.beat, self.poll_s = beat, poll_s
+        self.run, self.wait = run, wait
+        self.held: dict[str, str] = {}
+        self._announced: set[str] = set()
 
     def _finished(self, name: str) -> bool:
         return _check(self.out, self.layout, name).finished
 
     def _claim(self, case: StudyCase) -> tuple[StudyCase, CaseClaim, Path] | None:
-        claim, staging = _decide(self.out, case, self.layout, self.beat)
+        claim, staging = _decide(self.out, case, self.layout, self.beat, self.run)
         return None if claim is None else (case, claim, staging)
+
+    def _waits_for(self, name: str) -> bool:
+        """Whether to wait for case ``name``, unfinished and held by another process."""
+        owner = claim_owner(self.out, name)
+        if not owner:  # released meanwhile (the next pass claims it or finds it done), or
+            return True  # being written
+        if not self.wait and owner.get("run") != self.run:
+            self.held[name] = owner_text(owner)
+            return False
+        if owner.get("run") != self.run and name not in self._announced:
+            self._announced.add(name)
+            log.info("waiting for %s: %s computes it", name, owner_text(owner))
+        return True
 
     def next(self) -> tuple[StudyCase, CaseClaim, Path] | None:
         """The next case this group computes, claimed, with its staging folder; None when
@@ -343,24 +369,33 @@ class _Scheduler:
                     job = self._claim(self.layout.case(source))
                     if job is not None:
                         return job
-                    waiting = True  # another process computes the source
+                    if self._finished(source) or self._waits_for(source):
+                        waiting = True
+                    else:
+                        self.todo.remove(case)
                     continue
-                self.todo.remove(case)
                 job = self._claim(case)
                 if job is not None:
+                    self.todo.remove(case)
                     return job
+                if self._finished(case.name) or not self._waits_for(case.name):
+                    self.todo.remove(case)
+                else:
+                    waiting = True
             if waiting:
                 time.sleep(self.poll_s)
         return None
 
 
 def _work(group: MPI.Comm, out: Path, layout: StudyLayout, cases: list[StudyCase],
-          case_function: CaseFunction, poll_s: float) -> list[str]:
-    """Loop of one rank group over the cases; returns the names it computed."""
+          case_function: CaseFunction, poll_s: float, run: str, wait: bool
+          ) -> tuple[list[str], dict[str, str]]:
+    """Loop of one rank group over the cases; returns the names it computed and (on the
+    group's leader, without ``wait``) the cases it left to another process, with who."""
     leader = group.rank == 0
     computed = []
     with ClaimHeartbeat() as beat:
-        scheduler = _Scheduler(out, cases, layout, beat, poll_s) if leader else None
+        scheduler = _Scheduler(out, cases, layout, beat, poll_s, run, wait) if leader else None
         while True:
             job = scheduler.next() if leader else None
             picked = group.bcast(None if job is None else (job[0].name, str(job[2])), root=0)
@@ -377,15 +412,14 @@ def _work(group: MPI.Comm, out: Path, layout: StudyLayout, cases: list[StudyCase
                     beat.remove(job[1])
                     if staging.exists():  # interrupted before its commit
                         shutil.rmtree(staging, ignore_errors=True)
-    return computed
+    return computed, scheduler.held if leader else {}
 
 
-def _split(comm: MPI.Comm, ranks_per_case: int) -> MPI.Comm:
+def _check_ranks(comm: MPI.Comm, ranks_per_case: int) -> None:
     if comm.size % ranks_per_case:
         raise ParameterError(f"ranks_per_case = {ranks_per_case} does not divide the "
                              f"{comm.size} MPI ranks; use a divisor of {comm.size} "
                              "(--ranks-per-case 1 runs one case per rank)")
-    return comm.Split(comm.rank // ranks_per_case, comm.rank)
 
 
 def _with_sources(layout: StudyLayout, cases: Sequence[StudyCase]) -> list[StudyCase]:
@@ -399,7 +433,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
               case_function: CaseFunction | None = None,
               progress: ProgressCallback | None = None, report: bool = True,
               figures: bool = False, fields_output: bool = True,
-              poll_s: float = 1.0) -> SweepOutcome:
+              poll_s: float = 1.0, wait: bool = True) -> SweepOutcome:
     """Run the cases of a study (all, or ``case_indices``) into ``out`` and build its report.
 
     Also ``valve_dolfinx.run_sweep``.  Every rank of ``comm`` calls it with the same
@@ -428,6 +462,13 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
         Passed to ``run_case``: the PNG figures of every case (by default only the normal
         valve and the panel cases draw theirs, which the report's panels show: a case's
         figures cost seconds) and the ParaView fields of every case.
+    poll_s
+        How often a group that waits (for a case another process computes, or for a
+        warm start's source) looks at the study folder again (s).
+    wait
+        Wait for the cases another process (another sweep, plan or job-array task on the
+        same folder) is computing, logging which (the default); false: leave them, and list
+        them in ``SweepOutcome.in_progress`` (``--no-wait``).
 
     Returns
     -------
@@ -438,7 +479,8 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     Raises
     ------
     ParameterError
-        Before any computation, for settings that cannot run.
+        Before any computation (before the folder is created), for settings that cannot
+        run, ranks per case that do not divide the ranks included.
     OutputNotFolderError, OutputNotWritableError
         Before any computation, for an ``out`` that cannot be created or written.
     Interrupted
@@ -451,6 +493,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     layout = settings.layout()
     cases = layout.select(case_indices)
     todo = _with_sources(layout, cases)
+    _check_ranks(comm, settings.ranks_per_case)
     if case_function is None:
         from valve_dolfinx.config import case_name
 
@@ -460,8 +503,9 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             drawn = figures or case_name(config.geometry) in panels
             return run_closure_case(config, folder, group, start=start, figures=drawn,
                                     fields_output=fields_output)
-    error = None
+    error, run = None, None
     if comm.rank == 0:
+        run = uuid.uuid4().hex
         try:
             prepare_output(out)
             if case_indices is None or not (out / SETTINGS_FILE).is_file():
@@ -469,17 +513,18 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
                                                  "written_at": started})
         except ValveError as err:
             error = err
-    error = comm.bcast(error, root=0)
+    error, run = comm.bcast((error, run), root=0)
     if error:
         raise error
-    group = _split(comm, settings.ranks_per_case)
+    group = comm.Split(comm.rank // settings.ranks_per_case, comm.rank)
     monitor = _Monitor(out, todo, layout, progress, poll_s) if comm.rank == 0 else None
     if monitor:
         monitor.start()
     try:
-        computed = _work(group, out, layout, todo, case_function, poll_s)
+        computed, held = _work(group, out, layout, todo, case_function, poll_s, run, wait)
         # every group is done: the monitor's last scan sees the other groups' last cases
         computed = sorted(sum(comm.allgather(computed), []))
+        held = {k: v for part in comm.allgather(held) for k, v in part.items()}
     finally:
         if monitor:
             monitor.stop()
@@ -487,6 +532,8 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
     states = comm.bcast(_states(out, layout, todo) if comm.rank == 0 else None)
     outcome.failed = [case.name for case, state in states if state == "failed"]
+    outcome.in_progress = {case.name: held.get(case.name, "another process")
+                           for case, state in states if state == "running"}
     if comm.rank == 0:
         entry = {"started": started, "finished": _now(), "elapsed_s": outcome.elapsed_s,
                  "n_ranks": comm.size, "ranks_per_case": settings.ranks_per_case,
@@ -506,7 +553,7 @@ def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
         check = _check(out, layout, case.name)
         if check.finished:
             state = check.record.get("status", "finished")
-        elif CaseClaim.for_case(out, case.name).path.exists():
+        elif claim_owner(out, case.name) is not None:
             state = "running"
         else:
             state = {"empty": "pending", "damaged": "damaged"}.get(check.state, "changed")

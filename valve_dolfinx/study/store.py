@@ -42,7 +42,7 @@ from pathlib import Path
 
 from valve_dolfinx.interrupts import check_not_interrupted
 from valve_dolfinx.io import check_output_folder, write_json
-from valve_dolfinx.result import RECORD_FILE, RESULT_FILE, CaseCheck, check_case
+from valve_dolfinx.result import RECORD_FILE, RESULT_FILE, CaseCheck, check_case, file_digest
 
 __all__ = [
     "CASES_DIR",
@@ -53,6 +53,8 @@ __all__ = [
     "ClaimHeartbeat",
     "case_dir",
     "check_study_case",
+    "claim_owner",
+    "owner_text",
     "prepare_output",
     "staging_dir",
     "commit_case",
@@ -125,14 +127,17 @@ class CaseClaim:
     held: bool = False
     _token: dict = field(default_factory=dict, repr=False)
 
+    #: the run (one sweep or plan, all its ranks) the claim is for
+    run: str = ""
+
     @classmethod
-    def for_case(cls, out: Path, name: str) -> CaseClaim:
-        return cls(Path(out) / CASES_DIR / _CLAIMS / f"{name}.claim")
+    def for_case(cls, out: Path, name: str, run: str = "") -> CaseClaim:
+        return cls(Path(out) / CASES_DIR / _CLAIMS / f"{name}.claim", run=run)
 
     def _owner(self) -> dict:
         pid = os.getpid()
         return {"host": socket.gethostname(), "pid": pid, "start": _process_start(pid),
-                "claimed_at": time.time(), "token": uuid.uuid4().hex}
+                "claimed_at": time.time(), "token": uuid.uuid4().hex, "run": self.run}
 
     def acquire(self) -> bool:
         """Try to claim the case; False if a live process holds it."""
@@ -156,18 +161,10 @@ class CaseClaim:
             age = time.time() - self.path.stat().st_mtime
         except FileNotFoundError:
             return True  # released meanwhile
-        try:
-            owner = json.loads(text)
-        except json.JSONDecodeError:  # being written right now, or torn by a crash
-            stale = age > 10.0
-            owner = {}
-        else:
-            if owner.get("host") == socket.gethostname():
-                stale = not _alive(int(owner.get("pid", -1)), owner.get("start"))
-            else:
-                stale = age > STALE_AFTER_S
-        if not stale:
+        owner = _live_owner(text, age)
+        if owner is not None:
             return False
+        owner = _parsed(text)
         with contextlib.suppress(OSError):
             if self.path.read_text() == text:  # still the claim judged stale
                 self.path.unlink()
@@ -225,6 +222,47 @@ class ClaimHeartbeat:
                 claim.refresh()
 
 
+def _parsed(text: str) -> dict:
+    try:
+        owner = json.loads(text)
+    except json.JSONDecodeError:
+        return {}
+    return owner if isinstance(owner, dict) else {}
+
+
+def _live_owner(text: str, age: float) -> dict | None:
+    """The owner of a claim (its file's ``text``, last touched ``age`` s ago) if the claim is
+    live, None if it is stale: same host, its process is gone; another host, its heartbeat
+    stopped; unreadable (being written, or torn by a crash) for more than 10 s."""
+    owner = _parsed(text)
+    if not owner:
+        return {} if age <= 10.0 else None
+    if owner.get("host") == socket.gethostname():
+        alive = _alive(int(owner.get("pid", -1)), owner.get("start"))
+    else:
+        alive = age <= STALE_AFTER_S
+    return owner if alive else None
+
+
+def claim_owner(out: Path, name: str) -> dict | None:
+    """Who computes case ``name`` of the study ``out`` right now (host, pid, claimed_at), or
+    None when nobody does (no claim, or a stale one)."""
+    path = CaseClaim.for_case(out, name).path
+    try:
+        text = path.read_text()
+        age = time.time() - path.stat().st_mtime
+    except OSError:
+        return None
+    return _live_owner(text, age)
+
+
+def owner_text(owner: dict) -> str:
+    """``pid 123 on host`` of a claim's owner (:func:`claim_owner`)."""
+    if not owner:
+        return "a process that is writing its claim"
+    return f"pid {owner.get('pid')} on {owner.get('host')}"
+
+
 # --- staging and commit ---------------------------------------------------------------------
 def staging_dir(out: Path, name: str) -> Path:
     """A fresh, empty staging folder for case ``name``; leftovers of killed runs go first.
@@ -243,14 +281,16 @@ def staging_dir(out: Path, name: str) -> Path:
 def commit_case(out: Path, name: str, staging: Path, record: dict) -> Path:
     """Write the record into ``staging`` and rename it to ``cases/<name>`` (replacing an old one).
 
-    The record lists every file of the case with its size (``files``).  It is written
+    The record lists every file of the case with its size (``files``) and the SHA-256 of its
+    content (``sha256``: :func:`~valve_dolfinx.result.file_digest`).  It is written
     last inside the staging folder and the folder renamed in one step, so readers see
     the old case, no case, or the new case whole.  Nothing is committed once the command
     has received SIGINT or SIGTERM.
     """
-    files = {str(p.relative_to(staging)): p.stat().st_size
-             for p in sorted(staging.rglob("*")) if p.is_file()}
-    write_json(staging / RECORD_FILE, {**record, "files": files})
+    paths = [p for p in sorted(staging.rglob("*")) if p.is_file()]
+    files = {str(p.relative_to(staging)): p.stat().st_size for p in paths}
+    digests = {str(p.relative_to(staging)): file_digest(p) for p in paths}
+    write_json(staging / RECORD_FILE, {**record, "files": files, "sha256": digests})
     check_not_interrupted()
     final = case_dir(out, name)
     if final.exists():

@@ -7,7 +7,10 @@ key (``root.loaded_diameter``, ...) and ``path`` (a list where the case serves
 several values, as the normal valve serves every path), then the rest of the
 bookkeeping, then every other field of the result in its own order.  A case
 folder whose files are damaged (:func:`~valve_dolfinx.result.check_case`) is a
-row with status ``damaged`` and the reason, its result fields empty.
+row with status ``damaged`` and the reason, and a case computed with other settings than
+the study's (another identity, or not converged under another wall-clock limit) a row with
+status ``stale``; the result fields of both are empty, so that no number of theirs enters
+a table, figure or recommendation.
 ``results.json`` keeps the nested fields (per-leaflet numbers, parameters,
 versions) as they are; ``results.csv`` flattens them into
 dotted column names (``parameters.geometry.mesh_size``), so both hold the
@@ -24,11 +27,14 @@ import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from valve_dolfinx.io import atomic_write, write_json
 from valve_dolfinx.study.grid import NORMAL_CASE
 from valve_dolfinx.study.store import CASES_DIR, check_study_case
+
+if TYPE_CHECKING:
+    from valve_dolfinx.study.layout import StudyLayout
 
 __all__ = ["SPEC_COLUMNS", "case_rows", "flatten", "write_tables", "write_csv",
            "read_csv_rows"]
@@ -61,13 +67,16 @@ def _reason(record: dict, result: dict) -> str:
     return ""
 
 
-def case_rows(out: Path, order: Sequence[str] | None = None) -> list[dict]:
+def case_rows(out: Path, layout: StudyLayout | None = None, *, identity: bool = True
+              ) -> list[dict]:
     """Rows of every case folder under ``out/cases``.
 
-    In the order of the case names ``order`` (a study's cases), then any other case
-    folder; without ``order``, the normal valve first, then by W and H.  A case whose
-    files are missing, unreadable or disagree is a row with status ``damaged`` and the
-    reason; a folder whose name is no case's is skipped with a warning.
+    With ``layout`` (the study's cases): in its order, then any other case folder, and (with
+    ``identity``) each of its cases checked against the identity the layout expects;
+    without it, the normal valve first, then by W and H, every whole case taken as it is.
+    A case whose files are missing, unreadable or disagree is a row with status ``damaged``
+    and the reason, one of other settings a row with status ``stale``; a folder whose name
+    is no case's is skipped with a warning.
     """
     rows = []
     root = Path(out) / CASES_DIR
@@ -78,16 +87,24 @@ def case_rows(out: Path, order: Sequence[str] | None = None) -> list[dict]:
         if size is None:
             log.warning("skipping %s: not a case folder of a study", folder)
             continue
-        check = check_study_case(out, folder.name)
+        name = folder.name
+        if identity and layout is not None and name in layout.configs:
+            check = check_study_case(out, name, layout.configs[name], layout.digests[name])
+        else:
+            check = check_study_case(out, name)
         if check.finished:
-            rows.append(_row(folder.name, check.record, check.result))
+            rows.append(_row(name, check.record, check.result))
             continue
+        status = "damaged" if check.state in ("damaged", "empty") else "stale"
         reason = check.reason or "no result.json or case.json"
+        if status == "stale":
+            reason = (f"computed with other settings than the study's ({reason}); a sweep "
+                      "computes it again")
         log.warning("%s: %s", folder, reason)
-        rows.append(_damaged_row(folder.name, size, reason))
+        rows.append(_unusable_row(name, size, status, reason))
     rows.sort(key=_sort_key)
-    if order is not None:
-        place = {name: i for i, name in enumerate(order)}
+    if layout is not None:
+        place = {case.name: i for i, case in enumerate(layout.cases)}
         rows.sort(key=lambda row: place.get(row["case"], len(place)))
     return rows
 
@@ -100,10 +117,11 @@ def _graft_size(name: str) -> tuple[float | None, float | None] | None:
     return (float(match[1]), float(match[2])) if match else None
 
 
-def _damaged_row(name: str, size: tuple, reason: str) -> dict:
+def _unusable_row(name: str, size: tuple, status: str, reason: str) -> dict:
+    """The row of a case folder whose result does not count (``damaged`` or ``stale``)."""
     row: dict[str, Any] = dict.fromkeys(SPEC_COLUMNS)
     row["graft_width_pct"], row["graft_height_pct"] = size
-    row.update(case=name, status="damaged", reason=reason, config_hash=None)
+    row.update(case=name, status=status, reason=reason, config_hash=None)
     return row
 
 
