@@ -631,9 +631,9 @@ def settings_hash(config: Mapping[str, Any]) -> str:
     layout (other keys, such as ``result.json``'s ``root_state``, are ignored).
 
     Every physical and numerical setting enters it, and :data:`ANALYSIS_VERSION`; the
-    wall-clock limits do not (they decide whether a run finishes, not where it lands).  Integers count as the equal
-    real numbers.  Output paths, figures and
-    logging are not part of a :class:`CaseConfig`.
+    wall-clock limits do not (they decide whether a run finishes, not where it lands).
+    Integers count as the equal real numbers.  Output paths, figures and logging are not
+    part of a :class:`CaseConfig`.
     """
     names = {f.name for f in fields(CaseConfig)}
     data = {}
