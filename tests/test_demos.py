@@ -43,8 +43,8 @@ def test_normal_valve_demo(tmp_path):
 @pytest.mark.slow
 def test_patient_plan_demo(tmp_path):
     """The worked patient (22 ± 1 mm root, 22 mm free edge) on a coarse mesh and a one-graft
-    grid, two paths: six members, the answer, the template and the report are written, and
-    rebuilding them from the case folders gives the same answer."""
+    grid, two paths: six members, the report is written, and rebuilding it from the case
+    folders gives the same answer."""
     proc = _run("patient_plan.py", "--out", str(tmp_path), "--mesh-size", "2.5",
                 "--widths", "14", "--heights", "13", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -54,12 +54,12 @@ def test_patient_plan_demo(tmp_path):
     assert "rebuilt from the case folders: True" in proc.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     answer = summary["recommendation"]
-    graft = answer["graft"] or answer["closest"]
-    assert graft["label"] == "W14/H13" and len(answer["members"]) == 6
-    assert summary["run"]["cases"] == 9
-    assert summary["templates"][0]["cut_width_mm"] == pytest.approx(22.0 * 1.14 + 2.0)
-    for name in ("plan.pdf", "plan.md", "template_W14_H13.pdf", "template_W14_H13.svg",
-                 "worked_patient.toml", "study/W14_H13__root.loaded_diameter=22_aortic.png"):
+    # one graft is too few solved cells for a response surface: the plan reads no size
+    # and says so, rather than "no graft"
+    assert answer["graft"] is None and answer["closest"] is None
+    assert answer["headline"].startswith("No answer") and len(answer["members"]) == 6
+    assert summary["run"]["cases"] == 9 and summary["templates"] == []
+    for name in ("plan.pdf", "plan.md", "worked_patient.toml", "study/report.md"):
         assert (tmp_path / name).stat().st_size > 500, name
 
 

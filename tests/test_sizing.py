@@ -22,6 +22,7 @@ from valve_dolfinx.sizing import (
     sizes_to_confirm,
 )
 from valve_dolfinx.sizing.resolution import discretisation_error_mm, path_scatter_mm
+from valve_dolfinx.sizing.surface import SurfacePoint, fit_sealing
 
 WIDTHS = (0.0, 7.0, 14.0, 21.0, 27.0)
 HEIGHTS = (0.0, 13.0, 27.0, 40.0)
@@ -184,8 +185,8 @@ def test_no_size_seals_is_no_graft():
     tables = study(seed=6, leaks=lambda w, h: True)
     answer = read_answer(fit_study(tables, ladder=None), tables)
     assert answer.size is None and answer.why == "none seals"
-    # every case leaks: the rule of succession (0 + 1)/(40 + 2) everywhere
-    assert "the highest is 0.02" in answer.text
+    # every case leaks: every cell's share of sealed cases is 0, and so is the interpolation
+    assert "the highest is 0.00" in answer.text
 
 
 def test_too_few_cells_give_no_surface():
@@ -253,3 +254,26 @@ def test_design_scales_the_inputs_root_first_and_choices_as_indicators():
     assert x.min() == 0.0 and x[:3].max() == 1.0
     assert x[2] == pytest.approx([14 / 27, 13 / 40, 0.5, 0.0, 0.0])
     assert x[3] == pytest.approx([7 / 27, 0.5, 0.75, 0.5, 1.0])
+
+
+def test_sealing_is_read_from_the_solved_cells_not_smoothed():
+    """Sealing is interpolated piecewise-linearly between the solved cells' shares of
+    sealed cases: a solved cell gives its own share (two paths that disagree: 0.5), a size
+    between sealed cells seals, and between a sealed and a leaking cell the probability
+    falls linearly with the distance (halfway: 0.5); an isolated leaking cell does not
+    spoil sealed cells two grid steps away, as a smooth classifier would."""
+    widths, heights = (0.0, 10.0, 20.0, 30.0), (0.0, 20.0, 40.0)
+    leaking = {(30.0, 40.0)}
+    points, sealed = [], []
+    for w in widths:
+        for h in heights:
+            points.append(SurfacePoint(w, h))
+            sealed.append((w, h) not in leaking)
+    points.append(SurfacePoint(0.0, 0.0))  # a second path of W0/H0 that leaks
+    sealed.append(False)
+    model = fit_sealing(points, sealed)
+    p = model.probability([SurfacePoint(0.0, 0.0), SurfacePoint(10.0, 20.0),
+                           SurfacePoint(15.0, 30.0), SurfacePoint(30.0, 30.0),
+                           SurfacePoint(30.0, 40.0), SurfacePoint(10.0, 40.0)])
+    np.testing.assert_allclose(p, [0.5, 1.0, 1.0, 0.5, 0.0, 1.0], atol=1e-12)
+    assert model.summary()["cells"] == len(widths) * len(heights)

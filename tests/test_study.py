@@ -600,8 +600,8 @@ def test_recommendation_reads_the_answer_beside_the_solved_cells():
     assert rec.size == (13.0, 0.0) and rec.recommended == "W13/H0"
     assert rec.margin_mm == pytest.approx(0.04, abs=0.01)
     assert rec.tolerance_mm < 0.01 and rec.answer.resolution.path_scatter_mm is None
-    # every case sealed: the rule of succession (9 + 1)/(9 + 2) >= 0.9
-    assert rec.answer.seal_probability == pytest.approx(10 / 11)
+    # every case sealed: every cell's share of sealed cases is 1, and so is the interpolation
+    assert rec.answer.seal_probability == 1.0
     assert rec.answer.highest == (14.0, 27.0)
     # the solved cells beside it, as solved: W7/H0 is 2.56 mm, 0.44 mm short
     cell = rec.cell("W7/H0")

@@ -154,6 +154,10 @@ class PlanRecommendation:
                     f"height) converges, seals and reaches {self._target()}; its smallest "
                     f"margin is {margin_text(self.margin_mm)} mm{where}{resolution}.")
         scope = f" in every one of the {n} members{computed}" if n > 1 else ""
+        if self.closest is None and not self.unsealable_roots_mm:
+            return ("No answer: no size could be read, for too few solved cases or no "
+                    "target (the study's report says which); this says nothing for or "
+                    "against any graft.")
         if self.unsealable_roots_mm:
             text = (f"{self._unsealable()} Nor does any graft converge, seal and reach "
                     f"{self._target()}{scope}.")

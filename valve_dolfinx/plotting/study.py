@@ -177,23 +177,31 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         lines += [f"solid: the target; dashed: the tolerance, −{tol:.2f} mm; dash-dotted: "
                   f"probability of sealing {threshold:g} in every member, grey hatched below "
                   f"it; green: the band of sizes that qualify"]
+        # labels towards the map's middle, so that they stay inside the axes; the highest
+        # size's label on the other side when it sits next to the answer
+        mid_w, mid_h = lattice.widths_pct.mean(), lattice.heights_pct.mean()
+        left = up = None
         if answer.size is not None:
             ax.plot(*answer.size, marker="*", ms=20, mfc="white", mec="black", mew=1.5,
                     ls="none", zorder=5)
-            left = answer.size.width_pct > lattice.widths_pct.mean()
+            left, up = answer.size.width_pct > mid_w, answer.size.height_pct < mid_h
             ax.annotate(f"answer {answer.size.label}", answer.size,
-                        xytext=(-8 if left else 8, 8), textcoords="offset points",
-                        ha="right" if left else "left", fontsize=10, fontweight="bold",
-                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"), zorder=5)
+                        xytext=(-10 if left else 10, 10 if up else -20),
+                        textcoords="offset points", ha="right" if left else "left",
+                        fontsize=10, fontweight="bold", zorder=6,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"))
         if answer.highest is not None:
             ax.plot(*answer.highest, marker="^", ms=11, mfc="white", mec="black", mew=1.2,
                     ls="none", zorder=5)
-            # the label on the side of the map's middle, so that it stays inside the axes
-            left = answer.highest.width_pct > lattice.widths_pct.mean()
+            h_left = answer.highest.width_pct > mid_w
+            h_up = answer.highest.height_pct < mid_h
+            if left is not None and h_left == left:
+                h_left = answer.highest.width_pct < answer.size.width_pct
             ax.annotate(f"highest {answer.highest.label}", answer.highest,
-                        xytext=(-8 if left else 8, -16), textcoords="offset points",
-                        ha="right" if left else "left", fontsize=9,
-                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"), zorder=5)
+                        xytext=(-8 if h_left else 8, 10 if h_up else -18),
+                        textcoords="offset points", ha="right" if h_left else "left",
+                        fontsize=9, zorder=6,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"))
     else:
         lines.append(answer.text.split(". ")[0] + ".")
     _solved_cells(ax, rec)

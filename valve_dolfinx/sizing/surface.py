@@ -13,16 +13,18 @@ The numerical path is not an input: the paths of a cell are replicates.
   is the scatter the inputs do not explain (paths, mesh), reported in mm, and a grouped
   K-fold cross-validation (all cases of a cell held out together) gives its
   out-of-sample error.
-* :class:`SealingModel`: the probability that a graft case converges, seals and has no
-  leaflets that intersect (``competent``): scikit-learn's ``LogisticRegression`` on the
-  quadratic features of the scaled inputs (a sealing boundary that is a smooth conic in
-  W, H and the axes: it can bend, and seal only in a middle band, as wide grafts of low
-  height leak), its L2 regularisation chosen by a grouped, stratified cross-validation.
-  A study whose cases all seal (or all fail) has no boundary to fit: the probability is
-  then Laplace's rule of succession, ``(k + 1)/(n + 2)`` everywhere.
+* :class:`SealingModel`: the probability that a graft converges, seals and has no
+  leaflets that intersect (``competent``), read from the solved cells by piecewise-linear
+  interpolation (scipy's ``LinearNDInterpolator`` on a Delaunay triangulation of the
+  cells' scaled inputs) of each cell's share of sealed cases (its paths).  It is not
+  smoothed: sealing is not a smooth function of the size (a graft folding through a
+  neighbour at a post, or a second resting state, flips it between neighbouring cells),
+  so a size counts as sealing with probability 1 only where every solved cell around it
+  sealed, and a smooth classifier fitted to a few tens of cells would let the failures of
+  some cells decide the sizes beside sealed ones.
 
-Both are deterministic: a fixed ``random_state`` and a fixed number of optimiser
-restarts.  Nothing here imports DOLFINx.
+Both are deterministic: the surface has a fixed ``random_state`` and a fixed number of
+optimiser restarts.  Nothing here imports DOLFINx.
 """
 
 from __future__ import annotations
@@ -35,22 +37,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+from scipy.spatial import QhullError
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
-from sklearn.linear_model import LogisticRegression
-from sklearn.model_selection import (
-    GridSearchCV,
-    GroupKFold,
-    StratifiedGroupKFold,
-    cross_val_predict,
-)
-from sklearn.pipeline import Pipeline, make_pipeline
-from sklearn.preprocessing import PolynomialFeatures
+from sklearn.model_selection import GroupKFold, cross_val_predict
 
 __all__ = ["SurfacePoint", "Design", "CoaptationSurface", "SealingModel", "fit_surface",
-           "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS", "SEAL_CS"]
+           "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS"]
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +58,6 @@ RANDOM_STATE = 0
 RESTARTS = 4
 #: folds of the grouped cross-validation (fewer when the study has fewer cells)
 CV_FOLDS = 5
-#: the regularisation strengths (C, inverse) the sealing model's cross-validation chooses from
-SEAL_CS = (0.1, 1.0, 10.0, 100.0, 1000.0)
 #: bounds of the scaled length scales: a tenth of the studied range to 20 times it
 _LENGTH_BOUNDS = (0.1, 20.0)
 
@@ -248,62 +242,50 @@ def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
 
 @dataclass
 class SealingModel:
-    """The probability that a graft case converges, seals and has no leaflets
-    that intersect.
-
-    ``model`` is the fitted pipeline (quadratic features of the scaled inputs, then an
-    L2-regularised logistic regression whose strength ``C`` the grouped cross-validation
-    chose); None when every case had the same outcome, and then ``constant`` is the rule
-    of succession ``(k + 1)/(n + 2)``.
-    """
+    """The probability that a graft case converges, seals and has no leaflets that
+    intersect: the share of sealed cases of each solved cell (``cells``: their scaled
+    inputs; ``share``), interpolated piecewise-linearly between the cells (a Delaunay
+    triangulation of them; with one input, linearly along it) and taken from the nearest
+    cell outside their hull or where the cells span fewer dimensions than the inputs."""
 
     design: Design
     n_cases: int
     n_sealed: int
-    model: Pipeline | None = None
-    constant: float | None = None
-    regularisation: float | None = None
+    cells: np.ndarray
+    share: np.ndarray
 
     def probability(self, points: Sequence[SurfacePoint]) -> np.ndarray:
-        if self.model is None:
-            return np.full(len(points), self.constant)
-        return self.model.predict_proba(self.design.matrix(points))[:, 1]
+        x = self.design.matrix(points)
+        nearest = NearestNDInterpolator(self.cells, self.share)
+        if self.cells.shape[1] == 0:
+            return np.full(len(points), float(self.share.mean()))
+        if self.cells.shape[1] == 1:
+            order = np.argsort(self.cells[:, 0])
+            return np.interp(x[:, 0], self.cells[order, 0], self.share[order])
+        try:
+            p = LinearNDInterpolator(self.cells, self.share)(x)
+        except QhullError:  # the cells lie in a lower-dimensional set
+            return nearest(x)
+        outside = ~np.isfinite(p)
+        p[outside] = nearest(x[outside]) if outside.any() else p[outside]
+        return np.clip(p, 0.0, 1.0)
 
     def summary(self) -> dict:
-        model = ("constant (rule of succession)" if self.model is None else
-                 f"logistic regression on quadratic features, C = {self.regularisation:g}")
-        return {"cases": self.n_cases, "sealed": self.n_sealed, "model": model}
+        return {"cases": self.n_cases, "sealed": self.n_sealed, "cells": len(self.share),
+                "model": "piecewise-linear interpolation of each solved cell's share of "
+                         "sealed cases"}
 
 
 def fit_sealing(points: Sequence[SurfacePoint], sealed: Sequence[bool],
                 design: Design | None = None) -> SealingModel:
-    """Fit :class:`SealingModel` to the outcomes ``sealed`` at ``points``; ``design``: the
-    inputs to use (the coaptation surface's, so that both read the same axes).
-
-    ``C`` is chosen among :data:`SEAL_CS` by the log-loss of a grouped, stratified K-fold
-    cross-validation (each cell's cases held out together); with fewer than two cells of
-    the rarer outcome there is nothing to hold out, and the middle of :data:`SEAL_CS` is
-    taken.
-    """
+    """:class:`SealingModel` of the outcomes ``sealed`` at ``points``; ``design``: the
+    inputs to use (the coaptation surface's, so that both read the same axes).  The cases
+    of a cell (its paths) give the cell's share of sealed cases."""
     design = design or Design.of(points)
-    y = np.asarray(sealed, dtype=int)
-    out = SealingModel(design, len(y), int(y.sum()))
-    if y.all() or not y.any():
-        out.constant = (out.n_sealed + 1) / (out.n_cases + 2)
-        return out
-    x = design.matrix(points)
+    y = np.asarray(sealed, dtype=float)
     groups = _cell_groups(points)
-    rare = min(len(set(groups[y == 1])), len(set(groups[y == 0])))
-    out.model = make_pipeline(PolynomialFeatures(2), LogisticRegression(max_iter=2000))
-    out.regularisation = SEAL_CS[len(SEAL_CS) // 2]
-    if rare >= 2:
-        folds = list(StratifiedGroupKFold(min(CV_FOLDS, rare)).split(x, y, groups))
-        search = GridSearchCV(out.model, {"logisticregression__C": list(SEAL_CS)}, cv=folds,
-                              scoring="neg_log_loss")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            search.fit(x, y)
-        out.regularisation = float(search.best_params_["logisticregression__C"])
-    out.model.set_params(logisticregression__C=out.regularisation)
-    _quiet_fit(out.model, x, y)
-    return out
+    x = design.matrix(points)
+    labels = np.unique(groups)
+    cells = np.array([x[groups == g][0] for g in labels]).reshape(len(labels), x.shape[1])
+    share = np.array([y[groups == g].mean() for g in labels])
+    return SealingModel(design, len(y), int(y.sum()), cells, share)
