@@ -34,7 +34,7 @@ from valve_dolfinx.study.recommend import Recommendation, layout_tables, recomme
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE, claim_owner, owner_text
 from valve_dolfinx.study.table import case_rows, write_tables
 
-__all__ = ["StudyReport", "build_report", "read_settings", "member_tables", "figure_suffix",
+__all__ = ["StudyReport", "build_report", "read_settings", "figure_suffix",
            "remove_report", "SWEEP_LOG", "ANSWER_FILES", "REPORT_FILES"]
 
 log = logging.getLogger(__name__)
@@ -135,15 +135,6 @@ def _settings_from_rows(rows: list[dict]) -> StudySettings | None:
     if not widths:
         return None
     return StudySettings(widths_pct=tuple(widths), heights_pct=tuple(heights))
-
-
-def member_tables(layout: StudyLayout, comparison: int, rows: list[dict]
-                  ) -> dict[str, list[dict]]:
-    """``{member label: rows}`` of one comparison value: each member's normal valve and
-    grafts, from the rows at hand (a case not finished yet, damaged or stale is left out)."""
-    by_name = {r["case"]: r for r in rows if r.get("status") not in ("damaged", "stale")}
-    return {member: [by_name[name] for name in cases.values() if name in by_name]
-            for member, cases in layout.member_cases(comparison).items()}
 
 
 def figure_suffix(rec: Recommendation) -> str:
