@@ -169,7 +169,9 @@ def test_case_figures_mark_every_intersection(leaking_case):
     assert result.intersecting_pairs > 0
     assert len(drawn["intersections"]) == result.intersecting_pairs
     found = valve_intersections(drawn["positions"], drawn["valve"])
-    assert np.array_equal(drawn["intersections"], found.points)
+    # the same points (the library's broad phase may list the pairs in another order)
+    assert np.array_equal(np.unique(drawn["intersections"], axis=0),
+                          np.unique(found.points, axis=0))
 
 
 @pytest.mark.slow
