@@ -299,6 +299,10 @@ DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
         "thickness": ("mm", "contact thickness: sheets rest this far apart"),
         "crossing_stiffness": ("mN/mm", "barrier against the mid-surfaces crossing "
                                "(0: the SPEC law alone)"),
+        "guard_distance": ("mm", "reach of the barrier that keeps every surface from "
+                           "passing through another or itself (shorter than thickness)"),
+        "guard_stiffness": ("mN/mm³", "stiffness κ of that barrier: energy κ·b(d) per unit "
+                            "area, b(d) = -(d - reach)² ln(d/reach)"),
     },
     "pseudo_transient": {
         "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),

@@ -22,8 +22,8 @@ _FIXED = {"setting": False}
 class ContactParameters:
     """Parameters of the penalty contact (SPEC §5; :mod:`valve_dolfinx.contact.law`).
 
-    ``stiffness``, ``cutoff``, ``thickness`` and ``crossing_stiffness`` are settings (the
-    configuration's ``[contact]`` table).  The other fields are fixed numbers of the law
+    ``stiffness``, ``cutoff``, ``thickness``, ``crossing_stiffness``, ``guard_distance`` and
+    ``guard_stiffness`` are settings (the configuration's ``[contact]`` table).  The other fields are fixed numbers of the law
     (:data:`~valve_dolfinx.config.NOT_A_SETTING`): every case uses their defaults; the
     tests of the literal SPEC law set others.
 
@@ -53,6 +53,15 @@ class ContactParameters:
         law untouched wherever the mid-surfaces have not crossed -- every equilibrium
         of the normal valve -- and is C¹ (quadratic onset over ``crossing_width``).
         0 is the SPEC law alone.
+    guard_distance
+        Reach ``d̂`` (mm) of the barrier that keeps every surface from passing through
+        another or itself (:mod:`valve_dolfinx.contact.guard`), between mid-surfaces.
+        Shorter than ``thickness``, so that sheets at rest under the law are outside it.
+    guard_stiffness
+        ``κ`` (mN/mm³) of that barrier: a pair at distance ``d`` stores ``κ b(d)`` per unit
+        area, ``b(d) = −(d − d̂)² ln(d/d̂)`` (mm²).  The default pushes back with about
+        120 kPa (eleven times the diastolic pressure) at half the reach and grows without
+        bound closer in.
     penetration_depth
         How far behind a triangle (mm) a node is still treated as penetrating
         it.  Nodes further behind are taken to belong to the other side of the
@@ -86,6 +95,8 @@ class ContactParameters:
     cutoff: float = 0.1
     thickness: float = 0.25
     crossing_stiffness: float = 1000.0
+    guard_distance: float = 0.1
+    guard_stiffness: float = 1000.0
     penetration_depth: float = field(default=0.3, metadata=_FIXED)
     blend_distance: float = field(default=0.05, metadata=_FIXED)
     taper: float = field(default=0.5, metadata=_FIXED)
@@ -95,6 +106,10 @@ class ContactParameters:
     def __post_init__(self) -> None:
         check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
                     hint="0 is the SPEC law alone")
+        check_range("guard_distance", self.guard_distance, 0.0, 1.0, low_open=True, unit="mm",
+                    hint="the guard's reach should be shorter than the contact thickness")
+        check_range("guard_stiffness", self.guard_stiffness, 0.0, 1e7, low_open=True,
+                    unit="mN/mm³")
         check_range("crossing_width", self.crossing_width, 0.0, 1.0, low_open=True, unit="mm")
         check_range("blend_distance", self.blend_distance, 0.0, 1.0, low_open=True, unit="mm")
         check_range("thickness", self.thickness, 0.0, 2.0, unit="mm")

@@ -20,6 +20,11 @@ Driving force.  The law's force scale is the nodal pressure force
   Jacobian has the turning of the contact direction under a fixed ``f_ext``
   but not the change of ``f_ext`` itself with the surface, so Newton
   converges fast but not quite quadratically once contact is active.
+
+Guard.  With a :class:`~valve_dolfinx.contact.guard.SurfaceGuard` the hook also adds the
+guard's barrier (its gradient to the residual, its Hessian to the Jacobian) in the rows of
+the nodes this rank owns that no Dirichlet condition holds, and :func:`cut_to_free_fraction`
+shortens every Newton update to the part along which no surface meets another.
 """
 
 from __future__ import annotations
@@ -30,9 +35,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
+from valve_dolfinx.contact.guard import SurfaceGuard
 from valve_dolfinx.solvers.nodal import NodalCoupling, pressure_nodal_forces
 
-__all__ = ["ContactHook"]
+__all__ = ["ContactHook", "cut_to_free_fraction"]
 
 log = logging.getLogger(__name__)
 
@@ -61,12 +67,16 @@ class ContactHook:
 
     def __init__(self, coupling: NodalCoupling, models: Sequence, pressure_triangles: np.ndarray,
                  pressure: dolfinx.fem.Constant, pressure_side: float, *,
-                 lag_driving_force: bool = True, fixed_nodes: np.ndarray | None = None):
+                 lag_driving_force: bool = True, fixed_nodes: np.ndarray | None = None,
+                 guard: SurfaceGuard | None = None):
         self.coupling = coupling
+        self.guard = guard
         # nodes held by Dirichlet conditions (the attachment) are never contacting nodes;
         # their triangles still are contact surfaces
         fixed = np.empty(0, dtype=np.int64) if fixed_nodes is None else np.asarray(fixed_nodes)
         self.contact_nodes = np.setdiff1d(coupling.owned_nodes, fixed)
+        self._guard_rows = np.zeros(coupling.num_nodes, dtype=bool)
+        self._guard_rows[self.contact_nodes] = True
         self.lag_driving_force = bool(lag_driving_force)
         self.models = list(models)
         self.triangles = np.asarray(pressure_triangles, dtype=np.int64)
@@ -97,18 +107,33 @@ class ContactHook:
         self._key, self._pressure_key, self._has_jacobian = x, p, jacobian
         return self._results
 
+    def _guard_gradient(self, state: dolfinx.fem.Function) -> np.ndarray | None:
+        """The guard's energy gradient at ``state`` in this rank's rows (zero elsewhere)."""
+        if self.guard is None:
+            return None
+        gradient = self.guard.gradient(self.coupling.positions(state))
+        if gradient is None:
+            return None
+        return np.where(self._guard_rows[:, None], gradient, 0.0)
+
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
         for result in self._evaluate(state, jacobian=False):
             self.coupling.add_forces(b, result.forces, scale=-1.0)
+        gradient = self._guard_gradient(state)
+        if gradient is not None:
+            self.coupling.add_forces(b, gradient)
 
     def _merged_blocks(self, state: dolfinx.fem.Function) -> list[tuple]:
         """Each model's Jacobian blocks at ``state``, summed per (row, column) node pair
         (:meth:`NodalCoupling.merge_blocks`)."""
         results = self._evaluate(state, jacobian=True)
         if self._merged is None or self._merged[0] is not results:
-            self._merged = (results, [self.coupling.merge_blocks(r.jac_rows, r.jac_cols,
-                                                                 r.jac_blocks)
-                                      for r in results])
+            merged = [self.coupling.merge_blocks(r.jac_rows, r.jac_cols, -r.jac_blocks)
+                      for r in results]
+            if self.guard is not None:  # (summed per node pair by the library already)
+                merged.append(self.guard.hessian_blocks(self.coupling.positions(state),
+                                                        self._guard_rows))
+            self._merged = (results, merged)
         return self._merged[1]
 
     def jacobian_couplings(self, state: dolfinx.fem.Function) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +145,7 @@ class ContactHook:
 
     def add_jacobian(self, state: dolfinx.fem.Function, A: PETSc.Mat) -> None:
         for rows, cols, blocks in self._merged_blocks(state):
-            self.coupling.add_merged_blocks(A, rows, cols, blocks, scale=-1.0)
+            self.coupling.add_merged_blocks(A, rows, cols, blocks)
 
     def accept_state(self, state: dolfinx.fem.Function) -> None:
         """Record an accepted (time/load) step: sides and driving forces come from it."""
@@ -137,7 +162,10 @@ class ContactHook:
         """(N, 3) total contact force on every node (summed over ranks), e.g. for output."""
         local = sum(r.forces for r in self._evaluate(state, jacobian=False))
         if isinstance(local, int):
-            return np.zeros((self.coupling.num_nodes, 3))
+            local = np.zeros((self.coupling.num_nodes, 3))
+        gradient = self._guard_gradient(state)
+        if gradient is not None:
+            local = local - gradient
         return self.coupling.comm.allreduce(local, op=MPI.SUM)
 
     def diagnostics(self) -> dict:
@@ -154,7 +182,31 @@ class ContactHook:
         pen = max((r.max_penetration for r in self._results), default=0.0)
         force = sum(r.total_force for r in self._results)
         crossing = max((r.max_crossing for r in self._results), default=0.0)
-        return {"contacts": comm.allreduce(n, op=MPI.SUM),
-                "max_penetration_mm": comm.allreduce(crossing, op=MPI.MAX),
-                "max_layer_overlap_mm": comm.allreduce(pen, op=MPI.MAX),
-                "contact_force_mN": comm.allreduce(force, op=MPI.SUM)}
+        out = {"contacts": comm.allreduce(n, op=MPI.SUM),
+               "max_penetration_mm": comm.allreduce(crossing, op=MPI.MAX),
+               "max_layer_overlap_mm": comm.allreduce(pen, op=MPI.MAX),
+               "contact_force_mN": comm.allreduce(force, op=MPI.SUM)}
+        if self.guard is not None and self._key is not None:  # (every rank has every pair)
+            pairs = self.guard.pairs(self._key)
+            out["guard_pairs"] = pairs.count
+            out["guard_min_distance_mm"] = pairs.min_distance
+        return out
+
+    def free_fraction(self, x: PETSc.Vec, y: PETSc.Vec) -> float:
+        """Largest fraction of the Newton update ``x → x − y`` along which no surface meets
+        another (1 without a guard); the same number on every rank."""
+        if self.guard is None:
+            return 1.0
+        start = self.coupling.reference_positions + self.coupling.vector_displacements(x)
+        end = start - self.coupling.vector_displacements(y)
+        return self.coupling.comm.allreduce(self.guard.free_fraction(start, end), op=MPI.MIN)
+
+
+def cut_to_free_fraction(hooks: Sequence, x: PETSc.Vec, y: PETSc.Vec) -> float:
+    """Scale the Newton update ``y`` (the step is ``x − y``) to the fraction of it along
+    which no guarded surface meets another; the fraction applied."""
+    fraction = min((hook.free_fraction(x, y) for hook in hooks
+                    if hasattr(hook, "free_fraction")), default=1.0)
+    if fraction < 1.0:
+        y.scale(fraction)
+    return fraction

@@ -48,6 +48,7 @@ from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual, owned_bc_dofs
 from valve_dolfinx.solvers.callbacks import CallbackGuard
+from valve_dolfinx.solvers.contact_hook import cut_to_free_fraction
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
 from valve_dolfinx.solvers.report import DynamicsReport
@@ -304,8 +305,14 @@ class DampedDynamicsSolver:
             arr[:, 3:] = 1e30  # velocities are not error-controlled
         ts.setTolerances(rtol=0.0, atol=atol)
         ts.setFromOptions()
+        ts.getSNES().setLineSearchPreCheck(guard.wrap(self._cut_update))
         ts.setPostStep(guard.wrap(self._post_step))
         return ts
+
+    def _cut_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """Line-search pre-check: no Newton update carries a surface through another
+        (:func:`~valve_dolfinx.solvers.contact_hook.cut_to_free_fraction`)."""
+        cut_to_free_fraction(self.hooks, x, y)
 
     def _post_step(self, ts: PETSc.TS) -> None:
         p = self.params

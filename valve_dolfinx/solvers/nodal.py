@@ -144,6 +144,13 @@ class NodalCoupling:
         """(N, 3) current nodal positions x₀ + u on every rank."""
         return self.reference_positions + self.displacements(state)
 
+    def vector_displacements(self, vec: PETSc.Vec) -> np.ndarray:
+        """(N, 3) nodal values (the layout's column components) of a PETSc vector of the
+        state space, such as a Newton update, on every rank."""
+        bs, off = self.layout.block_size, self.layout.col_offset
+        blocks = vec.array_r.reshape(-1, bs)
+        return self._allgather_nodal(blocks[self._owned_local_block, off:off + 3])
+
     # --- scatter ----------------------------------------------------------------
     def add_forces(self, b: PETSc.Vec, forces: np.ndarray, scale: float = 1.0) -> None:
         """b[row(node, i)] += scale·forces[node, i] for the non-zero rows of ``forces`` (N, 3).

@@ -72,6 +72,7 @@ from valve_dolfinx.solvers.callbacks import (
     NewtonCycleStop,
     NewtonReversalDamping,
 )
+from valve_dolfinx.solvers.contact_hook import cut_to_free_fraction
 from valve_dolfinx.solvers.nodal import BlockPattern, NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
@@ -253,12 +254,14 @@ class PseudoTransientSolver:
 
     def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
         """Line-search pre-check: scale the Newton update so that no node moves further
-        than :data:`NEWTON_MOTION_MM`, then damp it if it reverses the previous one
-        (:data:`NEWTON_REVERSAL_DAMPING`)."""
+        than :data:`NEWTON_MOTION_MM`, damp it if it reverses the previous one
+        (:data:`NEWTON_REVERSAL_DAMPING`), and cut it to the part along which no surface
+        meets another (:func:`~valve_dolfinx.solvers.contact_hook.cut_to_free_fraction`)."""
         motion = self._largest_node_motion(y.array_r)
         if motion > NEWTON_MOTION_MM:
             y.scale(NEWTON_MOTION_MM / motion)
         self._reversals(self._snes.getIterationNumber(), y)
+        cut_to_free_fraction(self.hooks, x, y)
 
     def _largest_node_motion(self, owned: np.ndarray) -> float:
         local = owned.reshape(-1, 3)
