@@ -280,19 +280,15 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
                                        config.pseudo_transient, hooks=hooks, watch_nodes=watch)
         if start is not None:  # contact sides and driving forces of the start
-            for hook in solver.hooks:
-                accept = getattr(hook, "accept_state", None)
-                if accept is not None:
-                    accept(model.u)
+            solver.accept_state()
         report = solver.solve(progress=progress)
         report.start = _start_record(start)
-        state = model.u
     else:
         stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
         solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
                                       config.dynamics, hooks=hooks)
         report = solver.solve(progress=progress)
-        state = solver.U
+    state = solver.state
     hook = solver.hooks[0]
     positions = solver.coupling.positions(state)
     forces = hook.contact_forces(state)
