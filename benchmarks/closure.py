@@ -20,8 +20,11 @@ memory is the subprocess's ``ru_maxrss`` after the run.  The speed targets check
 (warm run, one core): normal valve <= 30 s, each graft case <= 60 s, contact <= 25 % of the
 solve.
 
+The figures of every run go to ``benchmarks/results/closure.csv`` and the tables drawn from
+them to ``closure.md`` (``--tables-only`` redraws them from the CSV).
+
 Run: ``.venv/bin/python benchmarks/closure.py`` (``--mesh-size 1.6 --cases normal`` for a
-quick look; ``--json FILE`` keeps the measured figures).
+quick look; ``--json FILE`` keeps the measured figures with each run's solver timings).
 """
 
 from __future__ import annotations
@@ -38,12 +41,14 @@ from cases import (
     add_common_arguments,
     case_config,
     case_label,
-    cell,
     parse_arguments,
     parse_case,
     report,
     run_worker,
 )
+
+# benchmarks/result_tables.py, beside this script
+from result_tables import Column, Table, add_table_options, cell, markdown_table
 
 CASES = ("normal", "W0/H0", "W27/H0", "W21/H27")
 #: rows of the table: (label, key of a run's figures, format)
@@ -161,27 +166,54 @@ def run_in_subprocess(case, args) -> list[dict]:
         raise RuntimeError(f"{case_label(case)}: {error}") from error
 
 
-def print_tables(measured: dict[str, list[dict]]) -> None:
+FIELDS = ("case", "run", "mesh_size_mm", *(key for _, key, _ in ROWS), "reason")
+
+
+def draw(rows: list[dict]) -> str:
+    """A column per case's first ("cold") run and median warm run, a row per figure; below,
+    the speed targets."""
+    runs: dict[str, list[dict]] = {}
+    for row in rows:
+        runs.setdefault(row["case"], []).append(row)
     columns = {}
-    for label, runs in measured.items():
-        warm = sorted(runs[1:], key=lambda r: r["total_s"])
-        columns[f"{label} cold"] = runs[0]
+    for label, mine in runs.items():
+        mine = sorted(mine, key=lambda r: r["run"])
+        warm = sorted(mine[1:], key=lambda r: r["total_s"])
+        columns[f"{label} cold"] = mine[0]
         if warm:
             columns[f"{label} warm"] = warm[(len(warm) - 1) // 2]
-    print(f"{'':<24}" + "".join(f"{name:>15}" for name in columns))
-    for label, key, fmt in ROWS:
-        print(f"{label:<24}" + "".join(f"{cell(run.get(key, 0.0), fmt):>15}"
-                                       for run in columns.values()))
-    print(f"\n{'target (warm run, one core)':<40} {'measured':>10}  result")
-    for label, runs in measured.items():
-        run = columns.get(f"{label} warm", runs[0])
+    figures = [{"figure": label, **{name: run.get(key) for name, run in columns.items()}}
+               for label, key, _ in ROWS]
+    formats = {label: fmt for label, _, fmt in ROWS}
+    table = [Column("", "figure", text=True)] + [
+        Column(name, lambda r, name=name: _shown(r[name], formats[r["figure"]]))
+        for name in columns]
+    checks = []
+    for label in runs:
+        run = columns.get(f"{label} warm", columns[f"{label} cold"])
         limit = 30.0 if label == "normal" else 60.0
-        checks = [(f"{label}: whole run <= {limit:g} s", run["total_s"], limit, "s"),
-                  (f"{label}: contact <= 25 % of the solve", run["contact_pct"], 25.0, "%")]
-        for text, value, bound, unit in checks:
+        for text, value, bound, unit in (
+                (f"{label}: whole run <= {limit:g} s", run["total_s"], limit, "s"),
+                (f"{label}: contact <= 25 % of the solve", run["contact_pct"], 25.0, "%")):
             verdict = "PASS" if value <= bound and run["converged"] else "MISS"
-            note = "" if run["converged"] else f" (not converged: {run['reason'][:60]})"
-            print(f"{text:<40} {value:>8.1f} {unit}  {verdict}{note}")
+            note = "" if run["converged"] else f" (not converged: {run['reason'] or ''})"
+            checks.append({"target": text, "measured": f"{value:.1f} {unit}",
+                           "result": verdict + note})
+    mesh = rows[0]["mesh_size_mm"] if rows else None
+    return "\n".join([
+        f"Mesh {mesh:g} mm, one process per case, {max(r['run'] for r in rows)} runs each.\n",
+        markdown_table(table, figures),
+        "Targets (warm run, one core):\n",
+        markdown_table([Column("target", "target", text=True), Column("measured", "measured"),
+                        Column("result", "result", text=True)], checks)])
+
+
+def _shown(value, fmt: str) -> str:
+    """A figure as the table shows it (text, counts and booleans as they are)."""
+    return cell(value, "" if fmt in ("s", "d") else fmt)
+
+
+TABLE = Table("closure", ".venv/bin/python benchmarks/closure.py", FIELDS, draw)
 
 
 def main(argv=None) -> int:
@@ -190,7 +222,11 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=2, help="runs per case and process")
     parser.add_argument("--user-cache", action="store_true",
                         help="compile into the user's FFCx cache instead of an empty one")
+    add_table_options(parser)
     args = parse_arguments(parser, argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return 0
     if args.worker:
         report(worker(args.cases[0], args.mesh_size, args.repeat, args.user_cache))
         return 0
@@ -200,8 +236,9 @@ def main(argv=None) -> int:
         print(f"{case_label(case)}: " + ", ".join(f"{r['total_s']:.1f} s"
                                                  for r in measured[case_label(case)]),
               file=sys.stderr, flush=True)
-    print(f"mesh {args.mesh_size:g} mm, one process per case, {args.repeat} runs each\n")
-    print_tables(measured)
+    rows = [{**run, "case": label, "run": k, "mesh_size_mm": args.mesh_size}
+            for label, runs in measured.items() for k, run in enumerate(runs, start=1)]
+    print(TABLE.at(args.results).write(rows).read_text())
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f, indent=1)

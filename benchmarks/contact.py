@@ -25,7 +25,10 @@ growth exponent ``α`` of ``time ∝ N^α`` fitted by least squares over the siz
 (N log N between 2k and 128k is α ≈ 1.1).  The load average of the machine is
 printed before and after, since other work on a shared machine slows the runs.
 
-Run: ``.venv/bin/python benchmarks/contact.py`` (single-threaded; prints tables).
+The figures go to ``benchmarks/results/contact.csv`` (a row per surface and series) and the
+tables drawn from them to ``contact.md`` (``--tables-only`` redraws them from the CSV).
+
+Run: ``.venv/bin/python benchmarks/contact.py`` (single-threaded).
 """
 
 from __future__ import annotations
@@ -40,6 +43,9 @@ import time  # noqa: E402
 import tracemalloc  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+# benchmarks/result_tables.py, beside this script
+from result_tables import Column, Table, add_table_options, markdown_table  # noqa: E402
 
 from valve_dolfinx.contact import ContactParameters, SurfaceContact, candidate_pairs  # noqa: E402
 
@@ -123,38 +129,58 @@ def measure(cells: int, length: float, repeats: int) -> dict[str, float]:
             "peak": peak / 2**20, **best}
 
 
+#: the measured figures of one surface (see :func:`measure`)
+FIGURES = ("triangles", "nodes", "aabb", "t_aabb", "prism", "active", "detection", "forces",
+           "detect+forces", "jacobian", "total", "cpu detect+forces", "cpu total", "blocks",
+           "peak")
+#: the two series: refinement of one surface, and a growing surface at one mesh size
+SERIES = {"refine": "Refinement: 3 sheets of {length:.1f} mm, gap {gap} mm over half the width "
+                    "(target: detection + forces <= 0.1 s at 32k triangles)",
+          "grow": "Fixed mesh size {spacing:.3f} mm, growing area (algorithmic scaling)"}
+COLUMNS = [Column("triangles", "triangles", ","), Column("nodes", "nodes", ","),
+           Column("AABB pairs", "aabb", ","), Column("AABB s", "t_aabb", ".4f"),
+           Column("prism pairs", "prism", ","), Column("active", "active", ","),
+           Column("detect s", "detection", ".4f"), Column("forces s", "forces", ".4f"),
+           Column("det+f s", "detect+forces", ".4f"),
+           Column("µs/tri", lambda r: 1e6 * r["detect+forces"] / r["triangles"], ".2f"),
+           Column("Jacob. s", "jacobian", ".4f"), Column("total s", "total", ".4f"),
+           Column("CPU d+f", "cpu detect+forces", ".4f"), Column("CPU tot", "cpu total", ".4f"),
+           Column("blocks", "blocks", ","), Column("peak MiB", "peak", ".1f")]
+
+
 def growth_exponent(rows: list[dict[str, float]], key: str) -> float:
     """Least-squares slope of log(rows[key]) against log(triangles)."""
     n = np.log([r["triangles"] for r in rows])
     return float(np.polyfit(n, np.log([r[key] for r in rows]), 1)[0])
 
 
-def print_table(title: str, rows: list[dict[str, float]]) -> None:
-    print(f"\n{title}")
-    head = (f"{'triangles':>9} {'nodes':>6} {'AABB pairs':>10} {'AABB s':>7} {'prism pairs':>11} "
-            f"{'active':>6} {'detect s':>8} {'forces s':>8} {'det+f s':>7} {'µs/tri':>6} "
-            f"{'Jacob. s':>8} {'total s':>7} {'CPU d+f':>7} {'CPU tot':>7} {'blocks':>8} "
-            f"{'peak MiB':>8}")
-    print(head)
-    print("-" * len(head))
-    for r in rows:
-        print(f"{r['triangles']:>9d} {r['nodes']:>6d} {r['aabb']:>10d} {r['t_aabb']:>7.4f} "
-              f"{r['prism']:>11d} {r['active']:>6d} {r['detection']:>8.4f} {r['forces']:>8.4f} "
-              f"{r['detect+forces']:>7.4f} {1e6 * r['detect+forces'] / r['triangles']:>6.2f} "
-              f"{r['jacobian']:>8.4f} {r['total']:>7.4f} {r['cpu detect+forces']:>7.4f} "
-              f"{r['cpu total']:>7.4f} {r['blocks']:>8d} {r['peak']:>8.1f}")
-    for small, large in zip(rows[:-1], rows[1:], strict=True):
-        ratio = large["triangles"] / small["triangles"]
-        nlogn = ratio * np.log(large["triangles"]) / np.log(small["triangles"])
-        print(f"  {small['triangles']:>6d} → {large['triangles']:>6d} triangles: detection + "
-              f"forces ×{large['detect+forces'] / small['detect+forces']:.2f}, total "
-              f"×{large['total'] / small['total']:.2f} (N log N: ×{nlogn:.2f}, prism pairs "
-              f"×{large['prism'] / small['prism']:.2f})")
-    print(f"  fitted growth exponent α (time ∝ N^α): detection + forces "
-          f"{growth_exponent(rows, 'detect+forces'):.2f}, total "
-          f"{growth_exponent(rows, 'total'):.2f}, prism pairs "
-          f"{growth_exponent(rows, 'prism'):.2f}, "
-          f"Jacobian blocks {growth_exponent(rows, 'blocks'):.2f}")
+def draw(rows: list[dict]) -> str:
+    """Per series its table, the growth from one size to the next and the fitted exponents;
+    the machine's load before and after."""
+    parts = [f"Before: {rows[0]['load_before']}; after: {rows[0]['load_after']}.\n"]
+    for series in dict.fromkeys(r["series"] for r in rows):
+        mine = [r for r in rows if r["series"] == series]
+        parts += [f"{mine[0]['title']}:\n", markdown_table(COLUMNS, mine)]
+        lines = []
+        for small, large in zip(mine[:-1], mine[1:], strict=True):
+            ratio = large["triangles"] / small["triangles"]
+            nlogn = ratio * np.log(large["triangles"]) / np.log(small["triangles"])
+            lines.append(f"- {small['triangles']} → {large['triangles']} triangles: detection "
+                         f"+ forces ×{large['detect+forces'] / small['detect+forces']:.2f}, "
+                         f"total ×{large['total'] / small['total']:.2f} (N log N: "
+                         f"×{nlogn:.2f}, prism pairs ×{large['prism'] / small['prism']:.2f})")
+        if len(mine) > 1:
+            lines.append(f"- fitted growth exponent α (time ∝ N^α): detection + forces "
+                         f"{growth_exponent(mine, 'detect+forces'):.2f}, total "
+                         f"{growth_exponent(mine, 'total'):.2f}, prism pairs "
+                         f"{growth_exponent(mine, 'prism'):.2f}, Jacobian blocks "
+                         f"{growth_exponent(mine, 'blocks'):.2f}")
+        parts.append("\n".join(lines) + "\n")
+    return "\n".join(parts)
+
+
+TABLE = Table("contact", ".venv/bin/python benchmarks/contact.py",
+              ("series", "title", *FIGURES, "load_before", "load_after"), draw)
 
 
 def load_average() -> str:
@@ -167,17 +193,26 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sizes", type=int, nargs="+", default=[2_000, 8_000, 32_000, 128_000],
                         help="approximate numbers of triangles")
+    add_table_options(parser)
     args = parser.parse_args()
-    print(f"before: {load_average()}")
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return
+    before = load_average()
     length = float(np.sqrt(700.0 / 3.0))
-    refine = [measure(round(np.sqrt(m / 6)), length, args.repeats) for m in args.sizes]
-    print_table(f"Refinement: 3 sheets of {length:.1f} mm, gap {GAP} mm over half the width "
-                f"(target: detection + forces <= 0.1 s at 32k triangles)", refine)
     spacing = length / round(np.sqrt(32_000 / 6))
-    grow = [measure(c, c * spacing, args.repeats)
-            for c in (round(np.sqrt(m / 6)) for m in args.sizes)]
-    print_table(f"Fixed mesh size {spacing:.3f} mm, growing area (algorithmic scaling)", grow)
-    print(f"after: {load_average()}")
+    rows = []
+    for size in args.sizes:
+        cells = round(np.sqrt(size / 6))
+        rows.append({"series": "refine", **measure(cells, length, args.repeats)})
+    for size in args.sizes:
+        cells = round(np.sqrt(size / 6))
+        rows.append({"series": "grow", **measure(cells, cells * spacing, args.repeats)})
+    after = load_average()
+    for row in rows:
+        row.update(title=SERIES[row["series"]].format(length=length, gap=GAP, spacing=spacing),
+                   load_before=before, load_after=after)
+    print(TABLE.at(args.results).write(rows).read_text())
 
 
 if __name__ == "__main__":

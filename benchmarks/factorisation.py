@@ -9,6 +9,9 @@ pattern) and the median of ``--repeat`` refactorisations with a solve (what it p
 otherwise), with MUMPS's operation count and largest front.  One BLAS thread, as the
 closure benchmarks measure a case on one core.
 
+The figures go to ``benchmarks/results/factorisation.csv`` and the table drawn from them to
+``factorisation.md`` (``--tables-only`` redraws it from the CSV).
+
 Run: ``.venv/bin/python benchmarks/factorisation.py`` (``--case W21/H27``, ``--mesh-size``).
 """
 
@@ -21,7 +24,8 @@ import tempfile
 import time
 
 # benchmarks/cases.py, beside this script
-from cases import SINGLE_THREAD, case_config, parse_arguments, parse_case
+from cases import SINGLE_THREAD, case_config, case_label, parse_arguments, parse_case
+from result_tables import Column, Table, add_table_options, markdown_table
 
 # one BLAS thread, set before NumPy and PETSc load their libraries
 for _name, _value in SINGLE_THREAD.items():
@@ -95,25 +99,50 @@ def factorise(A, options: dict, repeat: int) -> tuple[float, float, float | None
     return first, statistics.median(times), flops, front
 
 
+FIELDS = ("case", "mesh_size_mm", "converged", "unknowns", "stored_entries", "matrix_type",
+          "factorisation", "first_s", "again_s", "flops", "largest_front")
+
+
+def draw(rows: list[dict]) -> str:
+    """The Jacobian, then a line per factorisation: first, again with a solve, MUMPS's
+    operation count and largest front."""
+    first = rows[0]
+    columns = [Column("factorisation", "factorisation", text=True),
+               Column("first (ms)", lambda r: 1e3 * r["first_s"], ".1f"),
+               Column("again + solve (ms)", lambda r: 1e3 * r["again_s"], ".1f"),
+               Column("Mflop", lambda r: None if r["flops"] is None else r["flops"] / 1e6, ".0f"),
+               Column("largest front", "largest_front")]
+    return (f"The last Jacobian of {first['case']} at {first['mesh_size_mm']:g} mm (converged: "
+            f"{first['converged']}): {first['unknowns']} unknowns, {first['stored_entries']} "
+            f"stored entries, type {first['matrix_type']}.\n\n" + markdown_table(columns, rows))
+
+
+TABLE = Table("factorisation", ".venv/bin/python benchmarks/factorisation.py", FIELDS, draw)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--case", type=parse_case, default=None,
                         help="'normal' (default) or W<w>/H<h>")
     parser.add_argument("--mesh-size", type=float, default=None, help="mesh size (mm)")
     parser.add_argument("--repeat", type=int, default=10, help="refactorisations timed")
+    add_table_options(parser)
     args = parse_arguments(parser, argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return
     A, result = last_jacobian(args.case, args.mesh_size)
     info = A.getInfo()
-    print(f"Jacobian of the loaded valve (converged: {result.converged}): "
-          f"{A.getSize()[0]} unknowns, {info['nz_used']:.0f} stored entries, "
-          f"type {A.getType()}\n")
-    print(f"{'factorisation':42s} {'first (ms)':>11s} {'again + solve (ms)':>19s} "
-          f"{'Mflop':>7s} {'largest front':>14s}")
+    jacobian = {"case": case_label(args.case), "mesh_size_mm": args.mesh_size,
+                "converged": result.converged, "unknowns": A.getSize()[0],
+                "stored_entries": int(info["nz_used"]), "matrix_type": A.getType()}
+    rows = []
     for label, options in CHOICES:
         first, again, flops, front = factorise(A, options, args.repeat)
-        print(f"{label:42s} {first * 1e3:11.1f} {again * 1e3:19.1f} "
-              f"{'' if flops is None else f'{flops / 1e6:.0f}':>7s} "
-              f"{'' if front is None else front:>14}")
+        rows.append({**jacobian, "factorisation": label, "first_s": first, "again_s": again,
+                     "flops": flops, "largest_front": front})
+        print(f"{label}: {first * 1e3:.1f} ms, again {again * 1e3:.1f} ms", flush=True)
+    print(TABLE.at(args.results).write(rows).read_text())
 
 
 if __name__ == "__main__":

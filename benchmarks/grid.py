@@ -9,7 +9,8 @@ then a Markdown table in grid order: converged, static residual (mN), penetratio
 the intersecting edge–triangle pairs of the loaded surface (``intersecting_pairs``), figure
 of merit (``min_coaptation_height_mm``), raw minimum, central height, coaptation area,
 regurgitant orifice area, root diameter, Newton iterations, wall time (s, the case's own, output
-included).  ``--out FILE.md`` and ``--json FILE`` keep the table and the figures.
+included).  The figures go to ``benchmarks/results/grid.csv`` and the table drawn from them to
+``grid.md`` (``--tables-only`` redraws it from the CSV); ``--json FILE`` keeps them as JSON.
 
 Run: ``.venv/bin/python benchmarks/grid.py --jobs 2`` (the whole grid on 2 cores;
 ``--mesh-size 1.6 --cases normal,W21/H27`` for a quick look; ``--wall-time-limit S`` is
@@ -24,7 +25,6 @@ import os
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from pathlib import Path
 
 # benchmarks/cases.py, beside this script
 from cases import (
@@ -36,6 +36,7 @@ from cases import (
     report,
     run_worker,
 )
+from result_tables import Column, Table, add_table_options, markdown_table
 
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
 
@@ -88,14 +89,24 @@ def run_in_subprocess(case, args, root: str) -> dict:
                 "solver_message": str(error)}
 
 
-def markdown(rows: list[dict]) -> str:
-    lines = ["| case | " + " | ".join(h for h, _, _ in COLUMNS) + " |",
-             "|---|" + "---:|" * len(COLUMNS)]
-    lines += [f"| {r['case']} | " + " | ".join(cell(r.get(k), f) for _, k, f in COLUMNS) + " |"
-              for r in rows]
-    failed = [r for r in rows if not r.get("converged")]
-    lines += [""] + [f"- {r['case']}: {r.get('solver_message', '')}" for r in failed]
-    return "\n".join(lines).rstrip() + "\n"
+def draw(rows: list[dict]) -> str:
+    """A line per case in grid order, the failures' messages, and the run: how many
+    converged, the elapsed time against the sum of the cases' wall times."""
+    cases = [r for r in rows if r["kind"] == "case"]
+    run = next(r for r in rows if r["kind"] == "run")
+    columns = [Column("case", "case", text=True)] + [
+        Column(h, k, "" if f in ("s", "d") else f) for h, k, f in COLUMNS]
+    failed = [f"- {r['case']}: {r['solver_message'] or ''}" for r in cases if not r["converged"]]
+    total = sum(float(r["wall_time_s"] or 0.0) for r in cases)
+    summary = (f"{sum(bool(r['converged']) for r in cases)} of {len(cases)} cases converged; "
+               f"mesh {run['mesh_size_mm']:g} mm, {run['jobs']} at a time; elapsed "
+               f"{run['elapsed_s']:.0f} s, sum of case wall times {total:.0f} s.\n")
+    return "\n".join([markdown_table(columns, cases), *(["\n".join(failed) + "\n"] if failed
+                                                         else []), summary])
+
+
+TABLE = Table("grid", ".venv/bin/python benchmarks/grid.py --jobs 2",
+              ("kind", "case", *FIELDS, "mesh_size_mm", "jobs", "elapsed_s"), draw)
 
 
 def main(argv=None) -> int:
@@ -104,8 +115,11 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="cases run at a time")
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
     parser.add_argument("--keep", type=str, default=None, help="keep the case folders in DIR")
-    parser.add_argument("--out", type=Path, default=None, help="write the table to FILE.md")
+    add_table_options(parser)
     args = parse_arguments(parser, argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return 0
     if args.worker:
         report(worker(args.cases[0], args.mesh_size, args.wall_time_limit, args.keep))
         return 0
@@ -123,15 +137,10 @@ def main(argv=None) -> int:
             print(f"{row['case']:<8} {figures}{failure}", flush=True)
     elapsed = time.perf_counter() - t0
     scratch.cleanup()
-    ordered = [rows[case] for case in args.cases]
-    table = markdown(ordered)
-    total = sum(float(r.get("wall_time_s") or 0.0) for r in ordered)
-    summary = (f"{sum(bool(r.get('converged')) for r in ordered)} of {len(ordered)} cases "
-               f"converged; mesh {args.mesh_size:g} mm, {args.jobs} at a time; "
-               f"elapsed {elapsed:.0f} s, sum of case wall times {total:.0f} s\n")
-    print("\n" + table + "\n" + summary, end="")
-    if args.out:
-        args.out.write_text(table + "\n" + summary)
+    ordered = [{"kind": "case", **rows[case]} for case in args.cases]
+    run = {"kind": "run", "mesh_size_mm": args.mesh_size, "jobs": args.jobs,
+           "elapsed_s": elapsed}
+    print("\n" + TABLE.at(args.results).write([*ordered, run]).read_text(), end="")
     if args.json:
         args.json.write_text(json.dumps({"mesh_size_mm": args.mesh_size, "jobs": args.jobs,
                                          "elapsed_s": elapsed, "cases": ordered}, indent=1))

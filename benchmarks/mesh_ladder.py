@@ -12,6 +12,9 @@ from the finest over the cells sound at both (what
 :func:`valve_dolfinx.sizing.resolution.discretisation_error_mm` takes as the discretisation
 error).  The study resumes: a rerun with the same ``--out`` computes only what is missing.
 
+The table, drawn from the CSV, goes beside it (``mesh_ladder.md``; ``--tables-only``
+redraws it from the CSV without running the study).
+
 Run on the 2-core machine: ``.venv/bin/mpirun -n 2 .venv/bin/python benchmarks/mesh_ladder.py``
 (the default grid at three meshes: many hours).  A smoke test:
 ``--meshes 2.0 1.6 --widths 14 --heights 13 --out /tmp/ladder --table /tmp/ladder.csv``.
@@ -21,16 +24,17 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import time
 from pathlib import Path
+
+# benchmarks/result_tables.py, beside this script
+from result_tables import Column, Table, add_tables_only, cell, markdown_table
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.sizing.resolution import MESH_LADDER, discretisation_error_mm
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.runner import run_study
-from valve_dolfinx.study.table import write_csv
 
 #: the ladder's mesh sizes (mm), coarsest (the default) first
 MESHES_MM = (0.8, 0.6, 0.45)
@@ -57,29 +61,51 @@ def _cell(row: dict) -> str:
     return "normal" if w is None else f"W{w:g}/H{row['graft_height_pct']:g}"
 
 
-def print_ladder(rows: list[dict], meshes: list[float]) -> None:
-    """Markdown: per cell and path, the height at each mesh, and its change from the finest."""
+def draw_ladder(rows: list[dict], table: Path) -> str:
+    """Markdown: per cell and path, the minimum coaptation height at each mesh (``not
+    sound`` where the case did not converge or is not competent) and its change from the
+    finest mesh; below, each mesh's discretisation error as the sizing answer reads it from
+    ``table`` (:func:`discretisation_error_mm`)."""
+    meshes = sorted({row["mesh_size_mm"] for row in rows}, reverse=True)
     finest = min(meshes)
-    heights: dict[tuple, dict[float, str]] = {}
-    values: dict[tuple, dict[float, float]] = {}
-    for row in rows:
-        key = (_cell(row), row["path"] if not isinstance(row["path"], list) else 1)
-        y = row["min_coaptation_height_mm"]
-        sound = row["converged"] and row["competent"]
-        text = "–" if y is None else f"{y:.2f}" + ("" if sound else " (not sound)")
-        heights.setdefault(key, {})[row["mesh_size_mm"]] = text
-        if sound and y is not None:
-            values.setdefault(key, {})[row["mesh_size_mm"]] = y
     others = [m for m in meshes if m != finest]
-    print("| cell | path | " + " | ".join(f"{m:g} mm" for m in meshes) + " | "
-          + " | ".join(f"{m:g} − {finest:g}" for m in others) + " |")
-    print("|---|---:|" + "---:|" * (len(meshes) + len(others)))
-    for key in sorted(heights, key=lambda k: (k[0] != "normal", k)):
-        change = [values.get(key, {}).get(m, math.nan) - values.get(key, {}).get(finest, math.nan)
-                  for m in others]
-        print(f"| {key[0]} | {key[1]} | "
-              + " | ".join(heights[key].get(m, "–") for m in meshes) + " | "
-              + " | ".join("–" if math.isnan(c) else f"{c:+.2f}" for c in change) + " |")
+    cells: dict[tuple, dict] = {}
+    for row in rows:
+        key = (_cell(row), row["path"])
+        y = row["min_coaptation_height_mm"]
+        sound = bool(row["converged"] and row["competent"]) and y is not None
+        order = (-1.0, -1.0) if row["graft_width_pct"] is None else (
+            row["graft_width_pct"], row["graft_height_pct"])
+        entry = cells.setdefault(key, {"cell": key[0], "path": key[1], "order": order})
+        entry[row["mesh_size_mm"]] = cell(y, ".2f") + ("" if sound or y is None
+                                                       else " (not sound)")
+        if sound:
+            entry[("sound", row["mesh_size_mm"])] = y
+    for entry in cells.values():
+        for m in others:
+            a, b = entry.get(("sound", m)), entry.get(("sound", finest))
+            entry[("change", m)] = None if a is None or b is None else a - b
+    columns = [Column("cell", "cell", text=True), Column("path", "path")]
+    columns += [Column(f"{m:g} mm", lambda e, m=m: e.get(m)) for m in meshes]
+    columns += [Column(f"{m:g} − {finest:g}", lambda e, m=m: e[("change", m)], "+.2f")
+                for m in others]
+    ordered = sorted(cells.values(), key=lambda e: (e["order"], e["path"]))
+    grafts = len({k[0] for k in cells} - {"normal"})
+    lines = [f"Mesh ladder: the normal valve and {grafts} graft{'s' * (grafts != 1)} at "
+             f"{', '.join(f'{m:g}' for m in meshes)} mm; minimum coaptation height (mm), "
+             f"{sum(row['wall_time_s'] or 0.0 for row in rows):.0f} s of case time.\n",
+             markdown_table(columns, ordered)]
+    for mesh in others:
+        error, source = discretisation_error_mm(table, mesh)
+        lines.append(f"Discretisation error at {mesh:g} mm: "
+                     f"{'not measured' if error is None else f'{error:.3f} mm'} ({source}).\n")
+    return "\n".join(lines)
+
+
+def ladder_table(path: Path) -> Table:
+    """The ladder's table, its CSV at ``path`` (what the sizing answer reads)."""
+    return Table(path.stem, ".venv/bin/mpirun -n 2 .venv/bin/python benchmarks/mesh_ladder.py",
+                 COLUMNS, lambda rows: draw_ladder(rows, path), folder=path.parent)
 
 
 def main(argv=None) -> int:
@@ -93,7 +119,11 @@ def main(argv=None) -> int:
     parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
     parser.add_argument("--paths", type=int, default=1, help="numerical paths per cell")
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="S")
+    add_tables_only(parser)
     args = parser.parse_args(argv)
+    if args.tables_only:
+        print(ladder_table(args.table).redraw())
+        return 0
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
@@ -107,18 +137,9 @@ def main(argv=None) -> int:
     if comm.rank != 0:
         return 0
     rows = ladder_rows(outcome.report.rows)
-    args.table.parent.mkdir(parents=True, exist_ok=True)
-    write_csv(args.table, rows, COLUMNS)
-    print(f"\nMesh ladder: the normal valve and {len(args.widths)} × {len(args.heights)} grafts "
-          f"at {', '.join(f'{m:g}' for m in args.meshes)} mm, {args.paths} path(s), "
-          f"{comm.size} MPI rank(s); minimum coaptation height (mm).\n")
-    print_ladder(rows, sorted(args.meshes, reverse=True))
-    finest = min(args.meshes)
-    for mesh in (m for m in args.meshes if m != finest):
-        error, source = discretisation_error_mm(args.table, mesh)
-        shown = "not measured" if error is None else f"{error:.3f} mm"
-        print(f"\ndiscretisation error at {mesh:g} mm: {shown} ({source})")
-    print(f"\nwall time {time.perf_counter() - t0:.0f} s -> {args.out}; table {args.table}")
+    written = ladder_table(args.table).write(rows)
+    print(written.read_text())
+    print(f"wall time {time.perf_counter() - t0:.0f} s -> {args.out}; table {args.table}")
     return 0
 
 

@@ -18,6 +18,10 @@ a *failed* one is retried from the start of its step with half the Δτ.  Printe
   ``m``, the accepted solves such a cut would have ended (each one changes the path) and the
   failed-solve iterations it would have saved.
 
+The figures go to ``benchmarks/results/newton_solves.csv`` (a row per case, per Newton solve
+with its residual norms, and per PETSc event) and what is drawn from them to
+``newton_solves.md`` (``--tables-only`` redraws it from the CSV).
+
 Run: ``.venv/bin/python benchmarks/newton_solves.py [--cases normal,W21/H27]``.
 """
 
@@ -42,6 +46,7 @@ from cases import (
     report,
     run_worker,
 )
+from result_tables import Column, Table, add_table_options, cell, markdown_table
 
 CASES = ("W21/H27", "W21/H40")
 #: PETSc events whose time is charged to a factorised Jacobian
@@ -104,36 +109,45 @@ def stall_lengths(norms: list[float]) -> list[int]:
     return out
 
 
-def print_case(label: str, figures: dict) -> None:
-    solves = figures["solves"]
-    accepted = [s["norms"] for s in solves if s["accepted"]]
-    failed = [s["norms"] for s in solves if not s["accepted"]]
+FIELDS = ("kind", "case", "converged", "figure_of_merit_mm", "accepted", "norms", "event",
+          "count", "seconds")
+
+
+def case_rows(label: str, figures: dict) -> list[dict]:
+    """The CSV rows of one case: the case, each Newton solve (its residual norms separated
+    by spaces), each PETSc event."""
+    rows = [{"kind": "case", "case": label, "converged": figures["converged"],
+             "figure_of_merit_mm": figures["figure_of_merit_mm"]}]
+    rows += [{"kind": "solve", "case": label, "accepted": solve["accepted"],
+              "norms": " ".join(repr(float(n)) for n in solve["norms"])}
+             for solve in figures["solves"]]
+    rows += [{"kind": "event", "case": label, "event": name, **event}
+             for name, event in figures["events"].items()]
+    return rows
+
+
+def _norms(row: dict) -> list[float]:
+    return [float(n) for n in str(row["norms"]).split()]
+
+
+def draw_case(rows: list[dict]) -> str:
+    """One case: its Newton solves and their cost, how the accepted solves converged, how
+    the failed ones progressed, and the stall test."""
+    head = next(r for r in rows if r["kind"] == "case")
+    accepted = [_norms(r) for r in rows if r["kind"] == "solve" and r["accepted"]]
+    failed = [_norms(r) for r in rows if r["kind"] == "solve" and not r["accepted"]]
     iterations = [sum(len(n) - 1 for n in group) for group in (accepted, failed)]
-    events = figures["events"]
-    factorisations = events["MatLUFactorNum"]["count"]
-    print(f"\n{label}: converged {figures['converged']}, figure of merit "
-          f"{figures['figure_of_merit_mm']:.3f} mm")
-    print(f"  Newton solves: {len(accepted)} accepted ({iterations[0]} iterations), "
-          f"{len(failed)} failed ({iterations[1]} iterations); {factorisations} "
-          f"factorisations")
-    total = sum(e["seconds"] for e in events.values())
-    for name, event in events.items():
-        print(f"  {name:<18} {event['count']:6d} calls {event['seconds']:8.2f} s "
-              f"{1e3 * event['seconds'] / max(factorisations, 1):7.2f} ms per factorisation")
-    print(f"  {'all of these':<18} {'':12} {total:8.2f} s "
-          f"{1e3 * total / max(factorisations, 1):7.2f} ms per factorisation")
+    events = [r for r in rows if r["kind"] == "event"]
+    factorisations = next((e["count"] for e in events if e["event"] == "MatLUFactorNum"), 0)
+    per = max(factorisations, 1)
+    total = sum(e["seconds"] for e in events)
+    events.append({"event": "all of these", "count": None, "seconds": total})
     converged_at = Counter(len(n) - 1 for n in accepted)
-    print("  accepted solves by iterations: "
-          + ", ".join(f"{k}: {converged_at[k]}" for k in sorted(converged_at)))
     worst = [max((n[k] / n[0] for n in accepted if len(n) > k + 1), default=float("nan"))
              for k in range(1, 10)]
-    print("  largest r_k/r_0 of an accepted solve still running, k = 1..9: "
-          + ", ".join(f"{w:.3g}" for w in worst))
     typical = [statistics.median([n[k] / n[0] for n in failed if len(n) > k] or [math.nan])
                for k in range(1, 10)]
-    print("  median r_k/r_0 of the failed solves, k = 1..9: "
-          + ", ".join(f"{t:.3g}" for t in typical))
-    print(f"  {'stall m':>8} {'accepted solves cut':>20} {'failed-solve iterations saved':>30}")
+    stalls = []
     for m in STALLS:
         cut = sum(any(s >= m for s in stall_lengths(n)[:-1]) for n in accepted)
         saved = 0
@@ -142,13 +156,43 @@ def print_case(label: str, figures: dict) -> None:
                          None)
             if first is not None:
                 saved += len(norms) - 1 - first
-        print(f"  {m:>8} {cut:>20} {saved:>30}")
+        stalls.append({"m": m, "cut": cut, "saved": saved})
+    return "\n".join([
+        f"### {head['case']}: converged {cell(head['converged'])}, figure of merit "
+        f"{head['figure_of_merit_mm']:.3f} mm\n",
+        f"Newton solves: {len(accepted)} accepted ({iterations[0]} iterations), {len(failed)} "
+        f"failed ({iterations[1]} iterations); {factorisations} factorisations.\n",
+        markdown_table([Column("PETSc event", "event", text=True), Column("calls", "count"),
+                        Column("s", "seconds", ".2f"),
+                        Column("ms per factorisation", lambda e: 1e3 * e["seconds"] / per,
+                               ".2f")], events),
+        "- accepted solves by iterations: "
+        + ", ".join(f"{k}: {converged_at[k]}" for k in sorted(converged_at)),
+        "- largest r_k/r_0 of an accepted solve still running, k = 1..9: "
+        + ", ".join(f"{w:.3g}" for w in worst),
+        "- median r_k/r_0 of the failed solves, k = 1..9: "
+        + ", ".join(f"{t:.3g}" for t in typical) + "\n",
+        markdown_table([Column("stall m", "m"), Column("accepted solves cut", "cut"),
+                        Column("failed-solve iterations saved", "saved")], stalls)])
+
+
+def draw(rows: list[dict]) -> str:
+    """Every case, in the CSV's order."""
+    cases = dict.fromkeys(r["case"] for r in rows)
+    return "\n".join(draw_case([r for r in rows if r["case"] == case]) for case in cases)
+
+
+TABLE = Table("newton_solves", ".venv/bin/python benchmarks/newton_solves.py", FIELDS, draw)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_common_arguments(parser, [parse_case(c) for c in CASES])
+    add_table_options(parser)
     args = parse_arguments(parser, argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return 0
     if args.worker:
         report(worker(args.cases[0], args.mesh_size))
         return 0
@@ -160,7 +204,8 @@ def main(argv=None) -> int:
         except WorkerFailed as error:
             print(f"{label}: {error}", file=sys.stderr)
             return 1
-        print_case(label, measured[label])
+    rows = [row for label, figures in measured.items() for row in case_rows(label, figures)]
+    print(TABLE.at(args.results).write(rows).read_text())
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f)

@@ -11,7 +11,10 @@ Then prints, per choice, a Markdown table per cell (the minimum coaptation heigh
 whether it leaks, has leaflets that intersect or did not converge; the worst case over the
 members with ``--paths 2``), a row of the recommendation each value gives, and the wall
 time of its study.  Every study is resumable: a rerun with the same ``--out`` computes only what is
-missing.
+missing.  The figures go to ``benchmarks/results/sensitivity.csv`` (a row per choice, value and
+cell, one per value for the normal valve's target and for the recommendation, and one per
+study for its wall time) and the tables drawn from them to ``sensitivity.md``
+(``--tables-only`` redraws them from the CSV).
 
 Run on the 2-core machine: ``.venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sensitivity.py``
 (the default grid and mesh: hours).  A smoke test: ``--mesh-size 2.0 --widths 0 14
@@ -27,6 +30,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+# benchmarks/result_tables.py, beside this script
+from result_tables import Table, add_table_options, cell
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import CaseConfig, get_dotted
@@ -81,23 +87,55 @@ def _values(choice: Choice, mesh: float) -> tuple[tuple, Any]:
     return values, default
 
 
-def _cell(cell) -> str:
+FIELDS = ("kind", "choice", "key", "title", "value", "cell", "worst_height_mm", "members",
+          "leaking", "largest_orifice_mm2", "intersecting", "most_intersecting_pairs",
+          "not_converged", "target_low_mm", "target_high_mm", "answer", "wall_s")
+
+
+def _value_text(value) -> str:
+    """A value as ``value_text`` wrote it (the CSV reads ``true`` back as a bool)."""
+    return ("true" if value else "false") if isinstance(value, bool) else str(value)
+
+
+def choice_rows(choice: Choice, columns: list[tuple[Any, Any]], wall_s: float) -> list[dict]:
+    """The CSV rows of one choice: ``columns`` are ``(value, Recommendation)``."""
+    head = {"choice": choice.name, "key": choice.key, "title": choice.title}
+    rows = []
+    for value, rec in columns:
+        at = {**head, "value": value_text(value)}
+        targets = sorted(t for t in rec.targets_mm.values() if t is not None)
+        rows.append({**at, "kind": "normal", "cell": "normal",
+                     "target_low_mm": targets[0] if targets else None,
+                     "target_high_mm": targets[-1] if targets else None})
+        for c in rec.cells:
+            rows.append({**at, "kind": "cell", "cell": c.label,
+                         "worst_height_mm": c.worst_height_mm, "members": len(c.members),
+                         "leaking": len(c.leaking), "largest_orifice_mm2": c.largest_orifice_mm2,
+                         "intersecting": len(c.intersecting),
+                         "most_intersecting_pairs": c.most_intersecting_pairs,
+                         "not_converged": len(c.unconverged) + len(c.missing)})
+        rows.append({**at, "kind": "answer", "answer": _answer(rec)})
+    rows.append({**head, "kind": "wall", "wall_s": wall_s})
+    return rows
+
+
+def _entry(row: dict) -> str:
     """One table entry: the worst-case height and what went wrong in any member."""
-    if cell is None or cell.worst_height_mm is None:
+    if row is None or row["worst_height_mm"] is None:
         return "–"
-    text = f"{cell.worst_height_mm:.2f}"
-    n = len(cell.members)
+    text = f"{row['worst_height_mm']:.2f}"
+    n = row["members"]
 
-    def members(which: list) -> str:
-        return "" if n == 1 else f" in {len(which)}/{n}"
+    def members(count: int) -> str:
+        return "" if n == 1 else f" in {count}/{n}"
 
-    if cell.leaking:
-        text += f", leaks {cell.largest_orifice_mm2:.2g} mm²" + members(cell.leaking)
-    if cell.intersecting:
-        text += (f", intersects ({cell.most_intersecting_pairs} edge–triangle pairs)"
-                 + members(cell.intersecting))
-    if cell.unconverged or cell.missing:
-        text += ", not converged" + members(cell.unconverged + cell.missing)
+    if row["leaking"]:
+        text += f", leaks {row['largest_orifice_mm2']:.2g} mm²" + members(row["leaking"])
+    if row["intersecting"]:
+        text += (f", intersects ({row['most_intersecting_pairs']} edge–triangle pairs)"
+                 + members(row["intersecting"]))
+    if row["not_converged"]:
+        text += ", not converged" + members(row["not_converged"])
     return text
 
 
@@ -109,24 +147,39 @@ def _answer(rec) -> str:
     return "none"
 
 
-def _normal(rec) -> str:
-    targets = sorted(t for t in rec.targets_mm.values() if t is not None)
-    if not targets:
+def _target(row: dict) -> str:
+    low, high = row["target_low_mm"], row["target_high_mm"]
+    if low is None:
         return "–"
-    return f"{targets[0]:.2f}" if len(targets) == 1 else f"{targets[0]:.2f}–{targets[-1]:.2f}"
+    return cell(low, ".2f") if low == high else f"{low:.2f}–{high:.2f}"
 
 
-def print_table(choice: Choice, columns: list[tuple[Any, Any]]) -> None:
-    """The Markdown table of one choice: ``columns`` are ``(value, Recommendation)``."""
-    print(f"\n### {choice.title} (`{choice.key}`)\n")
-    print("| cell | " + " | ".join(value_text(v) for v, _ in columns) + " |")
-    print("|---|" + "---:|" * len(columns))
-    print("| normal | " + " | ".join(_normal(rec) for _, rec in columns) + " |")
-    for cell in columns[0][1].cells:
-        entries = [_cell(rec.cell(cell.label)) for _, rec in columns]
-        print(f"| {cell.label} | " + " | ".join(entries) + " |")
-    print("| **recommended** (margin mm) | " + " | ".join(_answer(rec) for _, rec in columns)
-          + " |")
+def draw(rows: list[dict]) -> str:
+    """Per choice, in the CSV's order: a Markdown table per cell (a column per value), the
+    normal valve's height (the target), the recommendation with its margin, and the wall
+    time of the choice's study."""
+    parts = []
+    for name in dict.fromkeys(row["choice"] for row in rows):
+        mine = [row for row in rows if row["choice"] == name]
+        values = list(dict.fromkeys(_value_text(r["value"]) for r in mine if r["kind"] != "wall"))
+        at = {(r["kind"], r["cell"], _value_text(r["value"])): r for r in mine}
+        cells = list(dict.fromkeys(r["cell"] for r in mine if r["kind"] == "cell"))
+        lines = [f"### {mine[0]['title']} (`{mine[0]['key']}`)\n",
+                 "| cell | " + " | ".join(values) + " |", "|---|" + "---:|" * len(values),
+                 "| normal | " + " | ".join(_target(at["normal", "normal", v]) for v in values)
+                 + " |"]
+        lines += [f"| {c} | " + " | ".join(_entry(at.get(("cell", c, v))) for v in values)
+                  + " |" for c in cells]
+        lines.append("| **recommended** (margin mm) | "
+                     + " | ".join(at["answer", None, v]["answer"] for v in values) + " |")
+        wall = next((r["wall_s"] for r in mine if r["kind"] == "wall"), None)
+        lines.append(f"\nWall time of its study: {cell(wall, '.0f')} s.\n")
+        parts.append("\n".join(lines))
+    return "\n".join(parts)
+
+
+TABLE = Table("sensitivity", ".venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sensitivity.py",
+              FIELDS, draw)
 
 
 def _run(settings: StudySettings, out: Path, comm) -> tuple[Any, float]:
@@ -144,7 +197,11 @@ def main(argv=None) -> int:
     parser.add_argument("--choices", nargs="+", default=[c.name for c in CHOICES],
                         choices=[c.name for c in CHOICES], metavar="NAME",
                         help=f"a subset of {', '.join(c.name for c in CHOICES)}")
+    add_table_options(parser)
     args = parser.parse_args(argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return 0
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
@@ -168,15 +225,15 @@ def main(argv=None) -> int:
             tables.append((choice, [(v, by_value[v]) for v in values]))
     if comm.rank != 0:
         return 0
+    rows = [row for choice, columns in tables
+            for row in choice_rows(choice, columns, walls[choice.name])]
     print(f"\nStudies of {len(args.widths)} × {len(args.heights)} grafts and the normal valve, "
           f"mesh {args.mesh_size:g} mm, {args.paths} path(s), {comm.size} MPI rank(s); "
           "minimum coaptation height in mm (the worst member's with several paths), the "
-          "recommendation with its margin (mm).")
-    for choice, columns in tables:
-        print_table(choice, columns)
-        print(f"\nwall time of its study: {walls[choice.name]:.0f} s")
+          "recommendation with its margin (mm).\n")
+    print(TABLE.at(args.results).write(rows).read_text())
     total = time.perf_counter() - t0
-    print(f"\nwall time: defaults {walls['defaults']:.0f} s; all studies {total:.0f} s "
+    print(f"wall time: defaults {walls['defaults']:.0f} s; all studies {total:.0f} s "
           f"({total / 3600:.2f} h) -> {args.out}")
     return 0
 

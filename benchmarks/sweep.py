@@ -7,9 +7,13 @@ ran it is not tracked; the wall time is the case's own) and the totals: the
 sweep's elapsed wall time, the sum of the case times and the speed-up the MPI
 rank groups gave over running the cases one after the other.
 
+The figures go to ``benchmarks/results/sweep.csv`` (a row per case and one for the sweep) and
+the table drawn from them to ``sweep.md`` (``--tables-only`` redraws it from the CSV).
+
 Run on the 2-core machine: ``.venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sweep.py``
 (``--mesh-size 1.6`` for a quick coarse figure; ``--widths``/``--heights`` for a
-smaller grid; ``--out DIR`` to keep the cases, default ``results/benchmark_sweep/<time>``).
+smaller grid; ``--out DIR`` to keep the cases, default ``results/benchmark_sweep/<time>``;
+``--results DIR`` for the table of such a run).
 """
 
 from __future__ import annotations
@@ -19,10 +23,51 @@ import logging
 import time
 from pathlib import Path
 
+# benchmarks/result_tables.py, beside this script
+from result_tables import Column, Table, add_table_options, markdown_table
+
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
 from valve_dolfinx.study.runner import run_study
+
+#: a case's figures in the table
+CASE_FIELDS = ("case", "converged", "competent", "min_coaptation_height_mm",
+               "central_coaptation_height_mm", "regurgitant_orifice_area_mm2",
+               "intersecting_pairs", "newton_iterations", "rejected_newton_iterations",
+               "n_cells", "mesh_size_mm", "wall_time_s", "reason")
+FIELDS = ("kind", *CASE_FIELDS, "computed", "ranks", "ranks_per_case", "elapsed_s")
+
+
+def draw(rows: list[dict]) -> str:
+    """A line per case; below, the sweep: cases, how many converged, its elapsed time
+    against the sum of the cases' wall times."""
+    cases = [r for r in rows if r["kind"] == "case"]
+    sweep = next(r for r in rows if r["kind"] == "sweep")
+    columns = [Column("case", "case", text=True), Column("converged", "converged"),
+               Column("competent", "competent"),
+               Column("min height (mm)", "min_coaptation_height_mm", ".2f"),
+               Column("central (mm)", "central_coaptation_height_mm", ".2f"),
+               Column("orifice (mm²)", "regurgitant_orifice_area_mm2", ".2f"),
+               Column("intersecting pairs", "intersecting_pairs"),
+               Column("Newton", lambda r: None if r["newton_iterations"] is None else
+                      f"{r['newton_iterations']} + {r['rejected_newton_iterations'] or 0}"),
+               Column("cells", "n_cells", ","), Column("wall (s)", "wall_time_s", ".0f"),
+               Column("reason", lambda r: (r["reason"] or "")[:60], text=True)]
+    total = sum(float(r["wall_time_s"] or 0.0) for r in cases)
+    elapsed = sweep["elapsed_s"]
+    mesh = cases[0]["mesh_size_mm"] if cases else None
+    return (markdown_table(columns, cases) + "\n"
+            f"{len(cases)} cases ({sweep['computed']} computed in this run), "
+            f"{sum(bool(r['converged']) for r in cases)} converged; mesh {mesh} mm; "
+            f"{sweep['ranks']} MPI ranks, {sweep['ranks_per_case']} per case.  Sweep wall "
+            f"time {elapsed:.0f} s; sum of case wall times {total:.0f} s "
+            f"(×{total / max(elapsed, 1e-9):.2f} from the rank groups).  Newton: iterations "
+            "in accepted steps + in failed solves.\n")
+
+
+TABLE = Table("sweep", ".venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sweep.py", FIELDS,
+              draw)
 
 
 def main(argv=None) -> int:
@@ -32,7 +77,11 @@ def main(argv=None) -> int:
     parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
     parser.add_argument("--out", type=Path, default=None)
+    add_table_options(parser)
     args = parser.parse_args(argv)
+    if args.tables_only:
+        print(TABLE.at(args.results).redraw())
+        return 0
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
@@ -47,23 +96,12 @@ def main(argv=None) -> int:
         outcome = run_study(settings, out, comm)
     if comm.rank != 0:
         return 0
-    rows = outcome.report.rows
-    print(f"{'case':<8} {'conv':>5} {'sealed':>6} {'min h':>6} {'centr':>6} {'cells':>6} "
-          f"{'wall s':>7}  reason")
-    for r in rows:
-        def f(key, fmt=".2f", row=r):
-            v = row.get(key)
-            return format(v, fmt) if isinstance(v, int | float) else "-"
-        print(f"{r['case']:<8} {str(r['converged']):>5} {str(r['competent']):>6} "
-              f"{f('min_coaptation_height_mm'):>6} {f('central_coaptation_height_mm'):>6} "
-              f"{f('n_cells', 'd'):>6} {f('wall_time_s', '.0f'):>7}  {(r['reason'] or '')[:60]}")
-    total = sum(float(r.get("wall_time_s") or 0.0) for r in rows)
-    converged = sum(bool(r["converged"]) for r in rows)
-    print(f"\n{len(rows)} cases ({len(outcome.computed)} computed now), {converged} converged; "
-          f"mesh {rows[0].get('mesh_size_mm') if rows else '-'} mm; {comm.size} MPI ranks, "
-          f"{settings.ranks_per_case} per case")
-    print(f"sweep wall time {outcome.elapsed_s:.0f} s; sum of case wall times {total:.0f} s "
-          f"(x{total / max(outcome.elapsed_s, 1e-9):.2f} from the rank groups) -> {out}")
+    rows = [{"kind": "case", **{key: row.get(key) for key in CASE_FIELDS}}
+            for row in outcome.report.rows]
+    rows.append({"kind": "sweep", "computed": len(outcome.computed), "ranks": comm.size,
+                 "ranks_per_case": settings.ranks_per_case, "elapsed_s": outcome.elapsed_s})
+    print(TABLE.at(args.results).write(rows).read_text())
+    print(f"-> {out}")
     return 0
 
 

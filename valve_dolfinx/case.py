@@ -30,6 +30,7 @@ from valve_dolfinx._version import __version__, git_commit
 from valve_dolfinx.analysis.intersection import Intersections, valve_intersections
 from valve_dolfinx.config import CaseConfig, case_name
 from valve_dolfinx.contact import PlaneContact, SurfaceContact
+from valve_dolfinx.contact.guard import SurfaceGuard
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.geometry.distributed import ValveDomain, create_valve_domain
 from valve_dolfinx.geometry.symmetry import mirror_leaflet, single_leaflet, symmetry_planes
@@ -249,8 +250,45 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         _set_free_positions(model, transfer_positions(start.valve, start.positions, valve),
                             valve.attachment_nodes())
     watch = [int(p.nodes[p.midline_free_edge_node]) for p in valve.leaflets]
+    guard = SurfaceGuard(valve.points, valve.cells, distance=config.contact.guard_distance,
+                         stiffness=config.contact.guard_stiffness)
+    hooks = _closure_hooks(valve, model, config, guard)
+    if config.solver == "ptc":
+        solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
+                                       config.pseudo_transient, hooks=hooks, watch_nodes=watch)
+        refused = None
+        if start is not None and guard.intersects(solver.coupling.positions(model.u)):
+            # a barrier holds a crossing it starts with: start unloaded instead
+            refused = f"{start.origin}, carried onto this mesh, has intersecting leaflets"
+            log.warning("not starting from %s; starting from the unloaded valve", refused)
+            model.u.x.array[:] = u0.x.array
+            start = None
+        if start is not None:  # contact sides and driving forces of the start
+            solver.accept_state()
+        report = solver.solve(progress=progress)
+        report.start = _start_record(start)
+        if refused:
+            report.start["refused"] = refused
+    else:
+        stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
+        solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
+                                      config.dynamics, hooks=hooks)
+        report = solver.solve(progress=progress)
+    state = solver.state
+    hook = solver.hooks[0]
+    positions = solver.coupling.positions(state)
+    forces = hook.contact_forces(state)
+    display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
+    return CaseState(domain, model, root, positions, forces, report, display=display)
 
-    def make_hook(coupling):
+
+def _closure_hooks(valve: ValveMesh, model: MembraneModel, config: CaseConfig,
+                   guard: SurfaceGuard) -> list:
+    """The solver's hook factories: contact (the leaflets on each other and themselves, and
+    on the symmetry planes of the symmetric reference, with ``guard`` keeping every surface
+    from passing through another), and bending where a leaflet has a bending rigidity."""
+
+    def make_contact(coupling):
         models = []
         if config.symmetric_reference:
             points, normals = symmetry_planes()
@@ -270,34 +308,14 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         # takes it from the current positions
         return ContactHook(coupling, models, valve.cells, model.pressure, VALVE_PRESSURE_SIDE,
                            lag_driving_force=config.solver == "ptc",
-                           fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]))
+                           fixed_nodes=np.unique(valve.edges[valve.edge_tags == ATTACHMENT]),
+                           guard=guard)
 
-    hooks = [make_hook]
+    hooks = [make_contact]
     if any(leaflet_rigidity(config, patch.is_graft) > 0 for patch in valve.leaflets):
         K = leaflet_bending_matrix(valve, config)
         hooks.append(lambda coupling: BendingHook(coupling, K))
-    if config.solver == "ptc":
-        solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
-                                       config.pseudo_transient, hooks=hooks, watch_nodes=watch)
-        if start is not None:  # contact sides and driving forces of the start
-            for hook in solver.hooks:
-                accept = getattr(hook, "accept_state", None)
-                if accept is not None:
-                    accept(model.u)
-        report = solver.solve(progress=progress)
-        report.start = _start_record(start)
-        state = model.u
-    else:
-        stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
-        solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
-                                      config.dynamics, hooks=hooks)
-        report = solver.solve(progress=progress)
-        state = solver.U
-    hook = solver.hooks[0]
-    positions = solver.coupling.positions(state)
-    forces = hook.contact_forces(state)
-    display = mirror_leaflet(valve, positions) if config.symmetric_reference else None
-    return CaseState(domain, model, root, positions, forces, report, display=display)
+    return hooks
 
 
 def _start_record(start: ValveState | None) -> dict:
@@ -332,35 +350,9 @@ def analyse_case(state: CaseState, config: CaseConfig):
     return result
 
 
-def run_case(config: CaseConfig, out_dir: str | Path | None = None,
-             comm: MPI.Comm = MPI.COMM_WORLD, progress: Callable[[dict], None] | None = None,
-             figures: bool = True, fields_output: bool = True,
-             valve: ValveMesh | None = None, start: ValveState | None = None) -> CaseResult:
-    """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
-
-    ``start``: a loaded valve to start the closure from (see :func:`solve_case`).
-
-    ``valve``: the valve mesh to close (rank 0's is used), e.g. one read with
-    :func:`~valve_dolfinx.geometry.valve.load_valve_mesh`; by default it is built from
-    ``config.geometry``.  A valve given must be ``config.geometry``'s (the result records
-    it): otherwise ParameterError names what differs, before any computation.
-
-    ``out_dir`` is checked before any computation
-    (:func:`~valve_dolfinx.io.check_output_folder`), and a ``result.json`` already in it
-    is removed, so that an unfinished run never leaves an older result beside its files.
-
-    Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
-    hash), ``config.toml`` (the configuration that ran, reloadable with
-    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.vtu``
-    (displacement, stress, strain, contact force) and the PNG figures.
-    """
-    from valve_dolfinx import output
-
-    t0 = time.perf_counter()
+def _analysed_result(config: CaseConfig, state: CaseState, comm: MPI.Comm) -> CaseResult:
+    """Analyse a solved case (coaptation, intersections, competence) into its result."""
     g = config.geometry
-    if out_dir is not None:
-        output.start_case(Path(out_dir), comm)
-    state = solve_case(config, comm, progress, valve=valve, start=start)
     coaptation = analyse_case(state, config)
     state.coaptation = coaptation
     report = state.report
@@ -405,6 +397,39 @@ def run_case(config: CaseConfig, out_dir: str | Path | None = None,
         version=__version__,
         git_commit=git_commit(),
     )
+    return result
+
+
+def run_case(config: CaseConfig, out_dir: str | Path | None = None,
+             comm: MPI.Comm = MPI.COMM_WORLD, progress: Callable[[dict], None] | None = None,
+             figures: bool = True, fields_output: bool = True,
+             valve: ValveMesh | None = None, start: ValveState | None = None) -> CaseResult:
+    """Solve one case and write its outputs to ``out_dir`` (if given); return the result.
+
+    ``start``: a loaded valve to start the closure from (see :func:`solve_case`).
+
+    ``valve``: the valve mesh to close (rank 0's is used), e.g. one read with
+    :func:`~valve_dolfinx.geometry.valve.load_valve_mesh`; by default it is built from
+    ``config.geometry``.  A valve given must be ``config.geometry``'s (the result records
+    it): otherwise ParameterError names what differs, before any computation.
+
+    ``out_dir`` is checked before any computation
+    (:func:`~valve_dolfinx.io.check_output_folder`), and a ``result.json`` already in it
+    is removed, so that an unfinished run never leaves an older result beside its files.
+
+    Files: ``result.json`` (SPEC §7 fields, parameters, versions, the settings
+    hash), ``config.toml`` (the configuration that ran, reloadable with
+    ``valve-dolfinx run --config``), ``history.csv`` (time steps), ``fields.vtu``
+    (displacement, stress, strain, contact force) and the PNG figures.
+    """
+    from valve_dolfinx import output
+
+    t0 = time.perf_counter()
+    g = config.geometry
+    if out_dir is not None:
+        output.start_case(Path(out_dir), comm)
+    state = solve_case(config, comm, progress, valve=valve, start=start)
+    result = _analysed_result(config, state, comm)
     result.wall_time_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     if out_dir is not None:
         output.write_case(Path(out_dir), config, result, state, figures=figures,

@@ -654,7 +654,8 @@ def _fail(err: BaseException, verbose: bool) -> int:
     return code
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line: every command with its options."""
     parser = argparse.ArgumentParser(prog="valve-dolfinx", description=__doc__,
                                      epilog=_EXIT_STATUS,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -668,30 +669,7 @@ def main(argv: list[str] | None = None) -> int:
     _add_geometry_args(p)
     p.set_defaults(func=_cmd_mesh, parser=p)
 
-    p = sub.add_parser("run", help="close one valve under 80 mmHg and analyse its coaptation")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
-    p.add_argument("--symmetric-reference", action="store_true",
-                   help="one leaflet against the two symmetry planes (the normal valve's "
-                   "cheap reference of SPEC §4)")
-    # config.SOLVERS, spelled out: the parser imports nothing of the package
-    p.add_argument("--solver", choices=("ptc", "bdf2"), default=None,
-                   help="pseudo-transient continuation to the static equilibrium (the "
-                   "default), or damped BDF2 dynamics (SPEC §4, the cross-check)")
-    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
-                   help="stop (converged: false, results written) after this wall time "
-                   "(default: the solver's, 900 s)")
-    p.add_argument("--root-diameter", type=float, default=None, metavar="D",
-                   help="prescribe the root diameter at 80 mmHg in mm (a patient's measured "
-                   "root, 10-40 mm) instead of distending the root with its wall law")
-    p.add_argument("--force", action="store_true",
-                   help="recompute even if --out already holds this case's result.json, or "
-                   "overwrite another case's result there")
-    p.add_argument("--mesh", type=Path, default=None, metavar="VALVE.npz",
-                   help="close this valve mesh (written by `valve-dolfinx mesh`) instead of "
-                   "building one; its geometry replaces the configuration's")
-    _add_config_args(p)
-    _add_geometry_args(p)
-    p.set_defaults(func=_cmd_run, parser=p)
+    _add_run_command(sub)
 
     p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
@@ -730,6 +708,39 @@ def main(argv: list[str] | None = None) -> int:
     _add_logging_args(parser, top=True)
     for command in sub.choices.values():
         _add_logging_args(command, top=False)
+    return parser
+
+
+def _add_run_command(sub) -> None:
+    """``valve-dolfinx run``: one case."""
+    p = sub.add_parser("run", help="close one valve under 80 mmHg and analyse its coaptation")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--symmetric-reference", action="store_true",
+                   help="one leaflet against the two symmetry planes (the normal valve's "
+                   "cheap reference of SPEC §4)")
+    # config.SOLVERS, spelled out: the parser imports nothing of the package
+    p.add_argument("--solver", choices=("ptc", "bdf2"), default=None,
+                   help="pseudo-transient continuation to the static equilibrium (the "
+                   "default), or damped BDF2 dynamics (SPEC §4, the cross-check)")
+    p.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS",
+                   help="stop (converged: false, results written) after this wall time "
+                   "(default: the solver's, 900 s)")
+    p.add_argument("--root-diameter", type=float, default=None, metavar="D",
+                   help="prescribe the root diameter at 80 mmHg in mm (a patient's measured "
+                   "root, 10-40 mm) instead of distending the root with its wall law")
+    p.add_argument("--force", action="store_true",
+                   help="recompute even if --out already holds this case's result.json, or "
+                   "overwrite another case's result there")
+    p.add_argument("--mesh", type=Path, default=None, metavar="VALVE.npz",
+                   help="close this valve mesh (written by `valve-dolfinx mesh`) instead of "
+                   "building one; its geometry replaces the configuration's")
+    _add_config_args(p)
+    _add_geometry_args(p)
+    p.set_defaults(func=_cmd_run, parser=p)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
     args = parser.parse_args(argv)
     if args.verbose and args.quiet:
         parser.error("-v/--verbose and -q/--quiet contradict each other: give one")

@@ -23,9 +23,9 @@ class ContactParameters:
     """Parameters of the penalty contact (SPEC §5; :mod:`valve_dolfinx.contact.law`).
 
     ``stiffness``, ``cutoff``, ``thickness``, ``crossing_stiffness``, ``guard_distance`` and
-    ``guard_stiffness`` are settings (the configuration's ``[contact]`` table).  The other fields are fixed numbers of the law
-    (:data:`~valve_dolfinx.config.NOT_A_SETTING`): every case uses their defaults; the
-    tests of the literal SPEC law set others.
+    ``guard_stiffness`` are settings (the configuration's ``[contact]`` table).  The other
+    fields are fixed numbers of the law (:data:`~valve_dolfinx.config.NOT_A_SETTING`):
+    every case uses their defaults; the tests of the literal SPEC law set others.
 
     Attributes
     ----------

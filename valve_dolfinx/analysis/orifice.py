@@ -144,35 +144,14 @@ def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
     centres = origin + (np.arange(n) + 0.5) * pixel
     in_disk = (centres[None, :] ** 2 + centres[:, None] ** 2) <= radius**2
     nl = len(valve.leaflets)
-    cover = np.zeros((nl, n * n), dtype=bool)
-    near = {key: np.full(n * n, np.inf) for key in pair_gaps}
-    for i, patch in enumerate(valve.leaflets):
-        xy = positions[patch.nodes, :2]
-        pix, tri, bary = rasterise_footprint(xy, patch.triangles, origin, pixel, n)
-        cover[i, pix] = True
-        for (a, b), gap in pair_gaps.items():
-            if a == i:
-                sheet_gap = np.einsum("kj,kj->k", bary, gap[patch.triangles[tri]])
-                np.minimum.at(near[a, b], pix, sheet_gap)
-
+    cover, near = _leaflet_cover(positions, valve, pair_gaps, origin, pixel, n)
     covered = cover.any(axis=0).reshape(n, n)
     if covered.any():
         clearance = distance_transform_edt(~covered) * pixel  # to the nearest covered centre
         open_ = in_disk & (clearance > 0.5 * threshold * (1 + 1e-9))
     else:
         open_ = in_disk.copy()
-    def touching(a: int, b: int) -> np.ndarray:
-        return (near[a, b] <= threshold) | (near[b, a] <= threshold)
-
-    channel = np.zeros(n * n, dtype=bool)
-    for a in range(nl):
-        for b in range(a + 1, nl):
-            gap = cover[a] & cover[b] & ~touching(a, b)
-            for c in set(range(nl)) - {a, b}:
-                # a third leaflet in the column that touches both fills the gap between them
-                gap &= ~(cover[c] & touching(a, c) & touching(b, c))
-            channel |= gap
-    channel = channel.reshape(n, n) & in_disk
+    channel = _overlap_channels(cover, near, threshold).reshape(n, n) & in_disk
     flows = None
     dead_end = np.zeros((n, n), dtype=bool)
     if open_.any() or channel.any():
@@ -207,3 +186,42 @@ def orifice_leak_map(positions: np.ndarray, valve: ValveMesh,
         "dead_end_area_mm2": dead_end_area,
     }
     return area, diagnostics
+
+
+def _leaflet_cover(positions: np.ndarray, valve: ValveMesh,
+                   pair_gaps: dict[tuple[int, int], np.ndarray], origin: float, pixel: float,
+                   n: int) -> tuple[np.ndarray, dict[tuple[int, int], np.ndarray]]:
+    """Which pixels each leaflet's projection covers (``(leaflets, n·n)``), and per pair
+    ``(a, b)`` the smallest gap from leaflet ``a`` to ``b`` over each pixel (inf where
+    ``a`` does not cover it)."""
+    cover = np.zeros((len(valve.leaflets), n * n), dtype=bool)
+    near = {key: np.full(n * n, np.inf) for key in pair_gaps}
+    for i, patch in enumerate(valve.leaflets):
+        xy = positions[patch.nodes, :2]
+        pix, tri, bary = rasterise_footprint(xy, patch.triangles, origin, pixel, n)
+        cover[i, pix] = True
+        for (a, b), gap in pair_gaps.items():
+            if a == i:
+                sheet_gap = np.einsum("kj,kj->k", bary, gap[patch.triangles[tri]])
+                np.minimum.at(near[a, b], pix, sheet_gap)
+    return cover, near
+
+
+def _overlap_channels(cover: np.ndarray, near: dict[tuple[int, int], np.ndarray],
+                      threshold: float) -> np.ndarray:
+    """Pixels (``n·n``) where two leaflets overlap without touching (a gap wider than
+    ``threshold`` between them) and no third leaflet touching both fills the gap."""
+    nl = len(cover)
+
+    def touching(a: int, b: int) -> np.ndarray:
+        return (near[a, b] <= threshold) | (near[b, a] <= threshold)
+
+    channel = np.zeros(cover.shape[1], dtype=bool)
+    for a in range(nl):
+        for b in range(a + 1, nl):
+            gap = cover[a] & cover[b] & ~touching(a, b)
+            for c in set(range(nl)) - {a, b}:
+                # a third leaflet in the column that touches both fills the gap between them
+                gap &= ~(cover[c] & touching(a, c) & touching(b, c))
+            channel |= gap
+    return channel

@@ -103,6 +103,21 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
     cutting through triangles, and the central coaptation height does not
     depend on where an unstructured mesh happens to put its nodes.
     """
+    points, triangles, chains = _gmsh_right_half(shape, h, n_commissure)
+    _snap_to_outline(shape, points, chains, n_commissure)
+    points, triangles, chains = _without_unused_nodes(points, triangles, chains)
+    return _mirrored(shape, points, triangles, chains)
+
+
+#: a half mesh's boundary chains, node ids in order: lower edge and free edge from the
+#: midline to the right corner, right commissure and midline from bottom to top
+_Chains = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _gmsh_right_half(shape: LeafletShape, h: float, n_commissure: int
+                     ) -> tuple[np.ndarray, np.ndarray, _Chains]:
+    """Gmsh's mesh of the right half of the outline (Frontal-Delaunay, ``n_commissure``
+    uniform nodes on the commissure): 2-D points, triangles and the boundary chains."""
     import gmsh
 
     gmsh.option.setNumber("General.Terminal", 0)
@@ -145,32 +160,40 @@ def _mesh_with_gmsh(shape: LeafletShape, h: float, n_commissure: int) -> FlatLea
             ids = np.unique(np.array([index[int(t)] for t in node_tags], dtype=np.int64))
             return ids[np.argsort(key(points[ids]))]
 
-        lower_ids = chain(lower, lambda p: p[:, 0])       # midline -> right corner
-        right_ids = chain(right, lambda p: p[:, 1])       # bottom -> top
-        free_ids = chain(free, lambda p: p[:, 0])         # midline -> right corner
-        mid_ids = chain(mid, lambda p: p[:, 1])           # bottom -> top
+        chains = (chain(lower, lambda p: p[:, 0]), chain(right, lambda p: p[:, 1]),
+                  chain(free, lambda p: p[:, 0]), chain(mid, lambda p: p[:, 1]))
     finally:
         gmsh.model.remove()
+    return points, triangles, chains
 
-    # snap boundary nodes exactly onto the analytic outline
-    b = shape.commissure_bottom
+
+def _snap_to_outline(shape: LeafletShape, points: np.ndarray, chains: _Chains,
+                     n_commissure: int) -> None:
+    """Put the boundary nodes exactly onto the analytic outline (in place), the
+    commissure's uniformly."""
+    lower_ids, right_ids, free_ids, mid_ids = chains
     points[lower_ids, 1] = shape.lower_edge(points[lower_ids, 0])
-    points[right_ids, 0] = a
+    points[right_ids, 0] = shape.half_width
     points[mid_ids, 0] = 0.0
     if len(right_ids) != n_commissure:
         raise MeshError(f"Gmsh placed {len(right_ids)} commissure nodes, expected {n_commissure}")
-    points[right_ids, 1] = np.linspace(b, top, n_commissure)
-    points[free_ids, 1] = top
+    points[right_ids, 1] = np.linspace(shape.commissure_bottom, shape.height, n_commissure)
+    points[free_ids, 1] = shape.height
 
-    # drop nodes on no triangle (Gmsh also meshes the spline's control points)
+
+def _without_unused_nodes(points: np.ndarray, triangles: np.ndarray, chains: _Chains
+                          ) -> tuple[np.ndarray, np.ndarray, _Chains]:
+    """Drop the nodes on no triangle (Gmsh also meshes the spline's control points)."""
     used = np.unique(triangles)
     renumber = np.full(len(points), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
-    points, triangles = points[used], renumber[triangles]
-    lower_ids, right_ids, free_ids, mid_ids = (renumber[c] for c in (lower_ids, right_ids,
-                                                                     free_ids, mid_ids))
+    return points[used], renumber[triangles], tuple(renumber[c] for c in chains)
 
-    # mirror: every node off the midline gets an image at -x
+
+def _mirrored(shape: LeafletShape, points: np.ndarray, triangles: np.ndarray,
+              chains: _Chains) -> FlatLeafletMesh:
+    """The whole leaflet: every node of the half mesh off the midline gets an image at -x."""
+    lower_ids, right_ids, free_ids, mid_ids = chains
     n = len(points)
     image = np.full(n, -1, dtype=np.int64)
     off = np.setdiff1d(np.arange(n), mid_ids)

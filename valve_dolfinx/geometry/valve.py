@@ -423,46 +423,13 @@ def build_valve(params: ValveParameters | None = None, **overrides) -> ValveMesh
         params = ValveParameters(**{**params.to_dict(), **overrides})
     native_shape = params.native_shape()
     native = mesh_flat_leaflet(native_shape, params.mesh_size)
-    n_comm = len(native.left)
     flats: list[FlatLeafletMesh] = [native, native, native]
     if params.has_graft:
         flats[GRAFT_POSITION] = mesh_flat_leaflet(params.graft_shape(), params.mesh_size,
-                                                  n_commissure=n_comm)
-
-    d = params.root_diameter
-    local_to_global: list[np.ndarray] = []
-    positions: list[np.ndarray] = []
-    next_id = 0
-    for k, fm in enumerate(flats):
-        ids = np.full(len(fm.points), -1, dtype=np.int64)
-        if k > 0:  # left commissure shared with the previous leaflet's right commissure
-            ids[fm.left] = local_to_global[k - 1][flats[k - 1].right]
-        if k == 2:  # right commissure shared with leaflet 0's left commissure
-            ids[fm.right] = local_to_global[0][flats[0].left]
-        new = ids < 0
-        ids[new] = np.arange(next_id, next_id + new.sum())
-        next_id += int(new.sum())
-        local_to_global.append(ids)
-        centre = 2.0 * math.pi * k / 3.0
-        if params.has_graft and k == GRAFT_POSITION:
-            native_flat, inward = place_graft(fm, native_shape, params.graft_placement,
-                                              params.billow_mm)
-            xyz = wrap_flat(native_flat, centre, d)
-            radial = xyz[:, :2] / np.linalg.norm(xyz[:, :2], axis=1, keepdims=True)
-            xyz[:, :2] -= inward[:, None] * radial
-        else:
-            xyz = wrap_flat(fm.points, centre, d)
-        positions.append(xyz)
-
-    points = np.full((next_id, 3), np.nan)
-    for k, (ids, xyz) in enumerate(zip(local_to_global, positions, strict=True)):
-        shared = ~np.isnan(points[ids, 0])
-        if np.any(shared):
-            gap = np.abs(points[ids[shared]] - xyz[shared]).max()
-            if gap > 1e-9 * d:
-                raise MeshError(f"commissure nodes of leaflet {k} miss their neighbour's by "
-                                f"{gap:.3g} mm; cannot join the leaflets")
-        points[ids[~shared]] = xyz[~shared]
+                                                  n_commissure=len(native.left))
+    local_to_global, num_nodes = _shared_node_ids(flats)
+    positions = [_wrapped_leaflet(fm, k, params, native_shape) for k, fm in enumerate(flats)]
+    points = _joined_points(local_to_global, positions, num_nodes, params.root_diameter)
 
     cells, tags, flat_cells, fibres, patches = [], [], [], [], []
     edges, edge_tags = [], []
@@ -472,13 +439,7 @@ def build_valve(params: ValveParameters | None = None, **overrides) -> ValveMesh
         cells.append(ids[fm.triangles])
         tags.append(np.full(len(fm.triangles), tag, dtype=np.int32))
         flat_cells.append(fm.points[fm.triangles])
-        centroids = fm.points[fm.triangles].mean(axis=1)
-        if is_graft:
-            a = math.radians(params.graft_fibre_angle_deg)
-            fib = np.tile([math.cos(a), math.sin(a)], (len(fm.triangles), 1))
-        else:
-            fib = fm.shape.fibre_direction(centroids[:, 0], centroids[:, 1])
-        fibres.append(fib)
+        fibres.append(_cell_fibres(fm, is_graft, params.graft_fibre_angle_deg))
         be = fm.boundary_edges()
         for key in ("lower", "left", "right"):
             edges.append(ids[be[key]])
@@ -509,3 +470,63 @@ def build_valve(params: ValveParameters | None = None, **overrides) -> ValveMesh
              f", graft W{params.graft_width_pct:g}/H{params.graft_height_pct:g}"
              if params.has_graft else "")
     return valve.validate()
+
+
+def _shared_node_ids(flats: list[FlatLeafletMesh]) -> tuple[list[np.ndarray], int]:
+    """Each leaflet's node ids in the valve, and their count: a leaflet's left commissure
+    is the previous leaflet's right one, and the last leaflet's right commissure the first
+    one's left."""
+    local_to_global: list[np.ndarray] = []
+    next_id = 0
+    for k, fm in enumerate(flats):
+        ids = np.full(len(fm.points), -1, dtype=np.int64)
+        if k > 0:
+            ids[fm.left] = local_to_global[k - 1][flats[k - 1].right]
+        if k == len(flats) - 1:
+            ids[fm.right] = local_to_global[0][flats[0].left]
+        new = ids < 0
+        ids[new] = np.arange(next_id, next_id + new.sum())
+        next_id += int(new.sum())
+        local_to_global.append(ids)
+    return local_to_global, next_id
+
+
+def _wrapped_leaflet(fm: FlatLeafletMesh, k: int, params: ValveParameters,
+                     native_shape: LeafletShape) -> np.ndarray:
+    """``(n, 3)`` positions of leaflet ``k``'s nodes on the root; a graft is placed on the
+    native leaflet's attachment first (:func:`place_graft`)."""
+    centre = 2.0 * math.pi * k / 3.0
+    if not (params.has_graft and k == GRAFT_POSITION):
+        return wrap_flat(fm.points, centre, params.root_diameter)
+    native_flat, inward = place_graft(fm, native_shape, params.graft_placement,
+                                      params.billow_mm)
+    xyz = wrap_flat(native_flat, centre, params.root_diameter)
+    radial = xyz[:, :2] / np.linalg.norm(xyz[:, :2], axis=1, keepdims=True)
+    xyz[:, :2] -= inward[:, None] * radial
+    return xyz
+
+
+def _joined_points(local_to_global: list[np.ndarray], positions: list[np.ndarray],
+                   num_nodes: int, diameter: float) -> np.ndarray:
+    """The valve's ``(num_nodes, 3)`` node positions; a shared commissure node must sit
+    where both its leaflets put it."""
+    points = np.full((num_nodes, 3), np.nan)
+    for k, (ids, xyz) in enumerate(zip(local_to_global, positions, strict=True)):
+        shared = ~np.isnan(points[ids, 0])
+        if np.any(shared):
+            gap = np.abs(points[ids[shared]] - xyz[shared]).max()
+            if gap > 1e-9 * diameter:
+                raise MeshError(f"commissure nodes of leaflet {k} miss their neighbour's by "
+                                f"{gap:.3g} mm; cannot join the leaflets")
+        points[ids[~shared]] = xyz[~shared]
+    return points
+
+
+def _cell_fibres(fm: FlatLeafletMesh, is_graft: bool, graft_angle_deg: float) -> np.ndarray:
+    """``(cells, 2)`` unit fibre directions in the flat chart: the native leaflet's
+    circumferential field, or the graft's one direction."""
+    if is_graft:
+        a = math.radians(graft_angle_deg)
+        return np.tile([math.cos(a), math.sin(a)], (len(fm.triangles), 1))
+    centroids = fm.points[fm.triangles].mean(axis=1)
+    return fm.shape.fibre_direction(centroids[:, 0], centroids[:, 1])

@@ -36,7 +36,6 @@ equilibrium without a physical time scale.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -47,11 +46,11 @@ from valve_dolfinx.exceptions import DegenerateGeometryError
 from valve_dolfinx.geometry.distributed import node_to_dof
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import assemble_jacobian, assemble_residual, owned_bc_dofs
-from valve_dolfinx.solvers.callbacks import CallbackGuard
 from valve_dolfinx.solvers.contact_hook import cut_to_free_fraction
 from valve_dolfinx.solvers.nodal import NodalCoupling, NodalLayout
 from valve_dolfinx.solvers.parameters import DynamicsParameters
 from valve_dolfinx.solvers.report import DynamicsReport
+from valve_dolfinx.solvers.stepping import SteppingSolver
 
 __all__ = ["DampedDynamicsSolver", "STATE_LAYOUT"]
 
@@ -94,12 +93,12 @@ MAX_STEPS = 20000
 NEWTON_MAX_IT = 20
 
 
-class _Stalled(RuntimeError):
-    """Raised from a TS callback to stop a run whose time step fell below the floor."""
-
-
-class DampedDynamicsSolver:
+class DampedDynamicsSolver(SteppingSolver):
     """BDF2 damped dynamics of a :class:`MembraneModel` with hooks (contact) and fixed dofs.
+
+    What it shares with the pseudo-transient continuation (set-up, the run, history,
+    failure reasons) is :class:`~valve_dolfinx.solvers.stepping.SteppingSolver`'s; its
+    ``state`` is ``U = (u, v)``.
 
     Parameters
     ----------
@@ -125,45 +124,39 @@ class DampedDynamicsSolver:
         :class:`NodalCoupling` of the state space.
     """
 
-    _count = 0
+    OPTIONS_PREFIX = "valve_dyn"
+    TITLE = "damped dynamics"
+    TIME, STEP, UNIT = "t", "dt", " s"
 
     def __init__(self, model: MembraneModel, bcs: Sequence[fem.DirichletBC],
                  initial_displacement: fem.Function, target_pressure: float,
                  stiffness: dict[int, float], watch_nodes: Sequence[int],
                  params: DynamicsParameters | None = None,
                  hooks: Sequence[Callable[[NodalCoupling], object]] = ()):
-        self.model = model
-        self.params = params or DynamicsParameters()
-        self.target_pressure = float(target_pressure)
-        mesh = model.domain.mesh
-        self.W = fem.functionspace(mesh, ("Lagrange", 1, (6,)))
-        self.U = fem.Function(self.W, name="state")
-        self.Udot = fem.Function(self.W, name="state_rate")
-        self.shift = fem.Constant(mesh, PETSc.ScalarType(0.0))
-        self.coupling = NodalCoupling(self.W, STATE_LAYOUT)
-        self.hooks = [make(self.coupling) for make in hooks]
-        self.watch_nodes = np.asarray(watch_nodes, dtype=np.int64)
-
+        self.W = fem.functionspace(model.domain.mesh, ("Lagrange", 1, (6,)))
+        super().__init__(model, params or DynamicsParameters(), target_pressure,
+                         fem.Function(self.W, name="state"),
+                         fem.Function(self.W, name="state_rate"), STATE_LAYOUT, hooks,
+                         watch_nodes)
         # the P1 spaces V (3 components) and W (6) number their nodes independently
         self._w_of_v = np.empty(len(model.u.x.array) // 3, dtype=np.int64)
         self._w_of_v[node_to_dof(model.V)] = node_to_dof(self.W)
         # initial state (u0, 0) and the fixed values
-        U_arr = self.U.x.array.reshape(-1, 6)
+        U_arr = self.state.x.array.reshape(-1, 6)
         U_arr[self._w_of_v, :3] = initial_displacement.x.array.reshape(-1, 3)
         U_arr[:, 3:] = 0.0
-        self.U.x.scatter_forward()
+        self.state.x.scatter_forward()
         self.bcs = self._state_bcs(bcs)
 
         self.stiffness = dict(stiffness)
         self.damping, self.mass = self._coefficients(stiffness)
         self.G_form, self.J_form = self._forms()
-        self.F_vec = fem_petsc.create_vector(self.W)
         self.J_mat = fem_petsc.create_matrix(self.J_form)
         self.J_mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         _, self._bc_rows = owned_bc_dofs(self.W, self.bcs)
-        self.report = DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
-        self._ts = None
-        self._progress: Callable[[dict], None] | None = None
+
+    def _new_report(self) -> DynamicsReport:
+        return DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
 
     # --- setup -------------------------------------------------------------------
     def _state_bcs(self, bcs: Sequence[fem.DirichletBC]) -> list[fem.DirichletBC]:
@@ -176,11 +169,11 @@ class DampedDynamicsSolver:
             for comp in (c, c + 3):  # displacement keeps its value, velocity is zero
                 Wc, to_parent = self.W.sub(comp).collapse()
                 to_parent = np.asarray(to_parent).ravel()  # 0.11 returns [array]
-                child = np.full(len(self.U.x.array), -1, dtype=np.int64)
+                child = np.full(len(self.state.x.array), -1, dtype=np.int64)
                 child[to_parent] = np.arange(len(to_parent))
                 parent = (6 * nodes + comp).astype(np.int32)
                 g = fem.Function(Wc)
-                g.x.array[:] = self.U.x.array[to_parent]
+                g.x.array[:] = self.state.x.array[to_parent]
                 out.append(fem.dirichletbc(g, [parent, child[parent].astype(np.int32)],
                                            self.W.sub(comp)))
         return out
@@ -197,7 +190,7 @@ class DampedDynamicsSolver:
 
     def _forms(self):
         model = self.model
-        U, Udot = self.U, self.Udot
+        U, Udot = self.state, self.rate
         u = ufl.as_vector([U[i] for i in range(3)])
         v = ufl.as_vector([U[i] for i in range(3, 6)])
         udot = ufl.as_vector([Udot[i] for i in range(3)])
@@ -224,37 +217,23 @@ class DampedDynamicsSolver:
 
     def _set_state(self, t: float, X: PETSc.Vec, Xdot: PETSc.Vec) -> None:
         self.model.pressure.value = self._load(t)
-        X.copy(self.U.x.petsc_vec)
-        self.U.x.scatter_forward()
-        Xdot.copy(self.Udot.x.petsc_vec)
-        self.Udot.x.scatter_forward()
+        self._copy_state(X, Xdot)
 
     def ifunction(self, ts, t, X, Xdot, F) -> None:
-        if ts is not None and ts.getTimeStep() < DT_MIN_S:
-            # failed Newton solves keep cutting dt; below the floor the run has stalled
-            self.report.reason = (
-                f"time step fell below the floor {DT_MIN_S:g} s at "
-                f"t = {t:.6g} s, step {ts.getStepNumber()} (Newton kept failing; last |F| = "
-                f"{ts.getSNES().getFunctionNorm():.3g})")
-            raise _Stalled(self.report.reason)
+        self._check_step_floor(ts, DT_MIN_S)
         self._set_state(t, X, Xdot)
         # a Newton iterate that collapses a triangle fails its solve; an accepted state raises
-        assemble_residual(F, self.G_form, self.U, self.hooks, self.bcs, X, trial=ts is not None)
+        assemble_residual(F, self.G_form, self.state, self.hooks, self.bcs, X,
+                          trial=ts is not None)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
         self._set_state(t, X, Xdot)
         self.shift.value = a
-        assemble_jacobian(J, self.J_form, self.U, self.hooks, self.bcs, self._bc_rows)
+        assemble_jacobian(J, self.J_form, self.state, self.hooks, self.bcs, self._bc_rows)
 
     # --- the run -------------------------------------------------------------------
     def _make_ts(self) -> PETSc.TS:
-        comm = self.model.domain.comm
-        DampedDynamicsSolver._count += 1
-        prefix = f"valve_dyn{DampedDynamicsSolver._count}_"
-        ts = PETSc.TS().create(comm)
-        ts.setOptionsPrefix(prefix)
-        opts = PETSc.Options()
-        defaults = {
+        options = {
             "ts_type": "bdf",
             "ts_bdf_order": 2,
             "ts_adapt_type": "basic",
@@ -288,16 +267,7 @@ class DampedDynamicsSolver:
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
         }
-        for key, value in defaults.items():
-            opts[f"{prefix}{key}"] = value
-        guard = self._guard
-        ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
-        ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
-        ts.setTime(0.0)
-        ts.setTimeStep(DT_INITIAL_S)
-        ts.setMaxTime(T_MAX_S)
-        ts.setMaxSteps(MAX_STEPS)
-        ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
+        ts = self._new_ts(options, DT_INITIAL_S, T_MAX_S, MAX_STEPS)
         atol = self.F_vec.duplicate()
         with atol.localForm() as a_local:
             arr = a_local.array.reshape(-1, 6)
@@ -305,8 +275,7 @@ class DampedDynamicsSolver:
             arr[:, 3:] = 1e30  # velocities are not error-controlled
         ts.setTolerances(rtol=0.0, atol=atol)
         ts.setFromOptions()
-        ts.getSNES().setLineSearchPreCheck(guard.wrap(self._cut_update))
-        ts.setPostStep(guard.wrap(self._post_step))
+        ts.getSNES().setLineSearchPreCheck(self._guard.wrap(self._cut_update))
         return ts
 
     def _cut_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
@@ -314,142 +283,79 @@ class DampedDynamicsSolver:
         (:func:`~valve_dolfinx.solvers.contact_hook.cut_to_free_fraction`)."""
         cut_to_free_fraction(self.hooks, x, y)
 
+    def _start_run(self) -> None:
+        self._t_prev = 0.0
+
     def _post_step(self, ts: PETSc.TS) -> None:
         p = self.params
-        r = self.report
         t = ts.getTime()
         dt = ts.getTimeStep()
-        self._step_dt = t - self._t_prev
-        self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
-        self.U.x.scatter_forward()
-        displacement = self.coupling.displacements(self.U)
-        step = np.linalg.norm(displacement - self._last_displacement, axis=1)
+        step_dt = t - self._t_prev
+        self._take_solution(ts)
+        displacement, step = self._node_motion()
         largest = float(np.max(step))
-        if largest > MAX_INCREMENT_MM and self._step_dt > DT_MIN_S:
+        if largest > MAX_INCREMENT_MM and step_dt > DT_MIN_S:
             # a node moved further than the contact search can follow: redo the step shorter
             ts.rollBack()
-            ts.setTimeStep(max(DT_MIN_S, 0.8 * self._step_dt * MAX_INCREMENT_MM / largest))
-            r.rejected_for_motion += 1
+            ts.setTimeStep(max(DT_MIN_S, 0.8 * step_dt * MAX_INCREMENT_MM / largest))
+            self.report.rejected_for_motion += 1
             return
         self._last_displacement = displacement
         self._t_prev = t
         increment = float(np.max(step[self.watch_nodes]))
         if largest > 0.5 * MAX_INCREMENT_MM:  # keep the next step's motion bounded
-            ts.setTimeStep(min(dt, self._step_dt * MAX_INCREMENT_MM / largest))
-        self._accept_state()
-        r.steps = ts.getStepNumber()
-        r.time = t
-        snes = ts.getSNES()
-        r.newton_iterations += snes.getIterationNumber()
-        entry = {"step": r.steps, "time": t, "dt": dt, "increment_mm": increment,
-                 "max_increment_mm": largest,
-                 "pressure": self._load(t)}
-        self._record(entry)
-        elapsed = time.perf_counter() - self._t0
+            ts.setTimeStep(min(dt, step_dt * MAX_INCREMENT_MM / largest))
+        self.accept_state()
+        self._count_step(ts)
+        self._keep_row({"step": self.report.steps, "time": t, "dt": dt,
+                        "increment_mm": increment, "max_increment_mm": largest,
+                        "pressure": self._load(t)})
         if (t >= RAMP_TIME_S and increment < p.stop_increment_mm
                 and self.equilibrium_residual(t) < EQUILIBRIUM_TOLERANCE_MN):
-            r.converged, r.reason = True, (
-                f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and static residual "
-                f"< {EQUILIBRIUM_TOLERANCE_MN:g} mN at t = {t:.4g} s")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-        elif elapsed > p.wall_time_limit_s:
-            r.reason = (f"wall-clock limit {p.wall_time_limit_s:g} s reached at t = {t:.4g} s, "
-                        f"step {r.steps}, dt = {dt:.3g} s, increment {increment:.3g} mm")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
-        elif dt <= DT_MIN_S * (1 + 1e-9):
-            r.reason = (f"time step fell to the floor {DT_MIN_S:g} s at t = {t:.4g} s, "
-                        f"step {r.steps}, increment {increment:.3g} mm")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+            self._end(ts, f"increment {increment:.2e} mm < {p.stop_increment_mm:g} mm and "
+                          f"static residual < {EQUILIBRIUM_TOLERANCE_MN:g} mN at t = {t:.4g} s",
+                      converged=True)
+            return
+        if self._out_of_time(ts, f"increment {increment:.3g} mm"):
+            return
+        if dt <= DT_MIN_S * (1 + 1e-9):
+            self._end(ts, f"time step fell to the floor {DT_MIN_S:g} s at t = {t:.4g} s, "
+                          f"step {self.report.steps}, increment {increment:.3g} mm")
 
-    def _record(self, entry: dict) -> None:
-        """Add the hooks' diagnostics to a history row, keep it and report it."""
-        for hook in self.hooks:
-            diag = getattr(hook, "diagnostics", None)
-            if diag is not None:
-                entry.update(diag())
-        self.report.history.append(entry)
-        if self._progress is not None:
-            self._progress(entry)
+    def _finish_run(self) -> None:
+        """Copy the displacement into ``model.u`` and take the static residual there."""
+        u = self.model.u.x.array.reshape(-1, 3)
+        u[:] = self.state.x.array.reshape(-1, 6)[self._w_of_v, :3]
+        self.model.u.x.scatter_forward()
+        try:
+            self.report.residual_mN = self.equilibrium_residual()
+        except DegenerateGeometryError:  # the state the reason names: no residual (NaN)
+            pass
 
-    def _accept_state(self) -> None:
-        """Tell the hooks that ``self.U`` is an accepted state."""
-        for hook in self.hooks:
-            update = getattr(hook, "accept_state", None)
-            if update is not None:
-                update(self.U)
+    def _log_summary(self) -> None:
+        r = self.report
+        log.info("damped dynamics: %s; %d steps (%d rejected, %d redone for their motion), "
+                 "%d Newton its, t = %.4g s, |R_static|_inf = %.3g mN, %.1f s",
+                 "converged" if r.converged else "NOT converged",
+                 r.steps, r.rejected_steps, r.rejected_for_motion,
+                 r.newton_iterations, r.time, r.residual_mN, r.wall_time_s)
 
     def _at_rest(self, t: float | None = None) -> tuple[PETSc.Vec, PETSc.Vec, float]:
         """The current state with velocities and rates zero, and the time of full load."""
-        X = self.U.x.petsc_vec.copy()
+        X = self.state.x.petsc_vec.copy()
         X.array.reshape(-1, 6)[:, 3:] = 0.0
         Xdot = X.duplicate()
         Xdot.set(0.0)
         t_full = max(RAMP_TIME_S, self.report.time if t is None else t)
         return X, Xdot, t_full
 
-    def solve(self, progress: Callable[[dict], None] | None = None) -> DynamicsReport:
-        """Integrate until converged, stalled, or out of time; never raises on divergence.
-
-        The final state is copied into ``model.u`` whatever happened; the report
-        says whether it is the equilibrium and, if not, where it stopped.
-        """
-        self._progress = progress
-        self._guard = CallbackGuard(stops=(_Stalled, DegenerateGeometryError))
-        self._t0 = time.perf_counter()
-        self.report = DynamicsReport(residual_tolerance_mN=EQUILIBRIUM_TOLERANCE_MN)
-        self._last_displacement = self.coupling.displacements(self.U)
-        self._t_prev = 0.0
-        ts = self._make_ts()
-        X = self.U.x.petsc_vec.copy()
-        try:
-            with self._guard:  # a signal waits for the next callback
-                ts.solve(X)
-        except PETSc.Error as err:
-            # an interrupt or an error in a callback is not a failed solve; a collapsed
-            # triangle at an accepted state is
-            where = f"at t = {ts.getTime():.4g} s, step {ts.getStepNumber()}"
-            stop = self._guard.reraise(where)
-            if stop is not None and not self.report.reason:
-                self.report.reason = f"{type(stop).__name__} {where}: {stop}"
-            if not self.report.reason:
-                self.report.reason = (f"PETSc error {err.ierr} {where}, "
-                                      f"dt = {ts.getTimeStep():.3g} s")
-            log.error("damped dynamics failed: %s", self.report.reason)
-        reason = ts.getConvergedReason()
-        if not self.report.converged and not self.report.reason:
-            self.report.reason = (f"TS stopped with reason {reason} at t = {ts.getTime():.4g} s, "
-                                  f"step {ts.getStepNumber()}, dt = {ts.getTimeStep():.3g} s")
-        self.report.count_rejections(ts)
-        self.U.x.petsc_vec.array[:] = ts.getSolution().array_r
-        self.U.x.scatter_forward()
-        self._copy_displacement()
-        try:
-            self.report.residual_mN = self.equilibrium_residual()
-        except DegenerateGeometryError:  # the state the reason names: no residual (NaN)
-            pass
-        self.report.wall_time_s = time.perf_counter() - self._t0
-        log.info("damped dynamics: %s; %d steps (%d rejected, %d redone for their motion), "
-                 "%d Newton its, t = %.4g s, |R_static|_inf = %.3g mN, %.1f s",
-                 "converged" if self.report.converged else "NOT converged",
-                 self.report.steps, self.report.rejected_steps, self.report.rejected_for_motion,
-                 self.report.newton_iterations, self.report.time,
-                 self.report.residual_mN, self.report.wall_time_s)
-        self._ts = ts
-        return self.report
-
-    def _copy_displacement(self) -> None:
-        u = self.model.u.x.array.reshape(-1, 3)
-        u[:] = self.U.x.array.reshape(-1, 6)[self._w_of_v, :3]
-        self.model.u.x.scatter_forward()
-
     def equilibrium_residual(self, t: float | None = None) -> float:
         """max |R(u)| (mN) over free nodes at full pressure, velocities and rates set to 0."""
-        saved_U = self.U.x.array.copy()
+        saved_U = self.state.x.array.copy()
         X, Xdot, t_full = self._at_rest(t)
         F = self.F_vec.duplicate()
         self.ifunction(None, t_full, X, Xdot, F)
         value = F.norm(PETSc.NormType.INFINITY)
-        self.U.x.array[:] = saved_U
-        self.U.x.scatter_forward()
+        self.state.x.array[:] = saved_U
+        self.state.x.scatter_forward()
         return float(value)
-

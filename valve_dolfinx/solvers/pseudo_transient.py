@@ -52,14 +52,12 @@ not depend on them (tested).
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
 import ufl
 
 from valve_dolfinx._compat import MPI, PETSc, dolfinx
-from valve_dolfinx.exceptions import DegenerateGeometryError, MeshError
 from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.assembly import (
     Laps,
@@ -67,21 +65,17 @@ from valve_dolfinx.solvers.assembly import (
     assemble_residual,
     owned_bc_dofs,
 )
-from valve_dolfinx.solvers.callbacks import (
-    CallbackGuard,
-    NewtonCycleStop,
-    NewtonReversalDamping,
-)
+from valve_dolfinx.solvers.callbacks import NewtonCycleStop, NewtonReversalDamping
 from valve_dolfinx.solvers.contact_hook import cut_to_free_fraction
 from valve_dolfinx.solvers.nodal import BlockPattern, NodalCoupling
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.report import SolveReport
+from valve_dolfinx.solvers.stepping import SteppingSolver
 
 __all__ = ["PseudoTransientSolver"]
 
 log = logging.getLogger(__name__)
 fem = dolfinx.fem
-fem_petsc = dolfinx.fem.petsc
 
 #: first pseudo-time step (dimensionless): a node under its full pressure force moves
 #: about 0.05·L in it
@@ -114,18 +108,18 @@ NEWTON_CYCLE_TOLERANCE = 1e-3
 NEWTON_REVERSAL_DAMPING = 0.5
 
 
-class _Stop(RuntimeError):
-    """Raised from a TS callback to end a run whose step fell below the floor."""
-
-
-class PseudoTransientSolver:
+class PseudoTransientSolver(SteppingSolver):
     """Static equilibrium of a :class:`MembraneModel` with hooks and Dirichlet conditions.
+
+    What it shares with the damped dynamics (set-up, the run, history, failure reasons) is
+    :class:`~valve_dolfinx.solvers.stepping.SteppingSolver`'s.
 
     Parameters
     ----------
     model
-        The membrane; ``model.u`` is the starting displacement on entry and the
-        final one on return (on the fixed dofs it must hold their values).
+        The membrane; ``model.u`` (the solver's ``state`` and ``u``) is the starting
+        displacement on entry and the final one on return (on the fixed dofs it must hold
+        their values).
     bcs
         Dirichlet conditions on ``model.V``.
     target_pressure
@@ -143,35 +137,35 @@ class PseudoTransientSolver:
         leaflet's free edge).
     """
 
-    _count = 0
+    OPTIONS_PREFIX = "valve_ptc"
+    TITLE = "pseudo-transient continuation"
+    TIME, STEP, UNIT = "τ", "Δτ", ""
 
     def __init__(self, model: MembraneModel, bcs: Sequence[fem.DirichletBC],
                  target_pressure: float, params: PseudoTransientParameters | None = None,
                  hooks: Sequence[Callable[[NodalCoupling], object]] = (),
                  watch_nodes: Sequence[int] = ()):
-        self.model = model
-        self.params = params or PseudoTransientParameters()
-        self.target_pressure = float(target_pressure)
+        rate = fem.Function(model.V, name="displacement_rate")
+        super().__init__(model, params or PseudoTransientParameters(), target_pressure,
+                         model.u, rate, None, hooks, watch_nodes)
         self.bcs = list(bcs)
-        V = model.V
-        self.coupling = NodalCoupling(V)
-        self.hooks = [make(self.coupling) for make in hooks]
-        self.watch_nodes = np.asarray(watch_nodes, dtype=np.int64)
-        self.u = model.u
-        self.udot = fem.Function(V, name="displacement_rate")
-        self.shift = fem.Constant(model.domain.mesh, PETSc.ScalarType(0.0))
         # nodal mass p·A/L in force units: the same for every tissue
         scale = max(abs(self.target_pressure), 1e-12) / self.params.mass_length_mm
         self.mass_scale = fem.Constant(model.domain.mesh, PETSc.ScalarType(scale))
         self.F_form, self.J_form = self._forms()
-        self.F_vec = fem_petsc.create_vector(V)
         self.J_mat = self._create_jacobian()
         # one process: the Jacobian's pattern grows once per assembly, before it
         self._pattern = BlockPattern(self.coupling) if self.coupling.comm.size == 1 else None
-        self._bc_local, self._bc_rows = owned_bc_dofs(V, self.bcs)
-        self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
-        self._progress: Callable[[dict], None] | None = None
+        self._bc_local, self._bc_rows = owned_bc_dofs(model.V, self.bcs)
         self._laps = Laps()
+
+    @property
+    def u(self) -> fem.Function:
+        """The displacement: ``model.u``, the time stepper's state."""
+        return self.state
+
+    def _new_report(self) -> SolveReport:
+        return SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
 
     # --- forms -------------------------------------------------------------------------
     def _forms(self):
@@ -182,7 +176,7 @@ class PseudoTransientSolver:
                           metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
         dA = model.area_factor()
         residual = model.residual(v)
-        F = self.mass_scale * ufl.inner(self.udot, v) * dA * dxv + residual
+        F = self.mass_scale * ufl.inner(self.rate, v) * dA * dxv + residual
         J = (ufl.derivative(residual, model.u, du)
              + self.shift * self.mass_scale * ufl.inner(du, v) * dA * dxv)
         return fem.form(F), fem.form(J)
@@ -214,42 +208,28 @@ class PseudoTransientSolver:
         return J
 
     # --- PETSc callbacks ---------------------------------------------------------------
-    def _set_state(self, X: PETSc.Vec, Xdot: PETSc.Vec | None) -> None:
-        X.copy(self.u.x.petsc_vec)
-        self.u.x.scatter_forward()
-        if Xdot is None:
-            self.udot.x.array[:] = 0.0
-        else:
-            Xdot.copy(self.udot.x.petsc_vec)
-            self.udot.x.scatter_forward()
-
     def ifunction(self, ts, t, X, Xdot, F) -> None:
-        if ts is not None and ts.getTimeStep() < DT_MIN:
-            self.report.reason = (
-                f"pseudo-time step fell below {DT_MIN:g} at step "
-                f"{ts.getStepNumber()} (Newton kept failing; last |R| = "
-                f"{self.report.residual_mN:.3g} mN)")
-            raise _Stop(self.report.reason)
+        self._check_step_floor(ts, DT_MIN)
         self._laps.start()
-        self._set_state(X, Xdot)
+        self._copy_state(X, Xdot)
         # a Newton iterate that collapses a triangle fails its solve; an accepted state raises
-        assemble_residual(F, self.F_form, self.u, self.hooks, self.bcs, X, self._laps,
+        assemble_residual(F, self.F_form, self.state, self.hooks, self.bcs, X, self._laps,
                           trial=ts is not None)
 
     def ijacobian(self, ts, t, X, Xdot, a, J, P) -> None:
         self._laps.start()
-        self._set_state(X, Xdot)
+        self._copy_state(X, Xdot)
         if self._pattern is not None:  # the blocks the hooks will add, in the pattern at once
             for hook in self.hooks:
                 couplings = getattr(hook, "jacobian_couplings", None)
                 if couplings is not None:
-                    if self._pattern.include(J, *couplings(self.u)) and ts is not None:
+                    if self._pattern.include(J, *couplings(self.state)) and ts is not None:
                         # a BAIJ preallocation leaves the matrix's nonzero state as it was:
                         # without a reset the LU would reuse the old pattern's analysis
                         ts.getSNES().getKSP().getPC().reset()
                     self._laps(hook.timing_name)
         self.shift.value = a
-        assemble_jacobian(J, self.J_form, self.u, self.hooks, self.bcs, self._bc_rows,
+        assemble_jacobian(J, self.J_form, self.state, self.hooks, self.bcs, self._bc_rows,
                           self._laps)
 
     def _limit_update(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
@@ -271,7 +251,7 @@ class PseudoTransientSolver:
     # --- static residual -----------------------------------------------------------------
     def static_residual(self) -> tuple[float, float]:
         """(‖R‖∞, ‖R‖₂) of the static residual at ``model.u`` (mN), over the free dofs."""
-        X = self.u.x.petsc_vec.copy()
+        X = self.state.x.petsc_vec.copy()
         F = X.duplicate()
         self.ifunction(None, 0.0, X, None, F)
         with F.localForm() as f_local:
@@ -284,11 +264,6 @@ class PseudoTransientSolver:
     # --- the run -------------------------------------------------------------------------
     def _make_ts(self) -> PETSc.TS:
         p = self.params
-        comm = self.model.domain.comm
-        PseudoTransientSolver._count += 1
-        prefix = f"valve_ptc{PseudoTransientSolver._count}_"
-        ts = PETSc.TS().create(comm)
-        ts.setOptionsPrefix(prefix)
         options = {
             "ts_type": "beuler",
             "ts_adapt_type": "none",
@@ -306,72 +281,48 @@ class PseudoTransientSolver:
             "pc_type": "lu",
             "pc_factor_mat_solver_type": "mumps",
         }
-        opts = PETSc.Options()
-        for key, value in {**options, **p.petsc_options}.items():
-            opts[f"{prefix}{key}"] = value
-        guard = self._guard
-        ts.setIFunction(guard.wrap(self.ifunction), self.F_vec)
-        ts.setIJacobian(guard.wrap(self.ijacobian), self.J_mat)
-        ts.setTime(0.0)
-        ts.setTimeStep(DT_INITIAL)
-        ts.setMaxTime(1e300)
-        ts.setMaxSteps(p.max_steps)
-        ts.setExactFinalTime(PETSc.TS.ExactFinalTime.MATCHSTEP)
+        ts = self._new_ts({**options, **p.petsc_options}, DT_INITIAL, 1e300, p.max_steps)
         ts.setFromOptions()
         self._ts, self._snes = ts, ts.getSNES()
-        ts.getSNES().setLineSearchPreCheck(guard.wrap(self._limit_update))
-        ts.getSNES().setMonitor(guard.wrap(self._cycles))
-        ts.setPostStep(guard.wrap(self._post_step))
+        self._cycles = NewtonCycleStop(NEWTON_CYCLE_TOLERANCE)
+        self._reversals = NewtonReversalDamping(NEWTON_REVERSAL_DAMPING)
+        ts.getSNES().setLineSearchPreCheck(self._guard.wrap(self._limit_update))
+        ts.getSNES().setMonitor(self._guard.wrap(self._cycles))
         return ts
+
+    def _start_run(self) -> None:
+        self.model.pressure.value = self.target_pressure
+        self._laps = Laps()
+        _, self._r_prev = self.static_residual()
 
     def _post_step(self, ts: PETSc.TS) -> None:
         p, r = self.params, self.report
         self._laps.start()
         dt = ts.getTimeStep()
-        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
-        self.u.x.scatter_forward()
-        displacement = self.coupling.displacements(self.u)
-        step = np.linalg.norm(displacement - self._last_displacement, axis=1)
-        self._last_displacement = displacement
+        self._take_solution(ts)
+        self._last_displacement, step = self._node_motion()
         motion = float(np.max(step, initial=0.0))
         watched = float(np.max(step[self.watch_nodes], initial=0.0))
         solved_pressure = float(self.model.pressure.value)
-        for hook in self.hooks:  # contact sides and driving forces of this state
-            accept = getattr(hook, "accept_state", None)
-            if accept is not None:
-                accept(self.u)
+        self.accept_state()  # contact sides and driving forces of this state
         self._reversals.carry_over()  # a cycle across steps is damped as one within a solve
         self._laps("post_step")  # the static residual's assembly keeps its own laps
         r_inf, r_two = self.static_residual()
-        r.steps = ts.getStepNumber()
-        r.time = ts.getTime()
-        r.newton_iterations += ts.getSNES().getIterationNumber()
+        self._count_step(ts)
         r.residual_mN = r_inf
-        entry = {"step": r.steps, "pseudo_time": r.time, "dt": dt,
-                 "pressure_kpa": solved_pressure,
-                 "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
-                 "watched_motion_mm": watched,
-                 "newton_iterations": ts.getSNES().getIterationNumber(),
-                 "rejected_steps": ts.getStepRejections()}
-        for hook in self.hooks:
-            diag = getattr(hook, "diagnostics", None)
-            if diag is not None:
-                entry.update(diag())
-        r.history.append(entry)
-        if self._progress is not None:
-            self._progress(entry)
+        self._keep_row({"step": r.steps, "pseudo_time": r.time, "dt": dt,
+                        "pressure_kpa": solved_pressure,
+                        "residual_mN": r_inf, "residual_l2_mN": r_two, "max_motion_mm": motion,
+                        "watched_motion_mm": watched,
+                        "newton_iterations": ts.getSNES().getIterationNumber(),
+                        "rejected_steps": ts.getStepRejections()})
         self._laps("post_step")
-        elapsed = time.perf_counter() - self._t0
         if r_inf < p.residual_tolerance:
-            r.converged = True
-            r.reason = (f"static residual {r_inf:.3g} mN < {p.residual_tolerance:g} mN after "
-                        f"{r.steps} pseudo-time steps, {r.newton_iterations} Newton iterations")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+            self._end(ts, f"static residual {r_inf:.3g} mN < {p.residual_tolerance:g} mN after "
+                          f"{r.steps} pseudo-time steps, {r.newton_iterations} Newton iterations",
+                      converged=True)
             return
-        if elapsed > p.wall_time_limit_s:
-            r.reason = (f"wall-clock limit {p.wall_time_limit_s:g} s reached at step {r.steps}: "
-                        f"static residual {r_inf:.3g} mN, Δτ = {dt:.3g}")
-            ts.setConvergedReason(PETSc.TS.ConvergedReason.CONVERGED_USER)
+        if self._out_of_time(ts, f"static residual {r_inf:.3g} mN"):
             return
         # switched evolution relaxation, bounded growth, bounded nodal motion
         ratio = INCREMENT * self._r_prev / r_two if r_two > 0 else GROWTH_LIMIT
@@ -381,53 +332,14 @@ class PseudoTransientSolver:
         self._r_prev = r_two
         ts.setTimeStep(max(new_dt, DT_MIN))
 
-    def solve(self, progress: Callable[[dict], None] | None = None) -> SolveReport:
-        """Step to the static equilibrium; never raises because the solve failed.
-
-        ``model.u`` holds the final state whatever happened; the report says
-        whether it is the equilibrium and, if not, where and why it stopped.
-        """
-        self._progress = progress
-        self._guard = CallbackGuard(stops=(_Stop, DegenerateGeometryError))
-        self._cycles = NewtonCycleStop(NEWTON_CYCLE_TOLERANCE)
-        self._reversals = NewtonReversalDamping(NEWTON_REVERSAL_DAMPING)
-        self._t0 = time.perf_counter()
-        self._laps = Laps()
-        self.report = SolveReport(residual_tolerance_mN=self.params.residual_tolerance)
-        self.model.pressure.value = self.target_pressure
-        self._last_displacement = self.coupling.displacements(self.u)
-        ts = self._make_ts()
-        X = self.u.x.petsc_vec.copy()
-        ts.setSolution(X)  # the final state, should the run end at its start
-        try:
-            _, self._r_prev = self.static_residual()
-            with self._guard:  # a signal waits for the next callback
-                ts.solve(X)
-        except (PETSc.Error, MeshError, DegenerateGeometryError, _Stop) as err:
-            # an interrupt or an error in a callback is not a failed solve; a collapsed
-            # triangle at an accepted state is
-            where = f"at step {ts.getStepNumber()}, Δτ = {ts.getTimeStep():.3g}"
-            err = self._guard.reraise(where) or err
-            if not self.report.reason:
-                self.report.reason = f"{type(err).__name__} {where}: {err}"
-            log.error("pseudo-transient continuation failed: %s", self.report.reason)
-        if not self.report.converged and not self.report.reason:
-            self.report.reason = (f"TS stopped ({ts.getConvergedReason()}) after "
-                                  f"{ts.getStepNumber()} steps (max_steps = "
-                                  f"{self.params.max_steps}): static residual "
-                                  f"{self.report.residual_mN:.3g} mN")
-        self.report.count_rejections(ts)
-        self.u.x.petsc_vec.array[:] = ts.getSolution().array_r
-        self.u.x.scatter_forward()
-        self.report.wall_time_s = time.perf_counter() - self._t0
+    def _finish_run(self) -> None:
         self.report.timings = dict(self._laps.seconds)
-        ts.destroy()
-        X.destroy()
+
+    def _log_summary(self) -> None:
+        r = self.report
         log.info("pseudo-transient continuation: %s (%s; %.1f s; %d Newton iterations in "
                  "%d failed solves, %d of which ended in a cycle; %d reversing Newton "
                  "updates damped, %d of them a step's first)",
-                 "converged" if self.report.converged else "NOT converged",
-                 self.report.reason, self.report.wall_time_s,
-                 self.report.rejected_newton_iterations, self.report.rejected_steps,
+                 "converged" if r.converged else "NOT converged", r.reason, r.wall_time_s,
+                 r.rejected_newton_iterations, r.rejected_steps,
                  self._cycles.stopped, self._reversals.damped, self._reversals.damped_first)
-        return self.report

@@ -28,6 +28,14 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from valve_dolfinx.config import (
+    CaseConfig,
+    config_from_dict,
+    get_dotted,
+    parse_value,
+    set_dotted,
+    setting_keys,
+)
 from valve_dolfinx.exceptions import ParameterError
 
 __all__ = [
@@ -89,8 +97,6 @@ def axis_label(values: Iterable[tuple[str, Any]]) -> str:
 def _split(option: str, key: str, values: Any) -> list[Any]:
     """Raw values: a list as it is; a string as the command line spells it (commas
     separate, each part read as a TOML value or a bare word); a scalar as one value."""
-    from valve_dolfinx.config import parse_value
-
     if isinstance(values, str):
         return [parse_value(part) for part in values.split(",") if part.strip()]
     if isinstance(values, list | tuple):
@@ -139,8 +145,6 @@ def axis_table(option: str, table: Any) -> dict[str, list[Any]]:
 
 def _check_key(option: str, key: str) -> None:
     """Raise unless ``key`` names one setting of the case configuration an axis may set."""
-    from valve_dolfinx.config import CaseConfig, get_dotted, setting_keys
-
     if key in _GRID_KEYS:
         raise ParameterError(f"{option} {key}: the graft size is the study's grid; give it with "
                              f"{_GRID_KEYS[key]}")
@@ -195,8 +199,6 @@ def check_axis_values(option: str, key: str, values: Any, base: Mapping) -> tupl
         table or the grid, no value, a value the configuration rejects (wrong type, out
         of range) and a value given twice.
     """
-    from valve_dolfinx.config import config_from_dict, get_dotted, set_dotted
-
     _check_key(option, key)
     raw = _split(option, key, values)
     if not raw:

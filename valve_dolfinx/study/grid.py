@@ -21,8 +21,18 @@ import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from valve_dolfinx.config import (
+    STUDY_TABLE,
+    CaseConfig,
+    apply_overrides,
+    config_from_dict,
+    get_dotted,
+    read_config_file,
+    set_dotted,
+    setting_keys,
+)
 from valve_dolfinx.exceptions import ParameterError, check_range
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
 from valve_dolfinx.study.axes import (
@@ -32,11 +42,14 @@ from valve_dolfinx.study.axes import (
     axis_table,
     check_axes,
 )
-from valve_dolfinx.study.layout import NORMAL_CASE, StudyCase, case_name
+from valve_dolfinx.study.layout import (
+    NORMAL_CASE,
+    StudyCase,
+    StudyLayout,
+    case_name,
+    study_layout,
+)
 from valve_dolfinx.study.paths import START_FROM_NORMAL, study_paths
-
-if TYPE_CHECKING:
-    from valve_dolfinx.study.layout import StudyLayout
 
 __all__ = [
     "STUDY_WIDTHS_PCT",
@@ -216,8 +229,6 @@ class StudySettings:
     def _check_warm_starts(self) -> None:
         """Raise if a path that starts the grafts from the loaded normal valve meets a solver
         that cannot start from a loaded valve (BDF2 starts from the unloaded valve)."""
-        from valve_dolfinx.config import config_from_dict
-
         warm = [p for p in study_paths(self.paths) if p.start == START_FROM_NORMAL]
         if not warm:
             return
@@ -234,8 +245,6 @@ class StudySettings:
     def base_case(self) -> dict:
         """The case settings every case starts from: ``case``, then the mesh size and the
         wall-clock limit (a new dict)."""
-        from valve_dolfinx.config import set_dotted
-
         data = json.loads(json.dumps(self.case))  # a deep copy
         if self.mesh_size_mm is not None:
             set_dotted(data, "geometry.mesh_size", self.mesh_size_mm)
@@ -247,13 +256,6 @@ class StudySettings:
     def _fixed_keys(self) -> dict[str, str]:
         """The keys something other than an axis sets, with what sets them; raises if a path
         sets a key the case settings give another value."""
-        from valve_dolfinx.config import (
-            CaseConfig,
-            config_from_dict,
-            get_dotted,
-            setting_keys,
-        )
-
         given = config_from_dict(self.case, source="study case settings").to_dict()
         defaults = CaseConfig().to_dict()
         fixed = {key: _CASE_SETTINGS for key in setting_keys(self.case)
@@ -283,9 +285,8 @@ class StudySettings:
     def layout(self) -> StudyLayout:
         """Every case, its configuration and where it stands among the axes
         (:func:`valve_dolfinx.study.layout.study_layout`)."""
-        from valve_dolfinx.study.layout import study_layout
-
-        return study_layout(self)
+        return study_layout(self.base_case(), self.axes, self.paths, self.widths_pct,
+                            self.heights_pct, self.include_normal)
 
     def cases(self) -> list[StudyCase]:
         """Every case, in the fixed order that ``--case-index`` counts."""
@@ -344,13 +345,6 @@ def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySet
         On an unknown key or a bad value, in ``[study]`` or in the case settings
         (named with its table), before anything runs.
     """
-    from valve_dolfinx.config import (
-        STUDY_TABLE,
-        apply_overrides,
-        config_from_dict,
-        read_config_file,
-    )
-
     data = read_config_file(path)
     study = data.pop(STUDY_TABLE, {})
     if not isinstance(study, dict):

@@ -36,16 +36,18 @@ import itertools
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from valve_dolfinx.config import canonical_hash, settings_hash
+from valve_dolfinx.config import (
+    CaseConfig,
+    canonical_hash,
+    config_from_dict,
+    set_dotted,
+    settings_hash,
+)
 from valve_dolfinx.exceptions import ParameterError
 from valve_dolfinx.study.axes import PATH_KEY, StudyAxis, axis_label, value_text
 from valve_dolfinx.study.paths import START_FROM_NORMAL, StudyPath, study_paths
-
-if TYPE_CHECKING:
-    from valve_dolfinx.config import CaseConfig
-    from valve_dolfinx.study.grid import StudySettings
 
 __all__ = [
     "NORMAL_CASE",
@@ -223,12 +225,9 @@ def _members(axes: Sequence[StudyAxis], paths: Sequence[StudyPath]) -> tuple[Mem
     return tuple(members)
 
 
-def _slot_configs(settings: StudySettings, comparisons, members, sizes
+def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, sizes
                   ) -> dict[Slot, CaseConfig]:
     """The configuration of every slot (errors name the slot's axis values)."""
-    from valve_dolfinx.config import config_from_dict, set_dotted
-
-    base = settings.base_case()
     configs: dict[Slot, CaseConfig] = {}
     for c, comparison in enumerate(comparisons):
         for m, member in enumerate(members):
@@ -239,7 +238,7 @@ def _slot_configs(settings: StudySettings, comparisons, members, sizes
                 set_dotted(data, key, value)
             config = config_from_dict(data, source=f"study case settings at {where}")
             try:
-                if settings.include_normal:
+                if include_normal:
                     configs[(c, m, None)] = config.normal_valve()
                 for size in sizes:
                     configs[(c, m, size)] = config.with_graft(*size)
@@ -275,9 +274,16 @@ def _name(size: Size, values: tuple[tuple[str, Any], ...]) -> str:
     return "__".join(parts)
 
 
-def study_layout(settings: StudySettings) -> StudyLayout:
+def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
+                 widths_pct: Sequence[float], heights_pct: Sequence[float],
+                 include_normal: bool = True) -> StudyLayout:
     """Enumerate a study's cases: build every slot's configuration, merge slots that are the
     same case, name the cases and order them (see the module docstring).
+
+    ``base_case`` is the case settings every case starts from, ``axes`` the comparison and
+    uncertainty axes, ``paths`` the number of numerical paths, and the grid's widths and
+    heights the graft sizes (:meth:`valve_dolfinx.study.grid.StudySettings.layout` passes
+    its own, checked).
 
     Raises
     ------
@@ -286,12 +292,12 @@ def study_layout(settings: StudySettings) -> StudyLayout:
         package rejects; and for a path that starts from the normal valve in a study
         without it.
     """
-    axes = settings.axes
-    paths = study_paths(settings.paths)
+    axes = tuple(axes)
+    paths = study_paths(paths)
     comparisons = tuple(_product([a for a in axes if a.is_comparison]))
     members = _members([a for a in axes if not a.is_comparison], paths)
-    sizes = tuple((w, h) for w in settings.widths_pct for h in settings.heights_pct)
-    configs = _slot_configs(settings, comparisons, members, sizes)
+    sizes = tuple((w, h) for w in widths_pct for h in heights_pct)
+    configs = _slot_configs(base_case, include_normal, comparisons, members, sizes)
     digests: dict[Slot, str] = {}
     for slot, config in configs.items():  # normal valves first: the grafts' sources
         if slot[2] is None:
@@ -300,7 +306,7 @@ def study_layout(settings: StudySettings) -> StudyLayout:
         if slot[2] is not None:
             start = None
             if members[slot[1]].path.start == START_FROM_NORMAL:
-                if not settings.include_normal:
+                if not include_normal:
                     raise ParameterError(f"{members[slot[1]].path.label} starts its grafts "
                                          "from the normal valve: include_normal must be true")
                 start = digests[(slot[0], slot[1], None)]

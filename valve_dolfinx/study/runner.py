@@ -60,10 +60,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from valve_dolfinx._compat import MPI
+from valve_dolfinx._compat import MPI, package_versions
+from valve_dolfinx._version import __version__, git_commit
+from valve_dolfinx.config import case_name
 from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.io import write_json
-from valve_dolfinx.result import competence_text
+from valve_dolfinx.result import CaseResult, competence_text, load_case
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
 from valve_dolfinx.study.layout import StudyCase, StudyLayout
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
@@ -130,8 +132,7 @@ def run_closure_case(config, out_dir: Path, comm: MPI.Comm, *, start: Path | Non
 
 def _loaded_start(folder: Path | None):
     """The loaded valve of a finished case folder as a closure's start, or None."""
-    from valve_dolfinx.geometry.transfer import ValveState
-    from valve_dolfinx.result import load_case
+    from valve_dolfinx.geometry.transfer import ValveState  # SciPy's k-d tree: when needed
 
     if folder is None:
         return None
@@ -144,10 +145,6 @@ def _loaded_start(folder: Path | None):
 
 def _failure_result(case: StudyCase, config, error: str, n_ranks: int, wall: float) -> dict:
     """result.json of a case that raised: the SPEC fields unknown, the reason recorded."""
-    from valve_dolfinx._compat import package_versions
-    from valve_dolfinx._version import __version__, git_commit
-    from valve_dolfinx.result import CaseResult
-
     result = CaseResult(graft_width_pct=case.width_pct, graft_height_pct=case.height_pct,
                         converged=False, competence_reason="the case failed",
                         n_ranks=n_ranks, wall_time_s=wall,
@@ -495,8 +492,6 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     todo = _with_sources(layout, cases)
     _check_ranks(comm, settings.ranks_per_case)
     if case_function is None:
-        from valve_dolfinx.config import case_name
-
         panels = {NORMAL_CASE, *settings.panel_cases}  # the report draws these cases' panels
 
         def case_function(config, folder, group, *, start):
