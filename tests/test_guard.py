@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_contact_fe import SOFT, clamp_boundary, two_sheets
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.analysis.intersection import find_intersections
@@ -19,8 +20,6 @@ from valve_dolfinx.mechanics.membrane import MembraneModel
 from valve_dolfinx.solvers.contact_hook import ContactHook
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 from valve_dolfinx.solvers.pseudo_transient import PseudoTransientSolver
-
-from test_contact_fe import SOFT, clamp_boundary, two_sheets
 
 DHAT, KAPPA = 0.1, 1000.0
 
