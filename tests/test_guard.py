@@ -8,6 +8,8 @@ solve against the independent intersection check (:mod:`valve_dolfinx.analysis.i
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from test_contact_fe import SOFT, clamp_boundary, two_sheets
@@ -173,3 +175,27 @@ def test_the_guard_holds_a_push_the_law_does_not_answer():
     assert crossings.count == 0
     # the guard carries the upper sheet's pressure inside its reach, apart
     assert diag["guard_pairs"] > 0 and 0.0 < diag["guard_min_distance_mm"] < DHAT
+
+
+def test_a_start_whose_leaflets_intersect_is_refused_for_the_unloaded_valve():
+    """A barrier would hold a crossing it starts from: the closure starts unloaded and the
+    result's start says why."""
+    from valve_dolfinx.case import solve_case
+    from valve_dolfinx.config import CaseConfig
+    from valve_dolfinx.geometry.transfer import ValveState
+    from valve_dolfinx.geometry.valve import build_valve
+
+    config = CaseConfig()
+    config = replace(config, geometry=replace(config.geometry, mesh_size=2.0))
+    valve = build_valve(config.geometry)
+    crossed = valve.points.copy()
+    first = np.unique(valve.cells[valve.cell_tags == valve.leaflets[0].tag])
+    free = np.setdiff1d(first, valve.attachment_nodes())
+    crossed[free, :2] *= -1.0  # the first leaflet's free nodes swung through the axis
+    tags = valve.cell_tags
+    assert find_intersections(crossed, valve.cells, tags).count > 0
+    state = solve_case(config, MPI.COMM_SELF, valve=valve,
+                       start=ValveState(valve, crossed, "a crossed valve"))
+    assert state.report.start["from"] == "the unloaded valve"
+    assert "a crossed valve" in state.report.start["refused"]
+    assert state.report.converged
