@@ -138,7 +138,15 @@ class SurfaceGuard:
 
     def free_fraction(self, x0: np.ndarray, x1: np.ndarray) -> float:
         """Largest fraction in ``[0, 1]`` of the straight step ``x0 → x1`` along which no
-        pair meets (the library's CCD, conservatively rescaled)."""
+        pair meets (the library's CCD, conservatively rescaled).
+
+        Two points of the surface approach each other by at most twice the largest nodal
+        motion of the step, and at ``x0`` every pair is at least the reach apart or inside
+        the collision set: a step whose motion is below half of the closer of the two
+        cannot close any gap, and is whole without a CCD."""
+        motion = float(np.sqrt(np.max(np.sum((x1 - x0) ** 2, axis=1), initial=0.0)))
+        if 2.0 * motion < min(self.distance, self.pairs(x0).min_distance):
+            return 1.0
         ipctk = self._ipctk
         return float(ipctk.compute_collision_free_stepsize(
             self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), 0.0, ipctk.LBVH(),
