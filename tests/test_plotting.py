@@ -130,9 +130,24 @@ def test_an_intersection_is_marked_in_the_3d_view():
 @pytest.fixture(scope="module")
 def leaking_case(tmp_path_factory):
     """W27/H0 closed at 1.6 mm through run_case, its figures written; what they were drawn
-    from is recorded on the way."""
+    from is recorded on the way.  The contact's guard is switched off here (a guard that
+    never pushes and lets every step through), so that the graft folds through its
+    neighbours as under the contact law alone and the figures have intersections to mark."""
+    import valve_dolfinx.case
     from valve_dolfinx import CaseConfig, plotting, run_case
+    from valve_dolfinx.contact.guard import SurfaceGuard
     from valve_dolfinx.geometry.valve import ValveParameters
+
+    class NoGuard(SurfaceGuard):
+        def gradient(self, x):
+            return None
+
+        def hessian_blocks(self, x, rows):
+            empty = np.empty(0, dtype=np.int64)
+            return empty, empty, np.empty((0, 3, 3))
+
+        def free_fraction(self, x0, x1):
+            return 1.0
 
     out = tmp_path_factory.mktemp("W27_H0")
     drawn = {}
@@ -146,6 +161,7 @@ def leaking_case(tmp_path_factory):
     config = CaseConfig(geometry=ValveParameters(mesh_size=1.6)).with_graft(27.0, 0.0)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(plotting, "write_case_figures", record)
+        patch.setattr(valve_dolfinx.case, "SurfaceGuard", NoGuard)
         result = run_case(config, out, comm=MPI.COMM_SELF, fields_output=False)
     return out, result, drawn
 
