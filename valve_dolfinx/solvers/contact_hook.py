@@ -60,6 +60,12 @@ class ContactHook:
         The pressure constant of the model (kPa), read at each evaluation.
     pressure_side
         Sign of the pressure force relative to the triangle normal.
+    lag_driving_force
+        Freeze the driving force within a step (see the module docstring).
+    fixed_nodes
+        Nodes held by Dirichlet conditions: never contacting nodes, no guard rows.
+    guard
+        The barrier that keeps every surface from passing through another, or None.
     """
 
     #: name of this hook's share in a solver's timings
