@@ -21,7 +21,8 @@ from result_tables import Column, Table, add_table_options, markdown_table
 
 FIGURES = ("intersecting_pairs", "newton_iterations", "rejected_newton_iterations",
            "wall_time_s", "min_coaptation_height_mm", "competent", "converged")
-FIELDS = ("case", *(f"{f}_{side}" for f in FIGURES for side in ("before", "after")))
+FIELDS = ("case", "label_before", "label_after",
+          *(f"{f}_{side}" for f in FIGURES for side in ("before", "after")))
 
 
 def read_study(folder: Path) -> dict[str, dict]:
@@ -54,7 +55,10 @@ def compare(before: dict[str, dict], after: dict[str, dict]) -> list[dict]:
     return [*rows, total]
 
 
-def draw(rows: list[dict], labels=("before", "after")) -> str:
+def draw(rows: list[dict]) -> str:
+    """The Markdown table, its headings naming the two runs as the CSV's labels do."""
+    labels = (rows[0]["label_before"], rows[0]["label_after"]) if rows else ("", "")
+
     def pair(field, fmt=""):
         return [Column(f"{heading} ({label})", f"{field}_{side}", fmt)
                 for label, side in zip(labels, ("before", "after"), strict=True)
@@ -72,6 +76,10 @@ HEADINGS = {"intersecting_pairs": "pairs", "newton_iterations": "Newton",
             "min_coaptation_height_mm": "min height (mm)", "competent": "competent"}
 
 
+TABLE = Table("contact_comparison", "benchmarks/contact_comparison.py BEFORE AFTER", FIELDS,
+              draw)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("before", type=Path, nargs="?", help="study folder (the reference)")
@@ -80,15 +88,16 @@ def main() -> None:
                         help="what to call the two runs in the headings")
     add_table_options(parser)
     args = parser.parse_args()
-    table = Table("contact_comparison",
-                  "benchmarks/contact_comparison.py BEFORE AFTER", FIELDS,
-                  lambda rows: draw(rows, tuple(args.labels)), folder=args.results)
+    table = TABLE.at(args.results)
     if args.tables_only:
         print(table.redraw())
         return
     if args.before is None or args.after is None:
         parser.error("give the two study folders (or --tables-only)")
-    path = table.write(compare(read_study(args.before), read_study(args.after)))
+    rows = compare(read_study(args.before), read_study(args.after))
+    for row in rows:
+        row["label_before"], row["label_after"] = args.labels
+    path = table.write(rows)
     print(path.read_text())
 
 

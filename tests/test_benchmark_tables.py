@@ -48,6 +48,7 @@ def csv_rows(path: Path) -> list[dict[str, str]]:
 def committed_tables() -> dict:
     """The tables of benchmarks/results/, by name."""
     return {"membrane": bench("membrane").TABLE,
+            "contact_comparison": bench("contact_comparison").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 
@@ -251,3 +252,28 @@ def test_the_grid_and_sweep_tables_count_what_converged(tmp_path):
     assert markdown_rows(text)[1][:3] == ["W0_H0", "yes", "no"]
     assert markdown_rows(text)[1][7] == "135 + 36"
     assert "sum of case wall times 20 s (×2.00 from the rank groups)" in text
+
+
+def test_the_contact_comparison_pairs_two_studies_case_by_case(tmp_path):
+    """Two stand-in studies: the rows pair each case's figures, the totals add them up."""
+    import json
+
+    module = bench("contact_comparison")
+    runs = {}
+    for side, pairs in (("before", (3, 0)), ("after", (0, 0))):
+        folder = tmp_path / side
+        for name, n, its in (("normal", pairs[1], 20), ("W21_H27", pairs[0], 300)):
+            case = folder / "cases" / name
+            case.mkdir(parents=True)
+            (case / "result.json").write_text(json.dumps({
+                "intersecting_pairs": n, "newton_iterations": its + (side == "after"),
+                "rejected_newton_iterations": 5, "wall_time_s": 1.5,
+                "min_coaptation_height_mm": 2.5, "competent": n == 0, "converged": True}))
+        runs[side] = module.read_study(folder)
+    rows = module.compare(runs["before"], runs["after"])
+    assert [r["case"] for r in rows] == ["normal", "W21_H27", "total"]
+    assert rows[1]["intersecting_pairs_before"] == 3 and rows[1]["intersecting_pairs_after"] == 0
+    assert rows[2]["newton_iterations_before"] == 320
+    assert rows[2]["newton_iterations_after"] == 322
+    assert rows[2]["competent_before"] == 1 and rows[2]["competent_after"] == 2
+    assert rows[2]["wall_time_s_after"] == pytest.approx(3.0)
