@@ -22,6 +22,7 @@ import numpy as np
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.case import analyse_case, solve_case
 from valve_dolfinx.config import CaseConfig
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.geometry.symmetry import distance_up_to_mirror
 from valve_dolfinx.geometry.valve import ValveParameters
 
@@ -55,14 +56,15 @@ def main() -> None:
     args = parser.parse_args()
     h = args.mesh_size
     for width, height in ((27.0, 0.0), (21.0, 27.0)):
-        print(f"W{width:g}/H{height:g}, mass x1:")
+        label = GraftSize(width, height).label
+        print(f"{label}, mass x1:")
         base, _ = _solve(_case(width, height, h))
-        print(f"W{width:g}/H{height:g}, mass x4:")
+        print(f"{label}, mass x4:")
         heavy, _ = _solve(_case(width, height, h, mass_factor=4.0))
         print(f"  |Δ figure of merit| = {abs(heavy - base):.4f} mm (target < 0.02 mm)")
     placed = {}
     for billow in (0.75, -0.75):
-        print(f"W21/H27 placed with billow {billow:+g} mm:")
+        print(f"{GraftSize(21, 27).label} placed with billow {billow:+g} mm:")
         placed[billow] = _solve(_case(21.0, 27.0, h, billow_mm=billow))
     (f_in, s_in), (f_out, s_out) = placed[0.75], placed[-0.75]
     valve_in, valve_out = s_in.domain.valve, s_out.domain.valve

@@ -21,6 +21,7 @@ import pytest
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.exceptions import OutputConflictError, ParameterError
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.plan.patient import (
     FIELDS,
     PatientInput,
@@ -35,7 +36,8 @@ from valve_dolfinx.plan.reach import (
     largest_root_mm,
     max_fibre_stretch,
 )
-from valve_dolfinx.plan.recommendation import GraftSize, PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanRecommendation
+from valve_dolfinx.sizing import Recommendation, Resolution, SizingAnswer
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE_EDGE_MM = math.pi / 3 * 20.0
@@ -352,22 +354,34 @@ def _pdf_text(path: Path) -> str:
         document.close()
 
 
+def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
+           target=2.31, source="given", members=("",)) -> PlanRecommendation:
+    """A plan's answer made by hand: the recommendation of a study over ``members`` (the
+    members named by themselves), its answer ``graft`` with ``margin``, or ``closest`` with
+    ``shortfall``."""
+    resolution = Resolution(None, 0, None, None, "not measured")
+    targets = dict.fromkeys(members, target)
+    size = GraftSize(*graft) if graft else None
+    sizing = SizingAnswer({}, list(members), targets, source, resolution, size=size,
+                          margin_mm=margin, limiting_member=limiting,
+                          highest=GraftSize(*closest) if closest else size,
+                          shortfall_mm=shortfall, why="" if size else "short")
+    study = Recommendation({}, list(members), targets, target, source, sizing)
+    return PlanRecommendation(study, {}, source)
+
+
 ANSWERS = {
-    "graft": (PlanRecommendation(graft=GraftSize(14, 13), margin_mm=0.12,
-                                 limiting_member="root 23.0 mm, billowed placement",
-                                 target_mm=2.31, target_source="the normal valve's",
-                                 members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
+    "graft": (answer((14, 13), 0.12, limiting="root 23.0 mm, billowed placement",
+                     source="the normal valve's",
+                     members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
               ["Recommended graft W14/H13", "smallest margin is 0.12 mm",
                "root 23.0 mm, billowed placement", "in all 3 members"]),
     # a margin that rounds to 0.00 mm is shown with its significant digits
-    "thin margin": (PlanRecommendation(graft=GraftSize(27, 27), margin_mm=0.0023,
-                                       limiting_member="root 23.0 mm", target_mm=2.31,
-                                       target_source="the normal valve's",
-                                       members=("root 22.0 mm", "root 23.0 mm")),
+    "thin margin": (answer((27, 27), 0.0023, limiting="root 23.0 mm",
+                           source="the normal valve's", members=("root 22.0 mm", "root 23.0 mm")),
                     ["Recommended graft W27/H27", "smallest margin is 0.0023 mm, in root 23.0",
                      "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
-    "closest": (PlanRecommendation(closest=GraftSize(27, 40), shortfall_mm=0.4, target_mm=2.3,
-                                   target_source="given", members=("a", "b")),
+    "closest": (answer(closest=(27, 40), shortfall=0.4, target=2.3, members=("a", "b")),
                 ["No graft in the studied range is robust", "The closest is W27/H40",
                  "0.40 mm short"]),
     "cannot": (PlanRecommendation(cannot_seal=free_edge_reach(16.0, 22.0, 80.0).sentence()),
@@ -397,16 +411,8 @@ def test_the_report_is_one_a4_page_with_the_answer(tmp_path, kind):
                                                (0.0023, "0.0023"), (0.0004, "0.00040"),
                                                (0.0, "0.00")])
 def test_the_margin_is_shown_with_its_significant_digits(margin, shown):
-    rec = PlanRecommendation(graft=GraftSize(14, 13), margin_mm=margin, target_mm=2.31,
-                             target_source="given")
+    rec = answer((14, 13), margin)
     assert f"its smallest margin is {shown} mm." in rec.headline()
-
-
-def test_a_recommendation_has_one_answer():
-    with pytest.raises(ParameterError, match="one of"):
-        PlanRecommendation(graft=GraftSize(0, 0), margin_mm=0.1, closest=GraftSize(7, 0))
-    with pytest.raises(ParameterError, match="margin"):
-        PlanRecommendation(graft=GraftSize(0, 0))
 
 
 # --- the plan, end to end on a stand-in study ---------------------------------------------
@@ -516,30 +522,32 @@ def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
     outcome = run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0,
                        templates=[GraftSize(21, 27)], case_function=stand_in_case)
     rec = outcome.recommendation
+    study, answer = rec.recommendation, rec.recommendation.answer
     members = [(d, p) for d in (21.0, 22.0, 23.0) for p in (1, 2)]
-    assert rec.members == tuple(_words(d, p) for d, p in members)
-    assert rec.targets_mm == {_words(d, p): pytest.approx(stand_in_height(None, d, 1))
-                              for d, p in members}
-    assert rec.target_mm is None and rec.target_source == "the normal valve's at the same root"
+    assert [rec.name(m) for m in study.members] == [_words(d, p) for d, p in members]
+    assert {rec.name(m): t for m, t in study.targets_mm.items()} == {
+        _words(d, p): pytest.approx(stand_in_height(None, d, 1)) for d, p in members}
+    assert study.target_mm is None
+    assert rec.target_source == "the normal valve's at the same root"
     expected = surface_margin((14.0, 13.0), 23.0)
     assert expected == pytest.approx(-0.03) and -PATH_SCATTER_MM < expected
     assert surface_margin((13.0, 14.0), 23.0) < -PATH_SCATTER_MM
     assert rec.graft == GraftSize(14.0, 13.0)
-    assert rec.margin_mm == pytest.approx(expected, abs=0.02)
-    assert rec.limiting_member == "root 23.0 mm"
-    assert [g.qualifies for g in rec.grafts] == [False, False, False, False]  # as solved
-    assert rec.grafts[2].graft == GraftSize(14.0, 13.0)
-    assert rec.grafts[2].spread_mm == pytest.approx(
+    assert answer.margin_mm == pytest.approx(expected, abs=0.02)
+    assert rec.name(answer.limiting_member) == "root 23.0 mm"
+    assert [c.qualifies for c in study.cells] == [False, False, False, False]  # as solved
+    assert study.cells[2].size == GraftSize(14.0, 13.0)
+    assert study.cells[2].spread_mm == pytest.approx(
         stand_in_height((14.0, 13.0), 21.0, 1) - stand_in_height((14.0, 13.0), 23.0, 2))
     names = _case_names(out)
     assert len(names) == 3 + 4 * 3 * 2 and "normal__root.loaded_diameter=23" in names
     assert "W14_H13__root.loaded_diameter=23__path=2" in names
 
     summary = json.loads((out / "summary.json").read_text())
-    answer = summary["recommendation"]
-    assert answer["graft"]["label"] == "W14/H13"
-    assert answer["margin_mm"] == rec.margin_mm
-    assert answer["limiting_member"] == "root 23.0 mm" and len(answer["members"]) == 6
+    saved = summary["recommendation"]
+    assert saved["graft"]["label"] == "W14/H13"
+    assert saved["margin_mm"] == answer.margin_mm
+    assert saved["limiting_member"] == "root 23.0 mm" and len(saved["members"]) == 6
     assert summary["reach"]["can_seal"] is True and summary["patient"]["paths"] == 2
     assert summary["run"]["cases"] == 27 and summary["run"]["converged"] == 27
     assert summary["run"]["wall_time_s"] == pytest.approx(27 * 0.01)
@@ -618,12 +626,13 @@ def test_a_plan_names_the_closest_graft_when_none_qualifies(tmp_path):
     outcome = run_plan(_patient(target_coaptation_mm=2.5), tmp_path, MPI.COMM_SELF,
                        mesh_size_mm=2.0, case_function=stand_in_case)
     rec = outcome.recommendation
+    study, answer = rec.recommendation, rec.recommendation.answer
     assert rec.graft is None and rec.closest == GraftSize(14.0, 27.0)
-    assert rec.target_mm == 2.5 and set(rec.targets_mm.values()) == {2.5}
+    assert study.target_mm == 2.5 and set(study.targets_mm.values()) == {2.5}
     shortfall = -surface_margin((14.0, 27.0), 23.0, 2.5)
     assert shortfall == pytest.approx(0.66) and shortfall > 3 * PATH_SCATTER_MM
-    assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.02)
-    assert rec.limiting_member == "root 23.0 mm"
+    assert answer.shortfall_mm == pytest.approx(shortfall, abs=0.02)
+    assert rec.name(answer.limiting_member) == "root 23.0 mm"
     assert (tmp_path / "template_W14_H27.pdf").is_file()
     headline = rec.headline()
     assert "No graft in the studied range is robust" in headline
@@ -645,16 +654,19 @@ def test_diameters_beyond_the_leaflets_reach_are_not_computed(tmp_path):
     outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
                        case_function=stand_in_case)
     rec = outcome.recommendation
+    study, answer = rec.recommendation, rec.recommendation.answer
     assert rec.unsealable_roots_mm == (26.5,)
     assert rec.unsealable_reason == free_edge_reach(22.0, 26.5, 80.0).sentence()
-    assert rec.members == tuple(_words(d, p) for d in (24.5, 25.5) for p in (1, 2))
+    assert [rec.name(m) for m in study.members] == [_words(d, p) for d in (24.5, 25.5)
+                                                     for p in (1, 2)]
     names = _case_names(tmp_path)
     assert len(names) == 2 + 4 * 2 * 2 and not any("26.5" in n for n in names)
     shortfall = -surface_margin((14.0, 27.0), 25.5)
     assert shortfall == pytest.approx(0.085) and shortfall > PATH_SCATTER_MM
     assert rec.graft is None and rec.closest == GraftSize(14.0, 27.0)
-    assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.01) and rec.margin_mm is None
-    assert rec.limiting_member == "root 25.5 mm"
+    assert answer.shortfall_mm == pytest.approx(shortfall, abs=0.01)
+    assert answer.size is None and answer.margin_mm is None
+    assert rec.name(answer.limiting_member) == "root 25.5 mm"
     headline = rec.headline()
     assert headline.startswith("No graft is robust over the root's uncertainty")
     assert "cannot seal a 26.5 mm root whatever the graft" in headline

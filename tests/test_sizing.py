@@ -225,7 +225,7 @@ def test_sizing_map_draws_the_answer(tmp_path):
     """The study's recommendation of a synthetic study drawn as the continuous sizing map
     (looked at by eye; here: it is written, with the answer's lattice behind it)."""
     from valve_dolfinx.plotting.study import plot_sizing_map
-    from valve_dolfinx.study.recommend import recommend
+    from valve_dolfinx.sizing import recommend
 
     rec = recommend(study(seed=2, leaks=lambda w, h: h == 0 and w >= 14), n_paths=2,
                     ladder=None)
@@ -233,7 +233,7 @@ def test_sizing_map_draws_the_answer(tmp_path):
     fig = plot_sizing_map(rec, tmp_path / "sizing_map.png", title="synthetic")
     assert (tmp_path / "sizing_map.png").stat().st_size > 50_000
     labels = [t.get_text() for t in fig.axes[0].texts]
-    assert f"answer {rec.recommended}" in labels and len(rec.cells) == 20
+    assert f"answer {rec.answer.size.label}" in labels and len(rec.cells) == 20
 
 
 def test_design_scales_the_inputs_root_first_and_choices_as_indicators():

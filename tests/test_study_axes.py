@@ -264,8 +264,8 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
 
     one = run_study(_settings(), tmp_path / "one", MPI.COMM_SELF,
                     case_function=stand_in_case).report
-    assert [r.recommended for r in one.recommendations] == ["W14/H0"]
-    assert one.recommendations[0].margin_mm == pytest.approx(margin(14, 0, 20, 200, 1),
+    assert [r.answer.size.label for r in one.recommendations] == ["W14/H0"]
+    assert one.recommendations[0].answer.margin_mm == pytest.approx(margin(14, 0, 20, 200, 1),
                                                              abs=0.005)
 
     settings = _settings(vary={"bending_modulus_kpa": [200, 400]},
@@ -281,14 +281,15 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
                             "root.loaded_diameter=21, path 1 (conformal)", worst]
     assert soft.targets_mm == pytest.approx(dict(zip(soft.members, [3.0, 3.0, 2.5, 2.5],
                                                       strict=True)))
-    assert soft.tolerance_mm == pytest.approx(0.1 / 2**0.5)
+    assert soft.answer.tolerance_mm == pytest.approx(0.1 / 2**0.5)
     for rec, height in ((soft, 2.0), (stiff, 12.0)):
-        assert rec.size.width_pct == 14.0 and abs(rec.size.height_pct - height) <= 1
-        assert rec.limiting_member == "root.loaded_diameter=21"
+        size = rec.answer.size
+        assert size.width_pct == 14.0 and abs(size.height_pct - height) <= 1
+        assert rec.answer.limiting_member == "root.loaded_diameter=21"
         eb = rec.comparison["bending_modulus_kpa"]
-        mean = (margin(14, rec.size.height_pct, 21, eb, 1)
-                + margin(14, rec.size.height_pct, 21, eb, 2)) / 2
-        assert rec.margin_mm == pytest.approx(mean, abs=0.02)
+        mean = (margin(14, size.height_pct, 21, eb, 1)
+                + margin(14, size.height_pct, 21, eb, 2)) / 2
+        assert rec.answer.margin_mm == pytest.approx(mean, abs=0.02)
         assert "in `root.loaded_diameter=21`" in rec.text
     # the solved cells beside the answer: the worst case over the four members
     cell = soft.cell("W14/H13")
@@ -301,8 +302,8 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
         for name in ("sizing_map", "coaptation_vs_width"):
             assert (tmp_path / "axes" / f"{name}{suffix}.png").stat().st_size > 10_000
     summary = json.loads((tmp_path / "axes" / "summary.json").read_text())
-    assert [r["recommended"] for r in summary["recommendations"]] == [soft.recommended,
-                                                                       stiff.recommended]
+    assert [r["recommended"] for r in summary["recommendations"]] == [
+        soft.answer.size.label, stiff.answer.size.label]
     text = (tmp_path / "axes" / "report.md").read_text()
     assert "### bending_modulus_kpa=400" in text and "| W14/H13 | " in text
 
@@ -613,3 +614,49 @@ if __name__ == "__main__":  # the CLI with the stand-in case function
     import sys
 
     sys.exit(_main(sys.argv[1:]))
+
+
+def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
+    """The answer of two diameters and two paths at 200 kPa is W14/H2, off the 3 × 2 grid
+    (:func:`test_comparison_recommends_per_value_and_uncertainty_over_all`).  The sweep
+    solves it in all four members as ordinary cases, marked as confirmations in the
+    tables.  Solved, its worst member (21 mm, path 2) is
+    -0.8 + 0.84 + 0.04 - 0.1 - 0.1 = -0.12 mm below the target (:func:`margin`), more than
+    the tolerance of 0.071 mm: the confirmation misses, its cases join the fit, and the
+    answer is read again; `report` rebuilds the same from the folder."""
+    from valve_dolfinx.study.layout import CONFIRM_FILE
+    from valve_dolfinx.study.report import build_report
+    from valve_dolfinx.study.runner import run_study
+
+    settings = _settings(uncertain={"root.loaded_diameter": [20, 21]}, paths=2)
+    out = tmp_path / "confirm"
+    report = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case).report
+    rec = report.recommendations[0]
+    confirmed = json.loads((out / CONFIRM_FILE).read_text())["confirm"]["0"]
+    assert confirmed[0] == [14.0, 2.0]
+    first = [n for n in _runs(out) if n.startswith("W14_H2_") or n == "W14_H2"]
+    assert sorted(first) == sorted(["W14_H2__root.loaded_diameter=20",
+                                    "W14_H2__root.loaded_diameter=20__path=2",
+                                    "W14_H2__root.loaded_diameter=21",
+                                    "W14_H2__root.loaded_diameter=21__path=2"])
+    # in the tables, marked
+    rows = {r["case"]: r for r in report.rows}
+    assert all(rows[name]["confirmation"] for name in first)
+    assert not rows["W14_H0__root.loaded_diameter=20"]["confirmation"]
+    cell = rec.cell("W14/H2")
+    assert cell.confirmation and len(cell.heights_mm) == 4
+    assert cell.margin_mm == pytest.approx(margin(14, 2, 21, 200, 2), abs=1e-9)
+    assert "| W14/H2 (confirmation) |" in (out / "report.md").read_text()
+    # the miss: it joined the fit (a cell per size and diameter: the grid's 6 and each
+    # confirmation's, at both), and the answer was read again
+    assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": cell.margin_mm,
+                                    "holds": False}
+    assert rec.answer.surface["cells"] == 2 * (6 + len(confirmed))
+    assert "Confirmation 1: W14/H2 solved in every member" in rec.text
+    assert "it misses" in rec.text
+    # every later confirmation (at most CONFIRM_ROUNDS) is of an answer moved by the refit
+    assert len(confirmed) == len(rec.confirmations) <= 3
+    assert len({tuple(s) for s in confirmed}) == len(confirmed)
+    # `report` reads the confirmations from the folder
+    again = build_report(out, settings).recommendations[0]
+    assert again.to_dict() == rec.to_dict()

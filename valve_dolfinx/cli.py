@@ -76,6 +76,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     check_output_folder(args.out)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
+    from valve_dolfinx.geometry.outline import GraftSize
     from valve_dolfinx.geometry.valve import build_valve
     from valve_dolfinx.io import export_valve_vtu
 
@@ -86,7 +87,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     elif args.defaults:
         cases = [(None, None), (21.0, 27.0)]
     for w, h in cases:
-        name = "normal_valve" if w is None else f"graft_valve_W{w:g}_H{h:g}"
+        name = "normal_valve" if w is None else f"graft_valve_{GraftSize(w, h).stem}"
         valve = None
         if comm.rank == 0:
             size = {} if args.mesh_size is None else {"mesh_size": args.mesh_size}
@@ -524,7 +525,7 @@ def _patient(args: argparse.Namespace):
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    from valve_dolfinx.plan.recommendation import GraftSize
+    from valve_dolfinx.geometry.outline import GraftSize
     from valve_dolfinx.plan.runner import plan_study_settings
 
     patient = _patient(args)  # every bad input stops here, before DOLFINx is imported

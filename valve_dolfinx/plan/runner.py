@@ -21,6 +21,7 @@ Layout of a plan folder ``DIR``::
     DIR/patient.toml                 the inputs as they ran (reloadable)
     DIR/plan.md, DIR/plan.pdf        the one-page report
     DIR/summary.json                 the answer, the reach check, the templates' dimensions
+    DIR/sizing_map.png               the study's sizing map at the size the page prints it
     DIR/template_W<w>_H<h>.svg/.pdf  the graft at true size (and .png, the report's thumbnail)
     DIR/study/                       the study folder (a sweep's layout: cases/, results.csv...)
 
@@ -45,20 +46,21 @@ from valve_dolfinx.exceptions import (
     ParameterError,
     StudyIncompleteError,
 )
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
-from valve_dolfinx.plan.recommendation import GraftSize, GraftWorstCase, PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanRecommendation
 from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
 from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
+from valve_dolfinx.sizing.cells import NORMAL_TARGET
 from valve_dolfinx.study.axes import axis_label
 from valve_dolfinx.study.grid import StudySettings
-from valve_dolfinx.study.recommend import NORMAL_TARGET, cell_state
 from valve_dolfinx.study.store import CASES_DIR, RESULT_FILE, SETTINGS_FILE
 
 if TYPE_CHECKING:
+    from valve_dolfinx.sizing.recommendation import Recommendation
     from valve_dolfinx.study.layout import Member
-    from valve_dolfinx.study.recommend import Recommendation
     from valve_dolfinx.study.report import StudyReport
 
 __all__ = ["LIMITATIONS", "ROOT_KEY", "STUDY_DIR", "PlanOutcome", "PlanStudy", "member_words",
@@ -70,6 +72,8 @@ log = logging.getLogger(__name__)
 #: the plan's study folder inside the plan folder
 STUDY_DIR = "study"
 SUMMARY_FILE = "summary.json"
+#: the sizing map as the plan's page prints it
+SIZING_MAP_FILE = "sizing_map.png"
 #: what the answer does not cover, printed on the report
 LIMITATIONS = (
     "An idealised valve: a cylindrical root prescribed at the measured diameter (± its "
@@ -224,7 +228,7 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
                   and m.path == layout.paths[0])
     name = layout.slots.get((0, member, None if shown is None else tuple(shown)))
     aortic, ventricular = _closed_views(out / CASES_DIR / name if name else None, out)
-    figures = PlanFigures(sizing_map=_existing(out / "sizing_map.png"),
+    figures = PlanFigures(sizing_map=_sizing_map(report, out.parent / SIZING_MAP_FILE),
                           closed_aortic=aortic, closed_ventricular=ventricular,
                           closed_member=f"root {patient.root_diameter_mm:.1f} mm, path "
                                         f"{layout.paths[0].number}")
@@ -235,6 +239,19 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
                   cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
                   wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
     return PlanStudy(recommendation, figures, run, out)
+
+
+def _sizing_map(report: StudyReport, path: Path) -> Path | None:
+    """The study's sizing map drawn at the size the plan's page prints it (its labels at
+    least :data:`~valve_dolfinx.plotting.study.MIN_PRINT_PT`)."""
+    from valve_dolfinx.plotting.plan import SIZING_MAP_MM
+    from valve_dolfinx.plotting.study import plot_sizing_map
+
+    if not report.recommendations:
+        return None
+    plot_sizing_map(report.recommendations[0], path,
+                    size_in=(SIZING_MAP_MM[0] / 25.4, SIZING_MAP_MM[1] / 25.4))
+    return path
 
 
 def member_words(member: Member) -> str:
@@ -262,36 +279,20 @@ def _closed_views(case: Path | None, out: Path) -> tuple[Path | None, Path | Non
 
 def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[float, ...],
                      reason: str) -> PlanRecommendation:
-    """The plan's answer from the study's worst-case :class:`~valve_dolfinx.study.recommend.
+    """The plan's answer from the study's :class:`~valve_dolfinx.sizing.recommendation.
     Recommendation` (members named in ``words``; ``beyond``: the root diameters not
     computed, which no graft seals)."""
-    sizes = {c.label: GraftSize(c.width_pct, c.height_pct) for c in rec.cells}
-    limiting = words.get(rec.limiting_member) if rec.limiting_member else None
-    grafts = tuple(GraftWorstCase(sizes[c.label], c.worst_height_mm, c.spread_mm, c.margin_mm,
-                                  words.get(c.limiting_member), c.qualifies, cell_state(c))
-                   for c in rec.cells)
     source = ("the normal valve's at the same root" if rec.target_source.startswith(
         NORMAL_TARGET) else "given in the plan's inputs")
     for member, why in rec.incompetent_targets.items():
         source += f"; caution, the normal valve is {why} at {words[member]}"
-    common = dict(target_mm=rec.target_mm, target_source=source,
-                  members=tuple(words[m] for m in rec.members),
-                  targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
-                  unsealable_roots_mm=beyond, unsealable_reason=reason,
-                  limiting_member=limiting, tolerance_mm=rec.tolerance_mm)
-    if rec.size is not None:
-        answer = {"closest": rec.size} if beyond else {"graft": rec.size}
-        return PlanRecommendation(**answer, margin_mm=rec.margin_mm, **common)
-    if rec.best_size is not None:
-        return PlanRecommendation(closest=rec.best_size, shortfall_mm=rec.shortfall_mm,
-                                  **common)
-    return PlanRecommendation(**common)
+    return PlanRecommendation(rec, words, source, beyond, reason)
 
 
 # --- the plan ----------------------------------------------------------------------------
 #: the files of a plan that state its answer (glob patterns): removed by ``--force`` before
 #: anything is computed, and when the plan's study turns out incomplete
-ANSWER_FILES = ("plan.md", "plan.pdf", SUMMARY_FILE)
+ANSWER_FILES = ("plan.md", "plan.pdf", SUMMARY_FILE, SIZING_MAP_FILE)
 #: the templates a plan draws (``--force`` removes them with the answer: they are cut
 #: from the old inputs' leaflet)
 TEMPLATE_FILES = ("template_*.svg", "template_*.pdf", "template_*.png")

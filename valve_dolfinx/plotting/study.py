@@ -32,10 +32,10 @@ from valve_dolfinx.plotting.style import OKABE_ITO, new_figure, save_figure
 from valve_dolfinx.result import margin_text
 
 if TYPE_CHECKING:
-    from valve_dolfinx.study.recommend import CellSummary, Recommendation
+    from valve_dolfinx.sizing import CellSummary, Recommendation
 
 __all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_nomogram", "plot_case_panel",
-           "PANEL_IMAGES"]
+           "PANEL_IMAGES", "MIN_PRINT_PT"]
 
 log = logging.getLogger(__name__)
 
@@ -116,26 +116,31 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     return save_figure(fig, path, dpi=130)
 
 
+#: the sizing map's default size (inches)
+_MAP_SIZE_IN = (8.6, 7.4)
+#: the smallest text of a figure drawn at its print size (points)
+MIN_PRINT_PT = 7.5
 #: the diverging colour map of a margin over the target (blue above, red below)
 _MARGIN_CMAP = "RdBu"
 
 
-def _solved_cells(ax, rec: Recommendation) -> None:
+def _solved_cells(ax, rec: Recommendation, pt) -> None:
     """The solved cells on a sizing map: filled where sound in every member, a cross where
     not, each with its worst-case height (mm)."""
     for c in rec.cells:
         value = _worst(c)
         marker = dict(marker="o", mfc="black", mec="white") if c.sound else dict(
             marker="X", mfc=_LEAK_COLOUR, mec="black")
-        ax.plot(c.width_pct, c.height_pct, ms=8, mew=1.0, ls="none", zorder=4, **marker)
+        ax.plot(c.width_pct, c.height_pct, ms=pt(8), mew=1.0, ls="none", zorder=4, **marker)
         if math.isfinite(value):
             ax.annotate(f"{value:.2f}", (c.width_pct, c.height_pct), xytext=(0, -13),
-                        textcoords="offset points", ha="center", va="top", fontsize=8,
+                        textcoords="offset points", ha="center", va="top", fontsize=pt(8),
                         zorder=4, bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none",
                                             alpha=0.7))
 
 
-def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = ""):
+def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = "",
+                    size_in: tuple[float, float] = _MAP_SIZE_IN):
     """The answer's sizing map over W × H (:mod:`valve_dolfinx.sizing.answer`).
 
     Filled contours of the predicted worst-case margin over the target (mm; its 0 line
@@ -143,10 +148,17 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     threshold, dash-dotted, the side that does not seal hatched), the band of qualifying
     sizes outlined in green, the answer (star) and the highest size (triangle), and the
     solved cells with their worst-case heights.  Without a surface, the solved cells
-    alone."""
+    alone.  ``size_in`` is the figure's size (inches): drawn smaller than the default (to be
+    printed at that size, as on the plan's page), its texts shrink with it down to
+    :data:`MIN_PRINT_PT`, and its notes are wrapped to the width."""
     answer = rec.answer
     lattice = answer.lattice
-    fig = new_figure(8.6, 7.4)
+    scale = size_in[0] / _MAP_SIZE_IN[0]
+
+    def pt(size: float) -> float:
+        return max(MIN_PRINT_PT, size * scale)
+
+    fig = new_figure(*size_in)
     ax = fig.add_subplot()
     lines = []
     if lattice is not None:
@@ -155,11 +167,13 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         reach = max(float(np.abs(margin).max()), 0.05)
         levels = np.linspace(-reach, reach, 21)
         filled = ax.contourf(w, h, margin, levels=levels, cmap=_MARGIN_CMAP, extend="both")
-        bar = fig.colorbar(filled, ax=ax, shrink=0.9)
-        bar.set_label("predicted worst-case margin over the target (mm)", fontsize=10)
+        # a map printed small keeps its width for the plane: the colour bar goes below it
+        bar = fig.colorbar(filled, ax=ax, shrink=0.9, location="right" if scale >= 1 else
+                           "bottom")
+        bar.set_label("predicted worst-case margin over the target (mm)", fontsize=pt(10))
         bar.set_ticks(levels[::4], labels=[f"{v:+.2f}" for v in levels[::4]])
         steps = ax.contour(w, h, margin, levels=levels[::4], colors="0.3", linewidths=0.6)
-        ax.clabel(steps, fmt="%.2f", fontsize=8)
+        ax.clabel(steps, fmt="%.2f", fontsize=pt(8))
         tol = answer.tolerance_mm
         ax.contour(w, h, margin, levels=[0.0], colors="black", linewidths=2.0)
         ax.contour(w, h, margin, levels=[-tol], colors="black", linewidths=1.5,
@@ -182,16 +196,16 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         mid_w, mid_h = lattice.widths_pct.mean(), lattice.heights_pct.mean()
         left = up = None
         if answer.size is not None:
-            ax.plot(*answer.size, marker="*", ms=20, mfc="white", mec="black", mew=1.5,
+            ax.plot(*answer.size, marker="*", ms=pt(20), mfc="white", mec="black", mew=1.5,
                     ls="none", zorder=5)
             left, up = answer.size.width_pct > mid_w, answer.size.height_pct < mid_h
             ax.annotate(f"answer {answer.size.label}", answer.size,
                         xytext=(-10 if left else 10, 10 if up else -20),
                         textcoords="offset points", ha="right" if left else "left",
-                        fontsize=10, fontweight="bold", zorder=6,
+                        fontsize=pt(10), fontweight="bold", zorder=6,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"))
         if answer.highest is not None:
-            ax.plot(*answer.highest, marker="^", ms=11, mfc="white", mec="black", mew=1.2,
+            ax.plot(*answer.highest, marker="^", ms=pt(11), mfc="white", mec="black", mew=1.2,
                     ls="none", zorder=5)
             h_left = answer.highest.width_pct > mid_w
             h_up = answer.highest.height_pct < mid_h
@@ -200,15 +214,16 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
             ax.annotate(f"highest {answer.highest.label}", answer.highest,
                         xytext=(-8 if h_left else 8, 10 if h_up else -18),
                         textcoords="offset points", ha="right" if h_left else "left",
-                        fontsize=9, zorder=6,
+                        fontsize=pt(9), zorder=6,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"))
     else:
         lines.append(answer.text.split(". ")[0] + ".")
-    _solved_cells(ax, rec)
+    _solved_cells(ax, rec, pt)
     lines.append("solved cells: dot sound in every member, cross not; number: worst-case "
                  "minimum coaptation height (mm)")
-    widths = sorted({c.width_pct for c in rec.cells})
-    heights = sorted({c.height_pct for c in rec.cells})
+    grid = [c for c in rec.cells if not c.confirmation]  # ticks at the grid's sizes
+    widths = sorted({c.width_pct for c in grid})
+    heights = sorted({c.height_pct for c in grid})
     if widths:
         ax.set_xticks(widths, [f"+{x:g}" for x in widths])
         ax.set_yticks(heights, [f"+{y:g}" for y in heights])
@@ -216,12 +231,13 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
         ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)
         ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + pad_h)
-    ax.tick_params(labelsize=10)
-    ax.set_xlabel("graft width enlargement W (%)", fontsize=11)
-    ax.set_ylabel("graft height enlargement H (%)", fontsize=11)
+    ax.tick_params(labelsize=pt(10))
+    ax.set_xlabel("graft width enlargement W (%)", fontsize=pt(11))
+    ax.set_ylabel("graft height enlargement H (%)", fontsize=pt(11))
     head = _title(rec, "Graft sizing map", title)
-    note = "\n".join(textwrap.fill(line, 100) for line in lines)
-    ax.set_title(f"{head}\n{note}", fontsize=9)
+    chars = int(100 * scale * 9 / pt(9))
+    note = "\n".join(textwrap.fill(line, chars) for line in lines)
+    ax.set_title(f"{head}\n{note}", fontsize=pt(9))
     return save_figure(fig, path, dpi=130)
 
 

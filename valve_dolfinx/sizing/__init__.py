@@ -8,7 +8,10 @@
 * :mod:`~valve_dolfinx.sizing.resolution`: the measured resolution (path scatter, surface
   noise, discretisation error) and the decision tolerance;
 * :mod:`~valve_dolfinx.sizing.answer`: the answer read from the surfaces at that
-  tolerance, its band and its wording, and the sizes to confirm.
+  tolerance, its band and its wording, and the sizes to confirm;
+* :mod:`~valve_dolfinx.sizing.recommendation`: one comparison value's answer beside the
+  worst case of each solved graft, from one fit over every comparison value (what the
+  study, the nomogram and the plan report).
 
 Nothing here imports DOLFINx.
 """
@@ -34,6 +37,7 @@ from valve_dolfinx.sizing.cells import (
     member_targets,
     summarise_cells,
 )
+from valve_dolfinx.sizing.recommendation import Recommendation, recommend, recommend_all
 from valve_dolfinx.sizing.resolution import Resolution
 
 __all__ = [
@@ -41,6 +45,7 @@ __all__ = [
     "CellSummary",
     "GraftSize",
     "MemberTable",
+    "Recommendation",
     "Resolution",
     "SizingAnswer",
     "StudyFit",
@@ -51,6 +56,8 @@ __all__ = [
     "incompetent_normals",
     "member_targets",
     "read_answer",
+    "recommend",
+    "recommend_all",
     "sizes_to_confirm",
     "summarise_cells",
 ]

@@ -153,6 +153,11 @@ class SizingAnswer:
     def tolerance_mm(self) -> float | None:
         return self.resolution.tolerance_mm
 
+    @property
+    def closest(self) -> GraftSize | None:
+        """Without a graft, the size of highest predicted worst case; else None."""
+        return self.highest if self.size is None else None
+
     def to_dict(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "lattice"}
         for key in ("size", "highest"):
@@ -405,9 +410,7 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"{band['area_ratio'][1]:.3f} ×); the highest predicted coaptation is at "
             f"{answer.highest.label} (margin {margin_text(answer.highest_margin_mm, signed=True)}"
             f" mm).")
-    confirm = (f"{size.label} is read from the surface: solve it in every member to confirm "
-               "it.")
-    return " ".join((head, margin, also, _resolution(answer), confirm))
+    return " ".join((head, margin, also, _resolution(answer)))
 
 
 def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:

@@ -280,12 +280,12 @@ class StudySettings:
         return (*(StudyAxis(k, v, COMPARISON) for k, v in self.vary.items()),
                 *(StudyAxis(k, v, UNCERTAINTY) for k, v in self.uncertain.items()))
 
-    def layout(self) -> StudyLayout:
-        """Every case, its configuration and where it stands among the axes
-        (:func:`valve_dolfinx.study.layout.study_layout`)."""
+    def layout(self, confirm: dict | None = None) -> StudyLayout:
+        """Every case, its configuration and where it stands among the axes, with the
+        confirmations ``confirm`` (:func:`valve_dolfinx.study.layout.study_layout`)."""
         from valve_dolfinx.study.layout import study_layout
 
-        return study_layout(self)
+        return study_layout(self, confirm)
 
     def cases(self) -> list[StudyCase]:
         """Every case, in the fixed order that ``--case-index`` counts."""

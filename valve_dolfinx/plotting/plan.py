@@ -1,0 +1,171 @@
+"""The plan's one page (A4) as a matplotlib figure, from its words and pictures.
+
+:func:`draw_plan_page` lays out a :class:`PlanPage`, top to bottom: the title, the
+answer framed in the colour of its kind, the measured inputs beside the graft template's
+thumbnail, the sizing map and the closed valve from the aorta and from the ventricle,
+what was run, the limitations.  A picture that was not made is a grey box that says so.
+The figure is exactly A4 on its own canvas (:func:`valve_dolfinx.plotting.style.
+new_figure`), its parts placed in millimetres; every text is at least 7 pt at print
+size, and the inputs are wrapped, never cut.  What the page says is computed by
+:mod:`valve_dolfinx.plan.report`.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from valve_dolfinx.plotting.page import A4_MM, PT_MM
+from valve_dolfinx.plotting.style import OKABE_ITO, new_figure
+
+__all__ = ["PlanPage", "draw_plan_page", "SIZING_MAP_MM"]
+
+_BOX = {"graft": "#e3f1ea", "closest": "#fbefd9", "cannot_seal": "#f8dfd6"}
+_EDGE = {"graft": OKABE_ITO["bluish_green"], "closest": OKABE_ITO["orange"],
+         "cannot_seal": OKABE_ITO["vermillion"]}
+#: the sizing map's box on the page (width, height in mm): a map drawn at this size is
+#: printed at 100 %, its labels at the sizes it was drawn with
+SIZING_MAP_MM = (116.0, 100.0)
+#: the inputs' values column: where it starts (mm) and its width (characters at 8 pt)
+_VALUES_X_MM, _VALUES_CHARS = 64.0, 58
+
+
+@dataclass(frozen=True)
+class PlanPage:
+    """What the plan's page shows (pictures: PNG files, None: not made).
+
+    ``kind`` is ``"graft"``, ``"closest"`` or ``"cannot_seal"`` (the answer box's colour);
+    ``details`` the lines under the headline; ``inputs`` (what, value) rows; ``reach``
+    what the native free edges can span (may be ""); ``nothing_computed`` the paragraph
+    that replaces the pictures when no study ran ("" otherwise); ``shown`` the graft and
+    member the closed-valve pictures show.
+    """
+
+    title: str
+    subtitle: str
+    kind: str
+    headline: str
+    details: list[str] = field(default_factory=list)
+    inputs: list[tuple[str, str]] = field(default_factory=list)
+    reach: str = ""
+    nothing_computed: str = ""
+    template: Path | None = None
+    template_caption: str = "Graft template"
+    template_missing: str = "not made"
+    sizing_map: Path | None = None
+    sizing_caption: str = "Sizing map"
+    closed_aortic: Path | None = None
+    closed_ventricular: Path | None = None
+    shown: str = ""
+    run: list[str] = field(default_factory=list)
+    limitations: str = ""
+    footer: str = ""
+
+
+def _axes_mm(fig, x: float, y: float, w: float, h: float):
+    """Axes at (x, y) of width w and height h, in millimetres from the lower left corner."""
+    return fig.add_axes((x / A4_MM[0], y / A4_MM[1], w / A4_MM[0], h / A4_MM[1]))
+
+
+def _rounded(x, y, w, h, face, edge, transform):
+    from matplotlib.patches import FancyBboxPatch
+
+    return FancyBboxPatch((x, y), w, h, boxstyle="round,pad=0,rounding_size=0.02",
+                          facecolor=face, edgecolor=edge, linewidth=1.0, transform=transform)
+
+
+def _text(fig, x: float, y: float, text: str, size: float = 9.0, spacing: float = 1.3,
+          **kw) -> float:
+    """Text whose first line's top is at ``y`` (mm), as written (a ``$`` is a dollar sign, not
+    math); returns the y below its last line."""
+    fig.text(x / A4_MM[0], y / A4_MM[1], text, fontsize=size, va="top", linespacing=spacing,
+             parse_math=False, **kw)
+    return y - (text.count("\n") + 1) * size * spacing * PT_MM
+
+
+def _picture(fig, box: tuple[float, float, float, float], path: Path | None, caption: str,
+             missing: str) -> None:
+    """A PNG fitted into ``box`` (mm) with its caption above, or a grey box saying why not."""
+    import matplotlib.image
+
+    x, y, w, h = box
+    fig.text(x / A4_MM[0], (y + h + 1.0) / A4_MM[1], caption, fontsize=8,
+             fontweight="bold", parse_math=False)
+    ax = _axes_mm(fig, x, y, w, h)
+    ax.set_axis_off()
+    if path is not None and Path(path).is_file():
+        ax.imshow(matplotlib.image.imread(path), interpolation="antialiased")
+        ax.set_anchor("N")
+        return
+    ax.add_patch(_rounded(0.0, 0.0, 1.0, 1.0, "#eeeeee", "#bbbbbb", ax.transAxes))
+    ax.text(0.5, 0.5, textwrap.fill(missing, 38), ha="center", va="center", fontsize=8,
+            color="#555555", transform=ax.transAxes, parse_math=False)
+
+
+def _answer_box(fig, page: PlanPage, top: float) -> float:
+    """The answer, framed in the colour of its kind; returns the y below the box."""
+    y = _text(fig, 16, top - 4.0, textwrap.fill(page.headline, 80), size=10.5,
+              spacing=1.35, fontweight="bold")
+    if page.details:
+        y = _text(fig, 16, y - 2.0, "\n".join(textwrap.fill(d, 116) for d in page.details),
+                  size=8)
+    bottom = y - 3.0
+    fig.patches.append(_rounded(12 / A4_MM[0], bottom / A4_MM[1], 186 / A4_MM[0],
+                                (top - bottom) / A4_MM[1], _BOX[page.kind], _EDGE[page.kind],
+                                fig.transFigure))
+    return bottom
+
+
+def _inputs(fig, rows: list[tuple[str, str]], top: float) -> float:
+    """The (what, value) rows, each value wrapped in its column; returns the y below."""
+    y = top
+    for what, value in rows:
+        _text(fig, 12, y, what, size=8, spacing=1.3, color="#333333")
+        y = _text(fig, _VALUES_X_MM, y, textwrap.fill(value, _VALUES_CHARS), size=8,
+                  spacing=1.3) - 1.0
+    return y
+
+
+def _pictures(fig, page: PlanPage, top: float, height: float) -> None:
+    """The sizing map on the left, the closed valve from the aorta and from the ventricle
+    stacked on the right, in a row ``height`` mm high below ``top``."""
+    which = f"\n{page.shown}" if page.shown else ""
+    _picture(fig, (12, top - height, SIZING_MAP_MM[0], height), page.sizing_map,
+             page.sizing_caption, "not made")
+    half = 0.5 * (height - 10.0)
+    _picture(fig, (134, top - half, 64, half), page.closed_aortic,
+             f"Closed valve from the aorta{which}", "not made")
+    _picture(fig, (134, top - height, 64, half), page.closed_ventricular,
+             f"Closed valve from the ventricle{which}", "not made")
+
+
+def draw_plan_page(page: PlanPage):
+    """The page as a matplotlib figure of exactly A4 (see the module docstring)."""
+    fig = new_figure(A4_MM[0] / 25.4, A4_MM[1] / 25.4, layout=None)
+    y = _text(fig, 12, 288, page.title, size=16, fontweight="bold")
+    y = _text(fig, 12, y - 1.0, page.subtitle, size=8, color="#333333")
+    y = _answer_box(fig, page, y - 3.0)
+
+    top = y - 6.0
+    _text(fig, 12, top, "Measured inputs", size=10, fontweight="bold")
+    y = _inputs(fig, page.inputs, top - 6.0)
+    if page.reach:
+        y = _text(fig, 12, y - 1.0, textwrap.fill(page.reach, 76), size=7.5, color="#333333")
+    if page.nothing_computed:
+        y = _text(fig, 12, y - 8.0, textwrap.fill(page.nothing_computed, 100), size=9)
+        height = 0.0
+    else:
+        thumb = 44.0
+        _picture(fig, (136, top - 4.0 - thumb, 62, thumb), page.template,
+                 page.template_caption, page.template_missing)
+        y = min(y, top - 4.0 - thumb) - 8.0
+        height = min(SIZING_MAP_MM[1], y - 74.0)
+        _pictures(fig, page, y, height)
+    y = _text(fig, 12, y - height - 8.0, "What was run", size=10, fontweight="bold")
+    y = _text(fig, 12, y - 1.5, "\n".join(textwrap.fill(line, 118) for line in page.run),
+              size=8)
+    y = _text(fig, 12, y - 4.0, "Limitations", size=10, fontweight="bold")
+    _text(fig, 12, y - 1.5, textwrap.fill(page.limitations, 118), size=8, style="italic")
+    _text(fig, 12, 14, page.footer, size=7, color="#555555")
+    return fig
