@@ -612,7 +612,7 @@ def test_recommendation_reads_the_answer_beside_the_solved_cells():
     # a given target moves the answer up the plane: 0.08 W + 0.03 H >= 1.3 needs H > 0 at
     # W <= 14 (W14 gives 0.08·14 + 0.03 H >= 1.3 for H >= 6)
     higher = recommend(rows, target_mm=3.3, ladder=None)
-    assert higher.size.width_pct == 14.0 and 5.0 <= higher.size.height_pct <= 7.0
+    assert higher.answer.size.width_pct == 14.0 and 5.0 <= higher.answer.size.height_pct <= 7.0
 
 
 def test_recommendation_when_none_qualifies():
@@ -629,7 +629,7 @@ def test_recommendation_when_none_qualifies():
     assert rec.text.startswith("No graft:") and "1.26 mm short" in rec.text
     no_normal = recommend(rows[1:], ladder=None)
     assert no_normal.target_mm is None and "give --target-coaptation" in no_normal.text
-    assert no_normal.size is None and no_normal.answer.why == "no target"
+    assert no_normal.answer.size is None and no_normal.answer.why == "no target"
     unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]], ladder=None)
     assert unconverged.answer.why == "no target" and "did not converge" in unconverged.text
 

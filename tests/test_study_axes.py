@@ -86,6 +86,14 @@ def _runs(out: Path) -> list[str]:
     return log.read_text().split() if log.exists() else []
 
 
+def _grid(names, settings, out: Path) -> list[str]:
+    """``names`` without the cases that confirm an answer (sizes off the grid)."""
+    from valve_dolfinx.study.layout import read_confirmations
+
+    extra = {c.name for c in settings.layout(read_confirmations(out)).cases if c.confirmation}
+    return [n for n in names if n not in extra]
+
+
 def _main(argv: list[str]) -> int:
     """The CLI with the stand-in case function."""
     return cli_with(stand_in_case, argv)
@@ -171,8 +179,10 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
     layout = settings.layout()
     assert len(layout.cases) == 2 * 2 * (1 + 2 * 6) == 52
-    assert sorted(_runs(out)) == sorted(c.name for c in layout.cases)  # each once
-    assert sorted(outcome.computed) == sorted(c.name for c in layout.cases)
+    # each once (and the answers' confirmations, tested below)
+    assert sorted(_grid(_runs(out), settings, out)) == sorted(c.name for c in layout.cases)
+    assert sorted(_grid(outcome.computed, settings, out)) == sorted(
+        c.name for c in layout.cases)
     assert [c.name for c in layout.cases[:4]] == [
         "normal__bending_modulus_kpa=0__root.loaded_diameter=20",
         "normal__bending_modulus_kpa=0__root.loaded_diameter=21",
@@ -181,7 +191,7 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     assert {c.name for c in layout.cases} >= {
         "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21",
         "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21__path=2"}
-    rows = read_csv_rows(out / "results.csv")
+    rows = [r for r in read_csv_rows(out / "results.csv") if r["confirmation"] == "false"]
     assert len(rows) == 52 and list(rows[0])[13:17] == [
         "case", "bending_modulus_kpa", "root.loaded_diameter", "path"]
     for row in rows:
@@ -231,11 +241,14 @@ def test_rerun_skips_every_finished_member(tmp_path):
     run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case, report=False)
     first = _runs(out)
     again = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert again.computed == [] and _runs(out) == first
+    assert _grid(again.computed, settings, out) == []  # the answer's confirmations only
+    assert _grid(_runs(out), settings, out) == first
     wider = settings.replace(uncertain={"root.loaded_diameter": [20, 21, 22]})
+    before = _runs(out)
     more = run_study(wider, out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(more.computed) == sorted(_runs(out)[len(first):])
-    assert len(more.computed) == 1 + 2 * 6 and all("=22" in n for n in more.computed)
+    assert sorted(more.computed) == sorted(_runs(out)[len(before):])
+    grid = _grid(more.computed, wider, out)
+    assert len(grid) == 1 + 2 * 6 and all("=22" in n for n in grid)
 
 
 def test_first_path_keeps_the_plain_sweep_names(tmp_path):
@@ -244,11 +257,12 @@ def test_first_path_keeps_the_plain_sweep_names(tmp_path):
 
     out = tmp_path / "study"
     plain = run_study(_settings(), out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(plain.computed) == sorted(["normal", "W0_H0", "W0_H13", "W7_H0", "W7_H13",
-                                             "W14_H0", "W14_H13"])
+    grid = _grid(plain.computed, _settings(), out)
+    assert sorted(grid) == sorted(["normal", "W0_H0", "W0_H13", "W7_H0", "W7_H13", "W14_H0",
+                                   "W14_H13"])
     two = run_study(_settings(paths=2), out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(two.computed) == sorted(f"{n}__path=2" for n in plain.computed
-                                          if n != "normal")
+    assert sorted(_grid(two.computed, _settings(paths=2), out)) == sorted(
+        f"{n}__path=2" for n in grid if n != "normal")
 
 
 # --- the recommendation over axes -------------------------------------------------------------

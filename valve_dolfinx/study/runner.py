@@ -562,10 +562,11 @@ def _confirmations(out: Path, settings: StudySettings) -> dict:
     try:
         same = (saved.is_file() and StudySettings.from_dict(
             json.loads(saved.read_text())["settings"]) == settings)
-    except (ValueError, KeyError, ValveError):
+    except (ValueError, KeyError, ValveError, OSError):
         same = False
     if not same:
-        (out / CONFIRM_FILE).unlink(missing_ok=True)
+        if (out / CONFIRM_FILE).is_file():
+            (out / CONFIRM_FILE).unlink()
         return {}
     return read_confirmations(out)
 
