@@ -19,7 +19,10 @@ The one home of the answer that the study, the nomogram and the plan report:
    of highest predicted worst case.  "No graft" only when no size seals, or none comes
    within the tolerance of the target; the closest size's shortfall is then given
    against the tolerance.
-3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer;
+3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer, and
+   :func:`solved_worst_case` gives the same statistic as the prediction from a size's
+   solves: per uncertainty member the mean of its paths' heights minus the member's
+   target, the least over the members;
    :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
    are resampled with replacement and the surfaces refitted.
 
@@ -55,7 +58,7 @@ from valve_dolfinx.sizing.surface import (
 )
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
-           "sizes_to_confirm", "resample_paths", "bootstrap_stability", "SEAL_PROBABILITY",
+           "sizes_to_confirm", "solved_worst_case", "resample_paths", "bootstrap_stability", "SEAL_PROBABILITY",
            "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
@@ -439,6 +442,33 @@ def sizes_to_confirm(answer: SizingAnswer, tables: Sequence[MemberTable]
         if tuple(answer.size) not in solved:
             out.append((answer.size, table))
     return out
+
+
+def solved_worst_case(answer: SizingAnswer, tables: Sequence[MemberTable], size: GraftSize
+                      ) -> tuple[float | None, str | None]:
+    """The solved counterpart of ``answer``'s predicted worst case, at ``size``.
+
+    The statistic the answer predicts: per uncertainty member (``answer.members``; its
+    paths are replicates, as in the fit), the mean minimum coaptation height of the size's
+    converged cases along its paths minus the member's target (``answer.targets_mm``); the
+    least of these over the members.  Returns that margin (mm) and its member, or
+    ``(None, None)`` when some member has no converged case of the size or no target.
+    """
+    heights: dict[str, list[float]] = {}
+    for table in tables:
+        for row in _graft_rows(table):
+            value = _number(row, FIGURE)
+            if ((float(row["graft_width_pct"]), float(row["graft_height_pct"])) == tuple(size)
+                    and row.get("converged") and math.isfinite(value)):
+                heights.setdefault(_member_label(table.uncertain), []).append(value)
+    margins = {}
+    for member in answer.members:
+        target = answer.targets_mm.get(member)
+        if target is None or not heights.get(member):
+            return None, None
+        margins[member] = float(np.mean(heights[member])) - target
+    limiting = min(margins, key=margins.get)
+    return margins[limiting], limiting
 
 
 def resample_paths(tables: Sequence[MemberTable], rng: np.random.Generator

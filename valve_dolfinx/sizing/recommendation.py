@@ -25,6 +25,7 @@ from valve_dolfinx.sizing.answer import (
     fit_study,
     read_answer,
     sizes_to_confirm,
+    solved_worst_case,
 )
 from valve_dolfinx.sizing.cells import (
     CellSummary,
@@ -54,8 +55,9 @@ class Recommendation:
     ``incompetent_targets`` the members whose target is the height of a normal valve that
     is not competent, with why (``competence_text``): a target no sound valve set.
     ``confirmations`` are the sizes solved to confirm the answer, in the order they were
-    proposed, each with its solved worst-case margin and whether it holds
-    (:func:`confirmation_holds`).
+    proposed, each with its solved worst-case margin (the statistic the answer predicts,
+    :func:`~valve_dolfinx.sizing.answer.solved_worst_case`), the member that sets it and
+    whether it holds (:func:`confirmation_holds`).
     """
 
     comparison: dict[str, Any]
@@ -73,10 +75,12 @@ class Recommendation:
     @property
     def next_confirmation(self) -> GraftSize | None:
         """The size to solve next in every member: the answer's, when it is not solved in
-        every member yet and the last confirmation (if any) missed; else None."""
+        every member yet and fewer than :data:`CONFIRM_ROUNDS` sizes have been solved to
+        confirm it; else None.  Every confirmation joins the fit, so the answer read after
+        one (missed, or held and moved by its cases) is confirmed in turn."""
         if self.answer.size is None or not self.confirm:
             return None
-        if self.confirmations and self.confirmations[-1]["holds"]:
+        if len(self.confirmations) >= CONFIRM_ROUNDS:
             return None
         return self.answer.size
 
@@ -98,32 +102,47 @@ class Recommendation:
                 "incompetent_targets": self.incompetent_targets, "text": self.text}
 
 
-def confirmation_holds(cell: CellSummary, tolerance_mm: float | None) -> bool:
-    """A confirmation holds when its size converged and sealed in every member and its
-    solved worst case comes within the tolerance of the target (none measured: reaches it);
-    otherwise it misses, joins the fit, and the answer is read again."""
-    return (cell.sound and cell.margin_mm is not None
-            and cell.margin_mm >= -(tolerance_mm or 0.0))
+def confirmation_holds(cell: CellSummary, margin_mm: float | None,
+                       tolerance_mm: float | None) -> bool:
+    """A confirmation holds when its size converged and sealed in every member (every
+    uncertainty value along every path: ``cell``) and its solved worst case ``margin_mm``
+    (:func:`~valve_dolfinx.sizing.answer.solved_worst_case`: the statistic the answer
+    predicts, paths averaged per uncertainty member, the least over those) comes within
+    the tolerance of the target (none measured: reaches it); otherwise it misses, joins
+    the fit, and the answer is read again."""
+    return cell.sound and margin_mm is not None and margin_mm >= -(tolerance_mm or 0.0)
 
 
 def _confirmation_text(rec: Recommendation) -> list[str]:
     """What the confirmations gave, beside the prediction."""
     out = []
     answer = rec.answer
+    paths = " (its paths averaged)" if len(rec.members) > len(answer.members) else ""
     for k, entry in enumerate(rec.confirmations, 1):
         cell = rec.cell(entry["graft"])
-        solved = ("its worst case is not known" if cell.margin_mm is None else
-                  f"solved worst-case margin {margin_text(cell.margin_mm, signed=True)} mm"
-                  f"{_in_member(cell.limiting_member)}")
+        solved = ("its worst case is not known" if entry["margin_mm"] is None else
+                  f"solved worst-case margin{paths} "
+                  f"{margin_text(entry['margin_mm'], signed=True)} mm"
+                  f"{_in_member(entry['limiting_member'])}")
         predicted = (f" (the surface now predicts {margin_text(answer.margin_mm, signed=True)}"
                      f" ± {answer.margin_sd_mm:.2f} mm)"
                      if answer.size is not None and answer.size.label == entry["graft"] else "")
         verdict = ("it holds" if entry["holds"] else
-                   f"it misses ({cell_state(cell)}): it joined the fit and the answer was "
-                   "read again")
+                   f"it misses ({_miss(cell, entry['margin_mm'], answer.tolerance_mm)}): it "
+                   "joined the fit and the answer was read again")
         out.append(f"Confirmation {k}: {entry['graft']} solved in every member, {solved}"
                    f"{predicted}; {verdict}.")
     return out
+
+
+def _miss(cell: CellSummary, margin_mm: float | None, tolerance_mm: float | None) -> str:
+    """Why a confirmation missed, in words."""
+    if not cell.sound:
+        return cell_state(cell)
+    if margin_mm is None:
+        return "no worst case"
+    return (f"{margin_text(-margin_mm)} mm short, beyond the tolerance of "
+            f"{margin_text(tolerance_mm or 0.0)} mm")
 
 
 def _in_member(member: str | None) -> str:
@@ -144,13 +163,17 @@ def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
     for size in confirmed:
         cell = rec.cell(GraftSize(*size).label)
         if cell is not None:
-            rec.confirmations.append({"graft": cell.label, "margin_mm": cell.margin_mm,
-                                      "holds": confirmation_holds(cell, answer.tolerance_mm)})
+            solved, member = solved_worst_case(answer, tables, cell.size)
+            rec.confirmations.append({
+                "graft": cell.label, "margin_mm": solved, "limiting_member": member,
+                "holds": confirmation_holds(cell, solved, answer.tolerance_mm)})
     lines = [answer.text, *_confirmation_text(rec)]
     if rec.confirm:
+        then = ("a sweep solves it there to confirm it" if rec.next_confirmation is not None
+                else f"the {CONFIRM_ROUNDS} rounds of confirmation are spent, so it is not "
+                "confirmed")
         lines.append(f"{answer.size.label} is read from the surface and not solved in "
-                     f"{len(rec.confirm)} of the {len(tables)} members: a sweep solves it "
-                     "there to confirm it.")
+                     f"{len(rec.confirm)} of the {len(tables)} members: {then}.")
     if target_mm is None:
         rec.incompetent_targets = incompetent_normals({t.label: t.rows for t in tables})
         lines += _incompetent_text(rec)
