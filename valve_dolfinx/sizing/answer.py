@@ -58,8 +58,8 @@ from valve_dolfinx.sizing.surface import (
 )
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
-           "sizes_to_confirm", "solved_worst_case", "resample_paths", "bootstrap_stability", "SEAL_PROBABILITY",
-           "MIN_CELLS"]
+           "sizes_to_confirm", "solved_worst_case", "resample_paths", "bootstrap_stability",
+           "SEAL_PROBABILITY", "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
