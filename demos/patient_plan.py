@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None):
 
     # %%
     if comm.rank == 0:
-        rec = outcome.recommendation
+        rec = outcome.answers.values[0]  # one answer: the plan varies nothing
         print(rec.headline())
         for cell in rec.recommendation.cells if rec.recommendation else ():
             print(f"  {cell.label}: lowest minimum coaptation "
@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None):
     # %%
     if comm.rank == 0:
         rebuilt = rebuild_plan(args.out)
-        same = rebuilt.recommendation.to_dict() == rec.to_dict()
+        same = rebuilt.answers.to_dict() == outcome.answers.to_dict()
         print(f"rebuilt from the case folders: {same}")
     return outcome
 

@@ -14,18 +14,26 @@ answers:
   qualifies in every member computed, with its margin there;
 * the native leaflets cannot seal the measured root whatever the graft (the same
   bound): nothing was computed.
+
+A plan with comparison axes (``--vary``) answers at each of their values:
+:class:`PlanAnswers` holds one :class:`PlanRecommendation` per value and says whether the
+size depends on them (the smallest size that qualifies at every value,
+:func:`~valve_dolfinx.sizing.answer.common_size`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from valve_dolfinx.geometry.outline import GraftSize
+from valve_dolfinx.sizing.answer import common_size
 from valve_dolfinx.sizing.cells import cell_state
 from valve_dolfinx.sizing.recommendation import Recommendation, headline
+from valve_dolfinx.study.axes import axis_label, value_text
 
-__all__ = ["PlanRecommendation"]
+__all__ = ["PlanRecommendation", "PlanAnswers"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +87,11 @@ class PlanRecommendation:
         """The graft to draw: the recommended one, else the closest."""
         return self.graft or self.closest
 
+    @property
+    def comparison(self) -> dict[str, Any]:
+        """The comparison value answered (``{key: value}``; empty without ``--vary``)."""
+        return {} if self.recommendation is None else dict(self.recommendation.comparison)
+
     def name(self, label: str | None) -> str | None:
         """A member's label in words."""
         return None if label is None else self.names.get(label, label)
@@ -109,7 +122,7 @@ class PlanRecommendation:
             {"graft": c.label, "worst_height_mm": c.worst_height_mm, "spread_mm": c.spread_mm,
              "margin_mm": c.margin_mm, "limiting_member": self.name(c.limiting_member),
              "qualifies": c.qualifies, "state": cell_state(c)} for c in rec.cells]
-        return {"graft": size(self.graft),
+        return {"comparison": self.comparison, "graft": size(self.graft),
                 "margin_mm": None if answer is None or answer.size is None
                 else answer.margin_mm,
                 "limiting_member": None if answer is None else self.name(answer.limiting_member),
@@ -124,3 +137,107 @@ class PlanRecommendation:
                 "unsealable_reason": self.unsealable_reason, "cannot_seal": self.cannot_seal,
                 "tolerance_mm": None if answer is None else answer.tolerance_mm,
                 "headline": self.headline()}
+
+
+@dataclass(frozen=True)
+class PlanAnswers:
+    """The plan's answer at each comparison value (one :class:`PlanRecommendation`, with an
+    empty ``comparison``, when nothing is varied), in the study's order of the values."""
+
+    values: tuple[PlanRecommendation, ...]
+
+    @property
+    def varied(self) -> bool:
+        return len(self.values) > 1
+
+    @property
+    def axes(self) -> dict[str, list[Any]]:
+        """``{key: [values]}`` of the comparison axes (empty when nothing is varied)."""
+        out: dict[str, list[Any]] = {}
+        for value in self.values:
+            for key, v in value.comparison.items():
+                if v not in out.setdefault(key, []):
+                    out[key].append(v)
+        return out
+
+    @property
+    def kind(self) -> str:
+        """``"cannot_seal"``, ``"graft"`` (a graft at every value) or ``"closest"``."""
+        if any(v.cannot_seal is not None for v in self.values):
+            return "cannot_seal"
+        return "graft" if all(v.graft is not None for v in self.values) else "closest"
+
+    @property
+    def common(self) -> GraftSize | None:
+        """With comparison axes, the smallest size that qualifies at every value (read from
+        the one surface of the plan's study); None when nothing is varied, or no size
+        qualifies at every value."""
+        recs = [v.recommendation for v in self.values]
+        if not self.varied or any(r is None for r in recs) or any(
+                v.unsealable_roots_mm for v in self.values):
+            return None
+        return common_size([r.answer for r in recs])
+
+    @property
+    def template_grafts(self) -> list[GraftSize]:
+        """The grafts to draw: the common size (if any), then each value's recommended or
+        closest graft, each once."""
+        grafts = [self.common, *(v.template_graft for v in self.values)]
+        return list(dict.fromkeys(g for g in grafts if g is not None))
+
+    def label(self, value: PlanRecommendation) -> str:
+        """A value as the page names it (``graft_bending_modulus_kpa=200``)."""
+        return axis_label(value.comparison.items())
+
+    def dependence(self) -> str:
+        """Whether the size depends on the comparison axes, in a sentence or two ("" when
+        nothing is varied)."""
+        if not self.varied:
+            return ""
+        axes = ", ".join(f"{k} ({', '.join(value_text(v) for v in vs)})"
+                         for k, vs in self.axes.items())
+        sizes = [v.graft for v in self.values]
+        if self.kind == "cannot_seal":
+            return ""
+        if all(s is not None for s in sizes) and len(set(sizes)) == 1:
+            return (f"The recommended graft is {sizes[0].label} at every value of {axes}: "
+                    "the size does not depend on it.")
+        answers = "; ".join(f"{s.label if s else 'none'} at {self.label(v)}"
+                            for v, s in zip(self.values, sizes, strict=True))
+        common = self.common
+        if common is None:
+            return (f"The size depends on {axes}: the answers are {answers}, and no size "
+                    "qualifies at every value.")
+        solved = [v.recommendation.cell(common.label) is not None for v in self.values]
+        if all(solved):
+            how = "solved at every value"
+        elif any(solved):
+            at = [", ".join(self.label(v) for v, s in zip(self.values, solved, strict=True)
+                            if s is flag) for flag in (True, False)]
+            how = f"solved at {at[0]}, read from the surface at {at[1]}"
+        else:
+            how = "read from the surface, not solved"
+        return (f"The answers are {answers}. {common.label} (+{common.width_pct:g} % width, "
+                f"+{common.height_pct:g} % height) is the smallest size that qualifies at "
+                f"every value of {axes} ({how}).")
+
+    def headline(self) -> str:
+        """The plan's answer as it opens the page: the one value's headline, or whether the
+        size depends on the comparison axes."""
+        if not self.varied:
+            return self.values[0].headline()
+        return self.dependence() or self.values[0].headline()
+
+    def lines(self) -> list[str]:
+        """Each value's headline, named by its value ([] when nothing is varied)."""
+        if not self.varied:
+            return []
+        return [f"At {self.label(v)}: {v.headline()}" for v in self.values]
+
+    def to_dict(self) -> dict:
+        common = self.common
+        return {"axes": self.axes,
+                "common": None if common is None else {"label": common.label,
+                                                       **common._asdict()},
+                "dependence": self.dependence(), "headline": self.headline(),
+                "values": [v.to_dict() for v in self.values]}

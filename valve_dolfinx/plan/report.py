@@ -5,25 +5,31 @@ its margin and the member that limits it, or the plain statement that no graft o
 grid is robust with the closest one, or that the native leaflets cannot seal the root),
 the measured inputs beside the graft template's thumbnail, the worst-case sizing map and
 the closed valve from the aorta and from the ventricle, what the leaflets can reach,
-what was run, and the limitations.  A picture that was not made (no study, a case that
-failed) is a grey box that says so.  This module says what the page shows; the page is
-drawn by :func:`valve_dolfinx.plotting.plan.draw_plan_page` (exactly A4, its parts placed
-in millimetres).
+what was run, and the limitations.  With comparison axes (``--vary``) the answer opens
+with whether the size depends on them and gives each value's answer; the page shows each
+value's sizing map side by side, and ``plan.md`` each value's pictures and table.  A
+picture that was not made (no study, a case that failed) is a grey box that says so.
+This module says what the page shows; the page is drawn by
+:func:`valve_dolfinx.plotting.plan.draw_plan_page` (exactly A4, its parts placed in
+millimetres).
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
-from valve_dolfinx.plan.recommendation import PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
 from valve_dolfinx.plotting.plan import PlanPage, draw_plan_page
 from valve_dolfinx.result import margin_text
 from valve_dolfinx.sizing.cells import cell_state
+from valve_dolfinx.study.axes import value_text
 from valve_dolfinx.study.paths import study_paths
 
 __all__ = ["PLAN_MD", "PLAN_PDF", "PlanFigures", "RunInfo", "input_lines", "reach_text",
@@ -38,12 +44,12 @@ _VERSIONS = ("valve_dolfinx", "dolfinx", "petsc", "numpy", "gmsh")
 
 @dataclass(frozen=True)
 class PlanFigures:
-    """The pictures of the page (PNG files; None: not made) and what they show."""
+    """The pictures of one comparison value (PNG files; None: not made) and what they
+    show."""
 
     sizing_map: Path | None = None
     closed_aortic: Path | None = None
     closed_ventricular: Path | None = None
-    template: Path | None = None
     #: the member the closed-valve pictures show, in words (e.g. "root 22.0 mm")
     closed_member: str = ""
 
@@ -93,6 +99,8 @@ def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
         ("graft fibres", f"{patient.graft_fibre_angle_deg:g}° from the free edge"),
         ("numerical paths", ", ".join(p.label for p in study_paths(patient.paths))),
         ("target coaptation", target),
+        *((f"compared (--vary {key})", ", ".join(value_text(v) for v in values))
+          for key, values in patient.vary.items()),
     ]
 
 
@@ -104,12 +112,6 @@ def reach_text(patient: PatientInput, reach: FreeEdgeReach) -> str:
         text += (f" The root's upper bound, {upper:.1f} mm, is beyond that: no graft can be "
                  "robust over the measurement's uncertainty, and that root is not computed.")
     return text
-
-
-def _kind(rec: PlanRecommendation) -> str:
-    if rec.cannot_seal is not None:
-        return "cannot_seal"
-    return "graft" if rec.graft is not None else "closest"
 
 
 def _targets(rec: PlanRecommendation) -> str:
@@ -151,11 +153,12 @@ def _margin(value: float | None) -> str:
     return "–" if value is None else margin_text(value, signed=True)
 
 
-def _grafts_table(rec: PlanRecommendation) -> list[str]:
-    """Every graft's worst case over the members, and each member's target (plan.md)."""
+def _grafts_table(rec: PlanRecommendation, where: str = "") -> list[str]:
+    """Every graft's worst case over the members, and each member's target (plan.md);
+    ``where`` names the comparison value."""
     if rec.recommendation is None or not rec.recommendation.cells:
         return []
-    lines = ["## Every graft over the members", "",
+    lines = [f"## Every graft over the members{where}", "",
              "| graft | worst min. coaptation (mm) | spread (mm) | margin (mm) | limiting member "
              "| over the members | qualifies |", "|---|---|---|---|---|---|---|"]
     for c in rec.recommendation.cells:
@@ -176,9 +179,26 @@ def _shown(rec: PlanRecommendation, figures: PlanFigures) -> str:
                                  figures.closed_member) if x)
 
 
+def _template_line(answers: PlanAnswers) -> str:
+    """Where the templates are, at true size (plan.md's links are added there)."""
+    grafts = answers.template_grafts
+    if not grafts:
+        return ""
+    files = ", ".join(f"template_{g.stem}.pdf" for g in grafts)
+    many = len(grafts) > 1
+    return (f"Template{'s' if many else ''}: {files}, true size; print at 100 % and check "
+            f"{'each' if many else 'its'} 50 mm bar.")
+
+
+def _at(answers: PlanAnswers, rec: PlanRecommendation) -> str:
+    """`` at key=value`` of a comparison value ("" when nothing is varied)."""
+    return f" at {answers.label(rec)}" if answers.varied else ""
+
+
 # --- plan.md ---------------------------------------------------------------------------------
-def _markdown(patient: PatientInput, rec: PlanRecommendation, reach: FreeEdgeReach | None,
-              figures: PlanFigures, run: RunInfo, limitations: str, out: Path) -> str:
+def _markdown(patient: PatientInput, answers: PlanAnswers, reach: FreeEdgeReach | None,
+              figures: Sequence[PlanFigures], run: RunInfo, limitations: str, out: Path,
+              templates: Mapping[GraftSize, Path]) -> str:
     def image(path: Path | None, alt: str) -> list[str]:
         if path is None:
             return [f"_{alt}: not made._", ""]
@@ -187,23 +207,33 @@ def _markdown(patient: PatientInput, rec: PlanRecommendation, reach: FreeEdgeRea
     lines = [f"# Repair plan: {patient.label}", "",
              "Pericardial graft for the non-coronary leaflet, sized with the finite element "
              "model of the closed valve (valve_dolfinx).", "",
-             "## Answer", "", f"**{rec.headline()}**", "", *(f"- {d}" for d in _details(rec))]
-    if rec.template_graft is not None:
-        stem = f"template_{rec.template_graft.stem}"
-        lines += ["", f"Template at true size: [{stem}.pdf]({stem}.pdf) "
-                  f"([{stem}.svg]({stem}.svg)); print at 100 % and check its 50 mm bar."]
-    lines += ["", "## Inputs", "", "| | |", "|---|---|",
+             "## Answer", "", f"**{answers.headline()}**", ""]
+    for rec in answers.values:
+        if answers.varied:
+            lines += [f"### At {answers.label(rec)}", "", f"**{rec.headline()}**", ""]
+        lines += [*(f"- {d}" for d in _details(rec)), ""]
+    for graft in answers.template_grafts:
+        stem = f"template_{graft.stem}"
+        lines += [f"Template {graft.label} at true size: [{stem}.pdf]({stem}.pdf) "
+                  f"([{stem}.svg]({stem}.svg)); print at 100 % and check its 50 mm bar.", ""]
+    lines += ["## Inputs", "", "| | |", "|---|---|",
               *(f"| {k} | {v} |" for k, v in input_lines(patient)), ""]
-    if reach is not None and rec.cannot_seal is None:
+    if reach is not None and answers.kind != "cannot_seal":
         lines += [reach_text(patient, reach), ""]
     lines += ["## Pictures", ""]
-    lines += image(figures.template, "graft template")
-    lines += image(figures.sizing_map, "sizing map (worst case over the members)")
-    shown = _shown(rec, figures)
-    shown = f" ({shown})" if shown else ""
-    lines += image(figures.closed_aortic, f"closed valve seen from the aorta{shown}")
-    lines += image(figures.closed_ventricular, f"closed valve seen from the ventricle{shown}")
-    lines += _grafts_table(rec)
+    grafts = answers.template_grafts
+    lines += image(templates.get(grafts[0]) if grafts else None,
+                   f"graft template {grafts[0].label}" if grafts else "graft template")
+    for rec, fig in zip(answers.values, figures, strict=True):
+        at = _at(answers, rec)
+        lines += image(fig.sizing_map, f"sizing map{at} (worst case over the members)")
+        shown = _shown(rec, fig)
+        shown = f" ({shown})" if shown else ""
+        lines += image(fig.closed_aortic, f"closed valve seen from the aorta{at}{shown}")
+        lines += image(fig.closed_ventricular,
+                       f"closed valve seen from the ventricle{at}{shown}")
+    for rec in answers.values:
+        lines += _grafts_table(rec, _at(answers, rec))
     lines += ["## What was run", "", *(f"- {line}" for line in run.lines()), "",
               "## Limitations", "", limitations, ""]
     return "\n".join(lines)
@@ -217,42 +247,56 @@ def _relative(path: Path, out: Path) -> str:
 
 
 # --- plan.pdf --------------------------------------------------------------------------------
-def _page(patient: PatientInput, rec: PlanRecommendation, reach: FreeEdgeReach | None,
-          figures: PlanFigures, run: RunInfo, limitations: str) -> PlanPage:
-    """What the page says (:func:`~valve_dolfinx.plotting.plan.draw_plan_page` draws it)."""
-    details = _details(rec)
-    graft = rec.template_graft
-    if graft is not None:
-        details.append(f"Template: template_{graft.stem}.pdf, true size; print at 100 % and "
-                       "check its 50 mm bar.")
+def _map_caption(answers: PlanAnswers, rec: PlanRecommendation) -> str:
     n = len(rec.recommendation.members) if rec.recommendation else 0
+    what = ("minimum coaptation height per graft" if n < 2 else
+            f"worst case of each graft over its {n} members")
+    if answers.varied:
+        return f"Sizing map at {answers.label(rec)}: {what}"
+    return f"Sizing map: {what}"
+
+
+def _page(patient: PatientInput, answers: PlanAnswers, reach: FreeEdgeReach | None,
+          figures: Sequence[PlanFigures], run: RunInfo, limitations: str,
+          templates: Mapping[GraftSize, Path]) -> PlanPage:
+    """What the page says (:func:`~valve_dolfinx.plotting.plan.draw_plan_page` draws it)."""
+    first, shown = answers.values[0], figures[0]
+    details = answers.lines() if answers.varied else _details(first)
+    if answers.varied:
+        details += [d for d in _details(first) if d.startswith(("Members", "Not computed"))]
+        details.append("The closed valve of each value's graft: plan.md.")
+    if _template_line(answers):
+        details.append(_template_line(answers))
+    grafts = answers.template_grafts
+    graft = grafts[0] if grafts else None
+    cannot = answers.kind == "cannot_seal"
     return PlanPage(
         title=f"Repair plan: {patient.label}",
         subtitle="Pericardial graft for the non-coronary leaflet, sized with the finite "
                  "element model of the closed valve (valve_dolfinx).",
-        kind=_kind(rec), headline=rec.headline(), details=details,
+        kind=answers.kind, headline=answers.headline(), details=details,
         inputs=input_lines(patient),
-        reach=reach_text(patient, reach) if reach is not None and rec.cannot_seal is None
-        else "",
-        nothing_computed="" if rec.cannot_seal is None else (
+        reach=reach_text(patient, reach) if reach is not None and not cannot else "",
+        nothing_computed="" if not cannot else (
             "Nothing was computed: a graft replaces the non-coronary leaflet only, and the two "
             "native leaflets left cannot reach the centre of this root however they are loaded "
             "(closed-form bound on the free edge's stretch, docs/plan.md)."),
-        template=figures.template,
+        template=templates.get(graft) if graft else None,
         template_caption=f"Graft template {graft.label}" if graft else "Graft template",
         template_missing="not made" if graft else "no template: no graft to draw",
-        sizing_map=figures.sizing_map,
-        sizing_caption=("Sizing map: minimum coaptation height per graft" if n < 2 else
-                        f"Sizing map: worst case of each graft over its {n} members"),
-        closed_aortic=figures.closed_aortic, closed_ventricular=figures.closed_ventricular,
-        shown=_shown(rec, figures), run=run.lines(), limitations=limitations,
+        sizing_maps=[(fig.sizing_map, _map_caption(answers, rec))
+                     for rec, fig in zip(answers.values, figures, strict=True)],
+        closed_aortic=None if answers.varied else shown.closed_aortic,
+        closed_ventricular=None if answers.varied else shown.closed_ventricular,
+        shown=_shown(first, shown), run=run.lines(), limitations=limitations,
         footer="A model's prediction to inform the surgeon's judgement, not to replace it. "
                "Method and sources: docs/plan.md.")
 
 
-def write_plan_report(out: str | Path, patient: PatientInput, recommendation: PlanRecommendation,
-                      figures: PlanFigures, run: RunInfo, limitations: str,
-                      reach: FreeEdgeReach | None = None) -> tuple[Path, Path]:
+def write_plan_report(out: str | Path, patient: PatientInput, answers: PlanAnswers,
+                      figures: Sequence[PlanFigures], run: RunInfo, limitations: str,
+                      reach: FreeEdgeReach | None = None, *,
+                      templates: Mapping[GraftSize, Path] | None = None) -> tuple[Path, Path]:
     """Write ``plan.md`` and the one-page ``plan.pdf`` into ``out`` (atomically).
 
     Parameters
@@ -261,22 +305,26 @@ def write_plan_report(out: str | Path, patient: PatientInput, recommendation: Pl
         The plan folder; pictures inside it are linked relative to it in ``plan.md``.
     patient
         The measured inputs.
-    recommendation
-        The plan's answer.
+    answers
+        The plan's answer at each comparison value.
     figures
-        The sizing map, the closed valve from the aorta and from the ventricle, the
-        template's thumbnail (each optional).
+        Per comparison value (as ``answers.values``): the sizing map, the closed valve
+        from the aorta and from the ventricle (each optional).
     run
         What was run.
     limitations
         One line saying what the answer does not cover.
     reach
         The closed-form check at the measured diameter (how far the free edges reach).
+    templates
+        The templates' thumbnails (PNG) by graft; the page shows the first of
+        ``answers.template_grafts``.
     """
     out = Path(out)
-    text = _markdown(patient, recommendation, reach, figures, run, limitations, out)
+    templates = templates or {}
+    text = _markdown(patient, answers, reach, figures, run, limitations, out, templates)
     md = atomic_write(out / PLAN_MD, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    fig = draw_plan_page(_page(patient, recommendation, reach, figures, run, limitations))
+    fig = draw_plan_page(_page(patient, answers, reach, figures, run, limitations, templates))
     pdf = atomic_write(out / PLAN_PDF, lambda tmp: fig.savefig(
         tmp, format="pdf", metadata={"Title": f"Repair plan: {patient.label}"}))
     log.info("plan report -> %s, %s", md, pdf)

@@ -2,8 +2,9 @@
 
 :func:`draw_plan_page` lays out a :class:`PlanPage`, top to bottom: the title, the
 answer framed in the colour of its kind, the measured inputs beside the graft template's
-thumbnail, the sizing map and the closed valve from the aorta and from the ventricle,
-what was run, the limitations.  A picture that was not made is a grey box that says so.
+thumbnail, the sizing map and the closed valve from the aorta and from the ventricle (with
+several comparison values, their sizing maps side by side instead), what was run, the
+limitations.  A picture that was not made is a grey box that says so.
 The figure is exactly A4 on its own canvas (:func:`valve_dolfinx.plotting.style.
 new_figure`), its parts placed in millimetres; every text is at least 7 pt at print
 size, and the inputs are wrapped, never cut.  What the page says is computed by
@@ -19,7 +20,7 @@ from pathlib import Path
 from valve_dolfinx.plotting.page import A4_MM, PT_MM
 from valve_dolfinx.plotting.style import OKABE_ITO, new_figure
 
-__all__ = ["PlanPage", "draw_plan_page", "SIZING_MAP_MM"]
+__all__ = ["PlanPage", "draw_plan_page", "SIZING_MAP_MM", "sizing_map_mm"]
 
 _BOX = {"graft": "#e3f1ea", "closest": "#fbefd9", "cannot_seal": "#f8dfd6"}
 _EDGE = {"graft": OKABE_ITO["bluish_green"], "closest": OKABE_ITO["orange"],
@@ -29,6 +30,16 @@ _EDGE = {"graft": OKABE_ITO["bluish_green"], "closest": OKABE_ITO["orange"],
 SIZING_MAP_MM = (116.0, 100.0)
 #: the inputs' values column: where it starts (mm) and its width (characters at 8 pt)
 _VALUES_X_MM, _VALUES_CHARS = 64.0, 58
+#: the page's printed area across (mm from the left edge) and the gap between pictures
+_LEFT_MM, _RIGHT_MM, _GAP_MM = 12.0, 198.0, 4.0
+
+
+def sizing_map_mm(n: int) -> tuple[float, float]:
+    """The box of each of ``n`` sizing maps on the page (width, height in mm): one beside the
+    closed valve (:data:`SIZING_MAP_MM`), several side by side across the page."""
+    if n <= 1:
+        return SIZING_MAP_MM
+    return ((_RIGHT_MM - _LEFT_MM - _GAP_MM * (n - 1)) / n, SIZING_MAP_MM[1])
 
 
 @dataclass(frozen=True)
@@ -38,8 +49,10 @@ class PlanPage:
     ``kind`` is ``"graft"``, ``"closest"`` or ``"cannot_seal"`` (the answer box's colour);
     ``details`` the lines under the headline; ``inputs`` (what, value) rows; ``reach``
     what the native free edges can span (may be ""); ``nothing_computed`` the paragraph
-    that replaces the pictures when no study ran ("" otherwise); ``shown`` the graft and
-    member the closed-valve pictures show.
+    that replaces the pictures when no study ran ("" otherwise); ``sizing_maps`` each
+    comparison value's sizing map with its caption (one without comparison axes: the
+    closed-valve pictures are then beside it); ``shown`` the graft and member the
+    closed-valve pictures show.
     """
 
     title: str
@@ -53,8 +66,7 @@ class PlanPage:
     template: Path | None = None
     template_caption: str = "Graft template"
     template_missing: str = "not made"
-    sizing_map: Path | None = None
-    sizing_caption: str = "Sizing map"
+    sizing_maps: list[tuple[Path | None, str]] = field(default_factory=list)
     closed_aortic: Path | None = None
     closed_ventricular: Path | None = None
     shown: str = ""
@@ -128,11 +140,17 @@ def _inputs(fig, rows: list[tuple[str, str]], top: float) -> float:
 
 
 def _pictures(fig, page: PlanPage, top: float, height: float) -> None:
-    """The sizing map on the left, the closed valve from the aorta and from the ventricle
-    stacked on the right, in a row ``height`` mm high below ``top``."""
+    """In a row ``height`` mm high below ``top``: the sizing map on the left, the closed
+    valve from the aorta and from the ventricle stacked on the right; or, with several
+    comparison values, their sizing maps side by side."""
+    maps = page.sizing_maps or [(None, "Sizing map")]
+    width = sizing_map_mm(len(maps))[0]
+    for k, (path, caption) in enumerate(maps):
+        _picture(fig, (_LEFT_MM + k * (width + _GAP_MM), top - height, width, height), path,
+                 textwrap.fill(caption, int(width / 1.6)), "not made")
+    if len(maps) > 1:
+        return
     which = f"\n{page.shown}" if page.shown else ""
-    _picture(fig, (12, top - height, SIZING_MAP_MM[0], height), page.sizing_map,
-             page.sizing_caption, "not made")
     half = 0.5 * (height - 10.0)
     _picture(fig, (134, top - half, 64, half), page.closed_aortic,
              f"Closed valve from the aorta{which}", "not made")

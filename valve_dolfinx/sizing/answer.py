@@ -19,11 +19,13 @@ The one home of the answer that the study, the nomogram and the plan report:
    of highest predicted worst case.  "No graft" only when no size seals, or none comes
    within the tolerance of the target; the closest size's shortfall is then given
    against the tolerance.
-3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer, and
+3. :func:`common_size` reads, over several comparison values' answers, the smallest size
+   that qualifies at every one of them.
+4. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer, and
    :func:`solved_worst_case` gives the same statistic as the prediction from a size's
    solves: per uncertainty member the mean of its paths' heights minus the member's
-   target, the least over the members;
-   :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
+   target, the least over the members.
+5. :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
    are resampled with replacement and the surfaces refitted.
 
 Nothing here imports DOLFINx.
@@ -58,8 +60,8 @@ from valve_dolfinx.sizing.surface import (
 )
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
-           "sizes_to_confirm", "solved_worst_case", "resample_paths", "bootstrap_stability",
-           "SEAL_PROBABILITY", "MIN_CELLS"]
+           "common_size", "sizes_to_confirm", "solved_worst_case", "resample_paths",
+           "bootstrap_stability", "SEAL_PROBABILITY", "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
@@ -427,6 +429,32 @@ def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"{free_edge:.1f} mm, height {height:.1f} mm), {margin_text(short)} mm short"
             f"{_in(answer.limiting_member)}: {times} the resolution of {margin_text(tol)} mm. "
             + _resolution(answer))
+
+
+def common_size(answers: Sequence[SizingAnswer]) -> GraftSize | None:
+    """The smallest flat area that qualifies in every one of ``answers`` (comparison values
+    read from one fit, on one lattice), ties going to the narrower, then the lower; None
+    when no size qualifies in all of them or one of them has no lattice (no answer read).
+
+    Raises
+    ------
+    ValueError
+        For answers read on different lattices (not from one fit).
+    """
+    lattices = [a.lattice for a in answers]
+    if not lattices or any(lattice is None for lattice in lattices):
+        return None
+    first = lattices[0]
+    if any(not (np.array_equal(lat.widths_pct, first.widths_pct)
+                and np.array_equal(lat.heights_pct, first.heights_pct)) for lat in lattices):
+        raise ValueError("common_size: the answers were read on different lattices (give the "
+                         "answers of one fit)")
+    every = np.logical_and.reduce([lattice.qualifies for lattice in lattices])
+    if not every.any():
+        return None
+    ww, hh = np.meshgrid(first.widths_pct, first.heights_pct)
+    sizes = [GraftSize(float(w), float(h)) for w, h in zip(ww[every], hh[every], strict=True)]
+    return min(sizes, key=lambda s: (s.area_ratio, *s))
 
 
 def sizes_to_confirm(answer: SizingAnswer, tables: Sequence[MemberTable]
