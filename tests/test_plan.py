@@ -770,10 +770,10 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
     assert answers.common == graft
     assert answers.kind == "graft"
     dependence = answers.dependence()
-    assert dependence.startswith(f"The answers are W14/H13 at graft_bending_modulus_kpa=200; "
-                                 f"{graft.label} at graft_bending_modulus_kpa=2000.")
+    assert dependence.startswith("The answer differs with graft_bending_modulus_kpa: "
+                                 f"W14/H13 at 200, {graft.label} at 2000.")
     assert (f"{graft.label} (+14 % width, +{graft.height_pct:g} % height) is the smallest size "
-            "that qualifies at every value of graft_bending_modulus_kpa (200, 2000)") in (
+            "that qualifies at every value (solved at 2000, read from the surface at 200)") in (
         dependence)
     assert answers.headline() == dependence
     # one study: the normal valve once per diameter, every graft at both values
@@ -800,12 +800,12 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
                   f"**Recommended graft {graft.label}",
                   "sizing_map__graft_bending_modulus_kpa=2000.png",
                   "## Every graft over the members at graft_bending_modulus_kpa=200",
-                  "| compared (--vary graft_bending_modulus_kpa) | 200, 2000 |"):
+                  "| compared (--vary) | graft_bending_modulus_kpa: 200, 2000 |"):
         assert words in markdown, words
     text = _pdf_text(out / "plan.pdf")
     for words in ("Sizing map at graft_bending_modulus_kpa=200",
                   "Sizing map at graft_bending_modulus_kpa=2000",
-                  "At graft_bending_modulus_kpa=2000: Recommended graft",
+                  f"At graft_bending_modulus_kpa=2000: {graft.label} (+14 % width",
                   "The closed valve of each value's graft: plan.md"):
         assert words in text, words
     # patient.toml keeps the axis: rerunning it recomputes nothing

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from valve_dolfinx.geometry.outline import GraftSize
+from valve_dolfinx.result import margin_text
 from valve_dolfinx.sizing.answer import common_size
 from valve_dolfinx.sizing.cells import cell_state
 from valve_dolfinx.sizing.recommendation import Recommendation, headline
@@ -189,37 +190,41 @@ class PlanAnswers:
         """A value as the page names it (``graft_bending_modulus_kpa=200``)."""
         return axis_label(value.comparison.items())
 
+    def _value(self, value: PlanRecommendation) -> str:
+        """A value in a list over one axis (``200``; every key with several axes)."""
+        if len(self.axes) == 1:
+            return value_text(next(iter(value.comparison.values())))
+        return self.label(value)
+
     def dependence(self) -> str:
         """Whether the size depends on the comparison axes, in a sentence or two ("" when
-        nothing is varied)."""
-        if not self.varied:
+        nothing is varied or nothing was computed)."""
+        if not self.varied or self.kind == "cannot_seal":
             return ""
-        axes = ", ".join(f"{k} ({', '.join(value_text(v) for v in vs)})"
-                         for k, vs in self.axes.items())
+        axes = " and ".join(self.axes)
         sizes = [v.graft for v in self.values]
-        if self.kind == "cannot_seal":
-            return ""
         if all(s is not None for s in sizes) and len(set(sizes)) == 1:
-            return (f"The recommended graft is {sizes[0].label} at every value of {axes}: "
-                    "the size does not depend on it.")
-        answers = "; ".join(f"{s.label if s else 'none'} at {self.label(v)}"
+            values = ", ".join(self._value(v) for v in self.values)
+            return (f"The recommended graft is {sizes[0].label} at every value of {axes} "
+                    f"studied ({values}): the size does not depend on it.")
+        answers = ", ".join(f"{s.label if s else 'no graft'} at {self._value(v)}"
                             for v, s in zip(self.values, sizes, strict=True))
+        head = f"The answer differs with {axes}: {answers}."
         common = self.common
         if common is None:
-            return (f"The size depends on {axes}: the answers are {answers}, and no size "
-                    "qualifies at every value.")
+            return f"{head} No size qualifies at every value."
         solved = [v.recommendation.cell(common.label) is not None for v in self.values]
         if all(solved):
             how = "solved at every value"
         elif any(solved):
-            at = [", ".join(self.label(v) for v, s in zip(self.values, solved, strict=True)
+            at = [", ".join(self._value(v) for v, s in zip(self.values, solved, strict=True)
                             if s is flag) for flag in (True, False)]
             how = f"solved at {at[0]}, read from the surface at {at[1]}"
         else:
             how = "read from the surface, not solved"
-        return (f"The answers are {answers}. {common.label} (+{common.width_pct:g} % width, "
+        return (f"{head} {common.label} (+{common.width_pct:g} % width, "
                 f"+{common.height_pct:g} % height) is the smallest size that qualifies at "
-                f"every value of {axes} ({how}).")
+                f"every value ({how}).")
 
     def headline(self) -> str:
         """The plan's answer as it opens the page: the one value's headline, or whether the
@@ -229,10 +234,26 @@ class PlanAnswers:
         return self.dependence() or self.values[0].headline()
 
     def lines(self) -> list[str]:
-        """Each value's headline, named by its value ([] when nothing is varied)."""
+        """Each value's answer in a line, named by its value ([] when nothing is varied)."""
         if not self.varied:
             return []
-        return [f"At {self.label(v)}: {v.headline()}" for v in self.values]
+        out = []
+        for value in self.values:
+            answer = value.recommendation.answer if value.recommendation else None
+            where = value.name(answer.limiting_member) if answer else None
+            where = f" in {where}" if where else ""
+            if value.graft is not None:
+                graft = value.graft
+                text = (f"{graft.label} (+{graft.width_pct:g} % width, +{graft.height_pct:g} % "
+                        f"height), predicted worst-case margin "
+                        f"{margin_text(answer.margin_mm, signed=True)} mm{where}.")
+            elif answer is not None and answer.shortfall_mm is not None and value.closest:
+                text = (f"no graft is robust; the closest, {value.closest.label}, is "
+                        f"{margin_text(answer.shortfall_mm)} mm short{where}.")
+            else:
+                text = value.headline()
+            out.append(f"At {self.label(value)}: {text}")
+        return out
 
     def to_dict(self) -> dict:
         common = self.common

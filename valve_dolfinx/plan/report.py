@@ -27,13 +27,14 @@ from valve_dolfinx.plan.patient import PatientInput
 from valve_dolfinx.plan.reach import FreeEdgeReach
 from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
 from valve_dolfinx.plotting.plan import PlanPage, draw_plan_page
+from valve_dolfinx.plotting.study import plot_sizing_map, sizing_map_key
 from valve_dolfinx.result import margin_text
 from valve_dolfinx.sizing.cells import cell_state
 from valve_dolfinx.study.axes import value_text
 from valve_dolfinx.study.paths import study_paths
 
 __all__ = ["PLAN_MD", "PLAN_PDF", "PlanFigures", "RunInfo", "input_lines", "reach_text",
-           "write_plan_report"]
+           "sizing_map_name", "write_plan_report"]
 
 log = logging.getLogger(__name__)
 
@@ -44,10 +45,9 @@ _VERSIONS = ("valve_dolfinx", "dolfinx", "petsc", "numpy", "gmsh")
 
 @dataclass(frozen=True)
 class PlanFigures:
-    """The pictures of one comparison value (PNG files; None: not made) and what they
-    show."""
+    """The closed-valve pictures of one comparison value (PNG files; None: not made) and
+    what they show (the sizing maps are drawn by :func:`write_plan_report`)."""
 
-    sizing_map: Path | None = None
     closed_aortic: Path | None = None
     closed_ventricular: Path | None = None
     #: the member the closed-valve pictures show, in words (e.g. "root 22.0 mm")
@@ -82,6 +82,14 @@ class RunInfo:
         return asdict(self)
 
 
+def sizing_map_name(rec: PlanRecommendation) -> str:
+    """The plan folder's sizing map of one comparison value: ``sizing_map.png``, or
+    ``sizing_map__KEY=VALUE.png`` with comparison axes (the study's figure suffix)."""
+    from valve_dolfinx.study.report import figure_suffix
+
+    return f"sizing_map{figure_suffix(rec.recommendation)}.png"
+
+
 def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
     """The measured inputs as (what, value) rows."""
     target = ("the normal valve's at the same root" if patient.target_coaptation_mm is None
@@ -99,7 +107,7 @@ def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
         ("graft fibres", f"{patient.graft_fibre_angle_deg:g}° from the free edge"),
         ("numerical paths", ", ".join(p.label for p in study_paths(patient.paths))),
         ("target coaptation", target),
-        *((f"compared (--vary {key})", ", ".join(value_text(v) for v in values))
+        *(("compared (--vary)", f"{key}: {', '.join(value_text(v) for v in values)}")
           for key, values in patient.vary.items()),
     ]
 
@@ -198,7 +206,7 @@ def _at(answers: PlanAnswers, rec: PlanRecommendation) -> str:
 # --- plan.md ---------------------------------------------------------------------------------
 def _markdown(patient: PatientInput, answers: PlanAnswers, reach: FreeEdgeReach | None,
               figures: Sequence[PlanFigures], run: RunInfo, limitations: str, out: Path,
-              templates: Mapping[GraftSize, Path]) -> str:
+              templates: Mapping[GraftSize, Path], maps: Mapping[int, Path]) -> str:
     def image(path: Path | None, alt: str) -> list[str]:
         if path is None:
             return [f"_{alt}: not made._", ""]
@@ -224,9 +232,9 @@ def _markdown(patient: PatientInput, answers: PlanAnswers, reach: FreeEdgeReach 
     grafts = answers.template_grafts
     lines += image(templates.get(grafts[0]) if grafts else None,
                    f"graft template {grafts[0].label}" if grafts else "graft template")
-    for rec, fig in zip(answers.values, figures, strict=True):
+    for k, (rec, fig) in enumerate(zip(answers.values, figures, strict=True)):
         at = _at(answers, rec)
-        lines += image(fig.sizing_map, f"sizing map{at} (worst case over the members)")
+        lines += image(maps.get(k), f"sizing map{at} (worst case over the members)")
         shown = _shown(rec, fig)
         shown = f" ({shown})" if shown else ""
         lines += image(fig.closed_aortic, f"closed valve seen from the aorta{at}{shown}")
@@ -284,8 +292,9 @@ def _page(patient: PatientInput, answers: PlanAnswers, reach: FreeEdgeReach | No
         template=templates.get(graft) if graft else None,
         template_caption=f"Graft template {graft.label}" if graft else "Graft template",
         template_missing="not made" if graft else "no template: no graft to draw",
-        sizing_maps=[(fig.sizing_map, _map_caption(answers, rec))
-                     for rec, fig in zip(answers.values, figures, strict=True)],
+        sizing_captions=[_map_caption(answers, rec) for rec in answers.values],
+        sizing_key=next((sizing_map_key(v.recommendation, names=True) for v in answers.values
+                         if v.recommendation is not None and v.recommendation.cells), ""),
         closed_aortic=None if answers.varied else shown.closed_aortic,
         closed_ventricular=None if answers.varied else shown.closed_ventricular,
         shown=_shown(first, shown), run=run.lines(), limitations=limitations,
@@ -308,8 +317,9 @@ def write_plan_report(out: str | Path, patient: PatientInput, answers: PlanAnswe
     answers
         The plan's answer at each comparison value.
     figures
-        Per comparison value (as ``answers.values``): the sizing map, the closed valve
-        from the aorta and from the ventricle (each optional).
+        Per comparison value (as ``answers.values``): the closed valve from the aorta and
+        from the ventricle (each optional).  Each value's sizing map is drawn here, at the
+        size the page prints it (:func:`sizing_map_name`).
     run
         What was run.
     limitations
@@ -322,10 +332,25 @@ def write_plan_report(out: str | Path, patient: PatientInput, answers: PlanAnswe
     """
     out = Path(out)
     templates = templates or {}
-    text = _markdown(patient, answers, reach, figures, run, limitations, out, templates)
-    md = atomic_write(out / PLAN_MD, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    fig = draw_plan_page(_page(patient, answers, reach, figures, run, limitations, templates))
+    maps: dict[int, Path] = {}
+
+    def draw_map(k: int, width_mm: float, height_mm: float) -> Path | None:
+        """Comparison value ``k``'s sizing map at the size the page prints it (its texts
+        at least :data:`~valve_dolfinx.plotting.study.MIN_PRINT_PT` at 100 %)."""
+        rec = answers.values[k]
+        if rec.recommendation is None or not rec.recommendation.cells:
+            return None
+        path = out / sizing_map_name(rec)
+        plot_sizing_map(rec.recommendation, path, size_in=(width_mm / 25.4, height_mm / 25.4),
+                        caption=False, dpi=200)
+        maps[k] = path
+        return path
+
+    fig = draw_plan_page(_page(patient, answers, reach, figures, run, limitations, templates),
+                         draw_map)
     pdf = atomic_write(out / PLAN_PDF, lambda tmp: fig.savefig(
         tmp, format="pdf", metadata={"Title": f"Repair plan: {patient.label}"}))
+    text = _markdown(patient, answers, reach, figures, run, limitations, out, templates, maps)
+    md = atomic_write(out / PLAN_MD, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     log.info("plan report -> %s, %s", md, pdf)
     return md, pdf

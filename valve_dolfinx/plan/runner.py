@@ -75,8 +75,6 @@ log = logging.getLogger(__name__)
 #: the plan's study folder inside the plan folder
 STUDY_DIR = "study"
 SUMMARY_FILE = "summary.json"
-#: the sizing map as the plan's page prints it
-SIZING_MAP_FILE = "sizing_map.png"
 #: what the answer does not cover, printed on the report
 LIMITATIONS = (
     "An idealised valve: a cylindrical root prescribed at the measured diameter (± its "
@@ -215,9 +213,9 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
 def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     """The plan's answers, pictures and run from its study's report (what ``build_report``
     of the study folder finds): each comparison value's worst-case recommendation over the
-    members mapped onto :class:`PlanRecommendation`, its worst-case sizing map and the
-    closed valve of its recommended (or closest) graft at the measured diameter along the
-    first path."""
+    members mapped onto :class:`PlanRecommendation` and the closed valve of its
+    recommended (or closest) graft at the measured diameter along the first path (the
+    report draws the sizing maps, at the size its page prints them)."""
     layout = report.layout
     words = {member.label: member_words(member) for member in layout.members}
     # the answer's members are the root diameters, the paths being its replicates
@@ -234,13 +232,12 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     member = next(i for i, m in enumerate(layout.members)
                   if dict(m.values)[ROOT_KEY] == patient.root_diameter_mm
                   and m.path == layout.paths[0])
-    maps = _sizing_maps(report, out.parent)
     figures = []
     for c, value in enumerate(answers.values):
         shown = value.template_graft
         name = layout.slots.get((c, member, None if shown is None else tuple(shown)))
         aortic, ventricular = _closed_views(out / CASES_DIR / name if name else None, out)
-        figures.append(PlanFigures(sizing_map=maps[c], closed_aortic=aortic,
+        figures.append(PlanFigures(closed_aortic=aortic,
                                    closed_ventricular=ventricular,
                                    closed_member=f"root {patient.root_diameter_mm:.1f} mm, "
                                                  f"path {layout.paths[0].number}"))
@@ -251,30 +248,6 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
                   cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
                   wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
     return PlanStudy(answers, figures, run, out)
-
-
-def sizing_map_name(rec: Recommendation) -> str:
-    """The plan folder's sizing map of one comparison value: ``sizing_map.png``, or
-    ``sizing_map__KEY=VALUE.png`` with comparison axes (the study's figure suffix)."""
-    from valve_dolfinx.study.report import figure_suffix
-
-    return f"{Path(SIZING_MAP_FILE).stem}{figure_suffix(rec)}.png"
-
-
-def _sizing_maps(report: StudyReport, folder: Path) -> list[Path]:
-    """Each comparison value's sizing map, drawn into ``folder`` at the size the plan's page
-    prints it (:func:`~valve_dolfinx.plotting.plan.sizing_map_mm`; its labels at least
-    :data:`~valve_dolfinx.plotting.study.MIN_PRINT_PT`)."""
-    from valve_dolfinx.plotting.plan import sizing_map_mm
-    from valve_dolfinx.plotting.study import plot_sizing_map
-
-    width, height = sizing_map_mm(len(report.recommendations))
-    paths = []
-    for rec in report.recommendations:
-        path = folder / sizing_map_name(rec)
-        plot_sizing_map(rec, path, size_in=(width / 25.4, height / 25.4))
-        paths.append(path)
-    return paths
 
 
 def member_words(member: Member) -> str:
