@@ -13,6 +13,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from valve_dolfinx.geometry.outline import GraftSize
+
 #: prefix of the worker's line of figures on its standard output
 MARK = "BENCHMARK-RESULT "
 #: one BLAS/OpenMP thread per worker: a case is measured on one core
@@ -42,7 +44,7 @@ def parse_cases(text: str) -> list[Case]:
 
 def case_label(case: Case) -> str:
     """``normal`` or ``W<w>/H<h>`` (what :func:`parse_case` reads)."""
-    return "normal" if case is None else f"W{case[0]:g}/H{case[1]:g}"
+    return "normal" if case is None else GraftSize(*case).label
 
 
 def case_config(case: Case, mesh_size: float):

@@ -31,6 +31,7 @@ from pathlib import Path
 from result_tables import Column, Table, add_tables_only, cell, markdown_table
 
 from valve_dolfinx._compat import MPI
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.interrupts import interrupt_on_signals
 from valve_dolfinx.sizing.resolution import MESH_LADDER, discretisation_error_mm
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, StudySettings
@@ -58,7 +59,7 @@ def ladder_rows(rows: list[dict]) -> list[dict]:
 
 def _cell(row: dict) -> str:
     w = row["graft_width_pct"]
-    return "normal" if w is None else f"W{w:g}/H{row['graft_height_pct']:g}"
+    return "normal" if w is None else GraftSize(w, row["graft_height_pct"]).label
 
 
 def draw_ladder(rows: list[dict], table: Path) -> str:

@@ -140,10 +140,12 @@ def _entry(row: dict) -> str:
 
 
 def _answer(rec) -> str:
-    if rec.recommended:
-        return f"{rec.recommended} ({margin_text(rec.margin_mm, signed=True)})"
-    if rec.best and rec.shortfall_mm is not None:
-        return f"none (best {rec.best}, {margin_text(-rec.shortfall_mm, signed=True)})"
+    answer = rec.answer
+    if answer.size is not None:
+        return f"{answer.size.label} ({margin_text(answer.margin_mm, signed=True)})"
+    if answer.closest is not None and answer.shortfall_mm is not None:
+        return (f"none (best {answer.closest.label}, "
+                f"{margin_text(-answer.shortfall_mm, signed=True)})")
     return "none"
 
 

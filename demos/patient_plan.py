@@ -42,6 +42,7 @@ from valve_dolfinx.logs import configure_logging
 from valve_dolfinx.plan.patient import PatientInput, patient_toml, read_patient, write_patient
 from valve_dolfinx.plan.reach import free_edge_reach
 from valve_dolfinx.plan.runner import plan_study_settings, rebuild_plan, run_plan
+from valve_dolfinx.sizing import cell_state
 from valve_dolfinx.study import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT
 
 
@@ -136,12 +137,12 @@ def main(argv: list[str] | None = None):
 
     # %%
     if comm.rank == 0:
-        rec = outcome.recommendation
+        rec = outcome.answers.values[0]  # one answer: the plan varies nothing
         print(rec.headline())
-        for graft in rec.grafts:
-            print(f"  {graft.graft.label}: lowest minimum coaptation "
-                  f"{_mm(graft.worst_height_mm)}, margin {_mm(graft.margin_mm)} in "
-                  f"{graft.limiting_member}; {graft.state}")
+        for cell in rec.recommendation.cells if rec.recommendation else ():
+            print(f"  {cell.label}: lowest minimum coaptation "
+                  f"{_mm(cell.worst_height_mm)}, margin {_mm(cell.margin_mm)} in "
+                  f"{rec.name(cell.limiting_member)}; {cell_state(cell)}")
         for template in outcome.templates:
             print(f"template {template.graft.label}: {template.cut_width_mm:.1f} x "
                   f"{template.cut_height_mm:.1f} mm cut piece -> {template.pdf}")
@@ -156,7 +157,8 @@ def main(argv: list[str] | None = None):
     # %%
     if comm.rank == 0:
         rebuilt = rebuild_plan(args.out)
-        print(f"rebuilt from the case folders: {rebuilt.recommendation == rec}")
+        same = rebuilt.answers.to_dict() == outcome.answers.to_dict()
+        print(f"rebuilt from the case folders: {same}")
     return outcome
 
 

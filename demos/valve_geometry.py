@@ -33,6 +33,7 @@ from pathlib import Path
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.geometry.valve import DEFAULT_MESH_SIZE, build_valve
 from valve_dolfinx.io import export_valve_vtu
 from valve_dolfinx.plotting import leaflet_outline, plot_flat_leaflet, plot_valve_3d
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
     graft = (build_valve(mesh_size=args.mesh_size, graft_width_pct=args.graft_width,
                          graft_height_pct=args.graft_height) if comm.rank == 0 else None)
     graft_domain = create_valve_domain(graft, comm)
-    tag = f"W{args.graft_width:g}_H{args.graft_height:g}"
+    tag = GraftSize(args.graft_width, args.graft_height).stem
     write_domain_xdmf(graft_domain, out / f"graft_valve_{tag}.xdmf")
 
     # %% [markdown]

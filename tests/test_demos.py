@@ -53,7 +53,7 @@ def test_patient_plan_demo(tmp_path):
     assert "6 members, 9 cases" in proc.stdout
     assert "rebuilt from the case folders: True" in proc.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
-    answer = summary["recommendation"]
+    answer = summary["answers"]["values"][0]
     # one graft is too few solved cells for a response surface: the plan reads no size
     # and says so, rather than "no graft"
     assert answer["graft"] is None and answer["closest"] is None

@@ -21,6 +21,7 @@ import pytest
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.exceptions import OutputConflictError, ParameterError
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.plan.patient import (
     FIELDS,
     PatientInput,
@@ -35,7 +36,8 @@ from valve_dolfinx.plan.reach import (
     largest_root_mm,
     max_fibre_stretch,
 )
-from valve_dolfinx.plan.recommendation import GraftSize, PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
+from valve_dolfinx.sizing import Recommendation, Resolution, SizingAnswer
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE_EDGE_MM = math.pi / 3 * 20.0
@@ -352,22 +354,34 @@ def _pdf_text(path: Path) -> str:
         document.close()
 
 
+def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
+           target=2.31, source="given", members=("",)) -> PlanRecommendation:
+    """A plan's answer made by hand: the recommendation of a study over ``members`` (the
+    members named by themselves), its answer ``graft`` with ``margin``, or ``closest`` with
+    ``shortfall``."""
+    resolution = Resolution(None, 0, None, None, "not measured")
+    targets = dict.fromkeys(members, target)
+    size = GraftSize(*graft) if graft else None
+    sizing = SizingAnswer({}, list(members), targets, source, resolution, size=size,
+                          margin_mm=margin, limiting_member=limiting,
+                          highest=GraftSize(*closest) if closest else size,
+                          shortfall_mm=shortfall, why="" if size else "short")
+    study = Recommendation({}, list(members), targets, target, source, sizing)
+    return PlanRecommendation(study, {}, source)
+
+
 ANSWERS = {
-    "graft": (PlanRecommendation(graft=GraftSize(14, 13), margin_mm=0.12,
-                                 limiting_member="root 23.0 mm, billowed placement",
-                                 target_mm=2.31, target_source="the normal valve's",
-                                 members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
+    "graft": (answer((14, 13), 0.12, limiting="root 23.0 mm, billowed placement",
+                     source="the normal valve's",
+                     members=("root 21.0 mm", "root 22.0 mm", "root 23.0 mm")),
               ["Recommended graft W14/H13", "smallest margin is 0.12 mm",
                "root 23.0 mm, billowed placement", "in all 3 members"]),
     # a margin that rounds to 0.00 mm is shown with its significant digits
-    "thin margin": (PlanRecommendation(graft=GraftSize(27, 27), margin_mm=0.0023,
-                                       limiting_member="root 23.0 mm", target_mm=2.31,
-                                       target_source="the normal valve's",
-                                       members=("root 22.0 mm", "root 23.0 mm")),
+    "thin margin": (answer((27, 27), 0.0023, limiting="root 23.0 mm",
+                           source="the normal valve's", members=("root 22.0 mm", "root 23.0 mm")),
                     ["Recommended graft W27/H27", "smallest margin is 0.0023 mm, in root 23.0",
                      "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
-    "closest": (PlanRecommendation(closest=GraftSize(27, 40), shortfall_mm=0.4, target_mm=2.3,
-                                   target_source="given", members=("a", "b")),
+    "closest": (answer(closest=(27, 40), shortfall=0.4, target=2.3, members=("a", "b")),
                 ["No graft in the studied range is robust", "The closest is W27/H40",
                  "0.40 mm short"]),
     "cannot": (PlanRecommendation(cannot_seal=free_edge_reach(16.0, 22.0, 80.0).sentence()),
@@ -381,8 +395,9 @@ def test_the_report_is_one_a4_page_with_the_answer(tmp_path, kind):
 
     rec, words = ANSWERS[kind]
     patient = PatientInput(root_diameter_mm=22.0, label="report test")
-    md, pdf = write_plan_report(tmp_path, patient, rec, PlanFigures(), RunInfo(),
-                                "only a test", free_edge_reach(FREE_EDGE_MM, 22.0, 80.0))
+    md, pdf = write_plan_report(tmp_path, patient, PlanAnswers((rec,)), [PlanFigures()],
+                                RunInfo(), "only a test",
+                                free_edge_reach(FREE_EDGE_MM, 22.0, 80.0))
     text = _pdf_text(pdf)
     markdown = md.read_text()
     for word in [*words, "Repair plan: report test", "22.0 ± 1.0 mm", "only a test"]:
@@ -397,16 +412,8 @@ def test_the_report_is_one_a4_page_with_the_answer(tmp_path, kind):
                                                (0.0023, "0.0023"), (0.0004, "0.00040"),
                                                (0.0, "0.00")])
 def test_the_margin_is_shown_with_its_significant_digits(margin, shown):
-    rec = PlanRecommendation(graft=GraftSize(14, 13), margin_mm=margin, target_mm=2.31,
-                             target_source="given")
+    rec = answer((14, 13), margin)
     assert f"its smallest margin is {shown} mm." in rec.headline()
-
-
-def test_a_recommendation_has_one_answer():
-    with pytest.raises(ParameterError, match="one of"):
-        PlanRecommendation(graft=GraftSize(0, 0), margin_mm=0.1, closest=GraftSize(7, 0))
-    with pytest.raises(ParameterError, match="margin"):
-        PlanRecommendation(graft=GraftSize(0, 0))
 
 
 # --- the plan, end to end on a stand-in study ---------------------------------------------
@@ -515,31 +522,33 @@ def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
     out = tmp_path / "plan"
     outcome = run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0,
                        templates=[GraftSize(21, 27)], case_function=stand_in_case)
-    rec = outcome.recommendation
+    rec = outcome.answers.values[0]
+    study, answer = rec.recommendation, rec.recommendation.answer
     members = [(d, p) for d in (21.0, 22.0, 23.0) for p in (1, 2)]
-    assert rec.members == tuple(_words(d, p) for d, p in members)
-    assert rec.targets_mm == {_words(d, p): pytest.approx(stand_in_height(None, d, 1))
-                              for d, p in members}
-    assert rec.target_mm is None and rec.target_source == "the normal valve's at the same root"
+    assert [rec.name(m) for m in study.members] == [_words(d, p) for d, p in members]
+    assert {rec.name(m): t for m, t in study.targets_mm.items()} == {
+        _words(d, p): pytest.approx(stand_in_height(None, d, 1)) for d, p in members}
+    assert study.target_mm is None
+    assert rec.target_source == "the normal valve's at the same root"
     expected = surface_margin((14.0, 13.0), 23.0)
     assert expected == pytest.approx(-0.03) and -PATH_SCATTER_MM < expected
     assert surface_margin((13.0, 14.0), 23.0) < -PATH_SCATTER_MM
     assert rec.graft == GraftSize(14.0, 13.0)
-    assert rec.margin_mm == pytest.approx(expected, abs=0.02)
-    assert rec.limiting_member == "root 23.0 mm"
-    assert [g.qualifies for g in rec.grafts] == [False, False, False, False]  # as solved
-    assert rec.grafts[2].graft == GraftSize(14.0, 13.0)
-    assert rec.grafts[2].spread_mm == pytest.approx(
+    assert answer.margin_mm == pytest.approx(expected, abs=0.02)
+    assert rec.name(answer.limiting_member) == "root 23.0 mm"
+    assert [c.qualifies for c in study.cells] == [False, False, False, False]  # as solved
+    assert study.cells[2].size == GraftSize(14.0, 13.0)
+    assert study.cells[2].spread_mm == pytest.approx(
         stand_in_height((14.0, 13.0), 21.0, 1) - stand_in_height((14.0, 13.0), 23.0, 2))
     names = _case_names(out)
     assert len(names) == 3 + 4 * 3 * 2 and "normal__root.loaded_diameter=23" in names
     assert "W14_H13__root.loaded_diameter=23__path=2" in names
 
     summary = json.loads((out / "summary.json").read_text())
-    answer = summary["recommendation"]
-    assert answer["graft"]["label"] == "W14/H13"
-    assert answer["margin_mm"] == rec.margin_mm
-    assert answer["limiting_member"] == "root 23.0 mm" and len(answer["members"]) == 6
+    saved = summary["answers"]["values"][0]
+    assert saved["graft"]["label"] == "W14/H13"
+    assert saved["margin_mm"] == answer.margin_mm
+    assert saved["limiting_member"] == "root 23.0 mm" and len(saved["members"]) == 6
     assert summary["reach"]["can_seal"] is True and summary["patient"]["paths"] == 2
     assert summary["run"]["cases"] == 27 and summary["run"]["converged"] == 27
     assert summary["run"]["wall_time_s"] == pytest.approx(27 * 0.01)
@@ -617,13 +626,14 @@ def test_a_plan_names_the_closest_graft_when_none_qualifies(tmp_path):
 
     outcome = run_plan(_patient(target_coaptation_mm=2.5), tmp_path, MPI.COMM_SELF,
                        mesh_size_mm=2.0, case_function=stand_in_case)
-    rec = outcome.recommendation
+    rec = outcome.answers.values[0]
+    study, answer = rec.recommendation, rec.recommendation.answer
     assert rec.graft is None and rec.closest == GraftSize(14.0, 27.0)
-    assert rec.target_mm == 2.5 and set(rec.targets_mm.values()) == {2.5}
+    assert study.target_mm == 2.5 and set(study.targets_mm.values()) == {2.5}
     shortfall = -surface_margin((14.0, 27.0), 23.0, 2.5)
     assert shortfall == pytest.approx(0.66) and shortfall > 3 * PATH_SCATTER_MM
-    assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.02)
-    assert rec.limiting_member == "root 23.0 mm"
+    assert answer.shortfall_mm == pytest.approx(shortfall, abs=0.02)
+    assert rec.name(answer.limiting_member) == "root 23.0 mm"
     assert (tmp_path / "template_W14_H27.pdf").is_file()
     headline = rec.headline()
     assert "No graft in the studied range is robust" in headline
@@ -644,24 +654,27 @@ def test_diameters_beyond_the_leaflets_reach_are_not_computed(tmp_path):
     patient = _patient(root_diameter_mm=25.5)
     outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
                        case_function=stand_in_case)
-    rec = outcome.recommendation
+    rec = outcome.answers.values[0]
+    study, answer = rec.recommendation, rec.recommendation.answer
     assert rec.unsealable_roots_mm == (26.5,)
     assert rec.unsealable_reason == free_edge_reach(22.0, 26.5, 80.0).sentence()
-    assert rec.members == tuple(_words(d, p) for d in (24.5, 25.5) for p in (1, 2))
+    assert [rec.name(m) for m in study.members] == [_words(d, p) for d in (24.5, 25.5)
+                                                     for p in (1, 2)]
     names = _case_names(tmp_path)
     assert len(names) == 2 + 4 * 2 * 2 and not any("26.5" in n for n in names)
     shortfall = -surface_margin((14.0, 27.0), 25.5)
     assert shortfall == pytest.approx(0.085) and shortfall > PATH_SCATTER_MM
     assert rec.graft is None and rec.closest == GraftSize(14.0, 27.0)
-    assert rec.shortfall_mm == pytest.approx(shortfall, abs=0.01) and rec.margin_mm is None
-    assert rec.limiting_member == "root 25.5 mm"
+    assert answer.shortfall_mm == pytest.approx(shortfall, abs=0.01)
+    assert answer.size is None and answer.margin_mm is None
+    assert rec.name(answer.limiting_member) == "root 25.5 mm"
     headline = rec.headline()
     assert headline.startswith("No graft is robust over the root's uncertainty")
     assert "cannot seal a 26.5 mm root whatever the graft" in headline
     assert "The closest is W14/H27, 0.09 mm short in its worst member" in headline
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["recommendation"]["unsealable_roots_mm"] == [26.5]
-    assert summary["recommendation"]["closest"]["label"] == "W14/H27"
+    assert summary["answers"]["values"][0]["unsealable_roots_mm"] == [26.5]
+    assert summary["answers"]["values"][0]["closest"]["label"] == "W14/H27"
     text = _pdf_text(tmp_path / "plan.pdf")
     assert "Not computed: the 26.5 mm root" in text
     assert "The root's upper bound, 26.5 mm, is beyond that" in text
@@ -675,11 +688,11 @@ def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path,
     patient = _patient(root_diameter_mm=30.0, leaflet_free_edge_mm=20.0)
     outcome = run_plan(patient, tmp_path, MPI.COMM_SELF, mesh_size_mm=2.0,
                        case_function=no_case)
-    assert outcome.recommendation.cannot_seal == outcome.reach.sentence()
+    assert outcome.answers.values[0].cannot_seal == outcome.reach.sentence()
     assert not outcome.reach.can_seal and outcome.templates == []
     assert not (tmp_path / "study").exists()
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["recommendation"]["cannot_seal"].startswith("The native leaflets cannot")
+    assert summary["answers"]["values"][0]["cannot_seal"].startswith("The native leaflets cannot")
     assert "cannot seal this 30.0 mm root" in _pdf_text(tmp_path / "plan.pdf")
     (tmp_path / "summary.json").unlink()
     assert main(["report", str(tmp_path)]) == 0
@@ -696,7 +709,7 @@ def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory):
     patient = _patient()
     world = run_plan(patient, root / "world", comm, mesh_size_mm=2.0,
                      case_function=stand_in_case)
-    assert world.recommendation.graft == GraftSize(14.0, 13.0)  # on every rank
+    assert world.answers.values[0].graft == GraftSize(14.0, 13.0)  # on every rank
     if comm.rank == 0:
         run_plan(patient, root / "serial", MPI.COMM_SELF, mesh_size_mm=2.0,
                  case_function=stand_in_case)
@@ -704,6 +717,100 @@ def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory):
                      for f in ("world", "serial")]
         assert summaries[0] == summaries[1]
         assert summaries[0]["run"]["cases"] == 27
+
+
+# --- a plan with comparison axes --------------------------------------------------------------
+#: the stand-in's loss of coaptation of a graft at 2000 kPa against 200 kPa (mm)
+STIFF_LOSS_MM = 0.088
+
+
+def stiff_case(config, out_dir: Path, comm, *, start: Path | None = None) -> dict:
+    """:func:`stand_in_case` with the graft's flexural modulus: a graft's height falls
+    linearly by :data:`STIFF_LOSS_MM` from 200 to 2000 kPa (the normal valve has no graft:
+    the same at both)."""
+    result = stand_in_case(config, out_dir, comm, start=start)
+    if config.geometry.has_graft:
+        result["min_coaptation_height_mm"] -= STIFF_LOSS_MM * (
+            config.graft_bending_modulus_kpa - 200.0) / 1800.0
+    return result
+
+
+def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
+    """--vary graft_bending_modulus_kpa=200,2000 on the stand-in (21, 22, 23 mm, two paths).
+    At 200 kPa the answer is W14/H13, as without the axis
+    (:func:`test_a_plan_recommends_over_three_diameters_and_the_paths`).  At 2000 kPa every
+    graft is 0.088 mm lower: at the widest graft, W14, the surface's margin at 23 mm is
+    -0.03 - 0.088 + 0.005 (H - 13) (:func:`surface_margin`), which comes within the paths'
+    scatter of 0.0707 mm from H = 13 + 0.0473 / 0.005 = 22.5 %: W14/H23 (a narrower graft
+    loses 0.1 mm per per cent of width, which no height in the grid makes up).  The size
+    that qualifies at both values is the 2000 kPa answer: the size depends on the
+    stiffness.  The normal valve is solved once per diameter, for both values."""
+    from valve_dolfinx.plan.runner import run_plan
+
+    patient = _patient(vary={"graft_bending_modulus_kpa": [200, 2000]})
+    assert patient.vary == {"graft_bending_modulus_kpa": (200.0, 2000.0)}
+    out = tmp_path / "plan"
+    outcome = run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0,
+                       case_function=stiff_case)
+    answers = outcome.answers
+    assert answers.varied and answers.axes == {"graft_bending_modulus_kpa": [200.0, 2000.0]}
+    soft, stiff = answers.values
+    assert soft.comparison == {"graft_bending_modulus_kpa": 200.0}
+    assert stiff.comparison == {"graft_bending_modulus_kpa": 2000.0}
+    threshold = 13 + (0.03 + STIFF_LOSS_MM - PATH_SCATTER_MM) / 0.005
+    assert threshold == pytest.approx(22.46, abs=0.01)
+    assert soft.graft == GraftSize(14.0, 13.0)
+    assert soft.recommendation.answer.margin_mm == pytest.approx(
+        surface_margin((14.0, 13.0), 23.0), abs=0.02)
+    graft = stiff.graft
+    assert graft.width_pct == 14.0 and abs(graft.height_pct - math.ceil(threshold)) <= 1
+    assert stiff.recommendation.answer.margin_mm == pytest.approx(
+        surface_margin((14.0, graft.height_pct), 23.0) - STIFF_LOSS_MM, abs=0.02)
+    # the size depends on the stiffness: what qualifies at both is the stiff answer
+    assert answers.common == graft
+    assert answers.kind == "graft"
+    dependence = answers.dependence()
+    assert dependence.startswith("The answer differs with graft_bending_modulus_kpa: "
+                                 f"W14/H13 at 200, {graft.label} at 2000.")
+    assert (f"{graft.label} (+14 % width, +{graft.height_pct:g} % height) is the smallest size "
+            "that qualifies at every value (solved at 2000, read from the surface at 200)") in (
+        dependence)
+    assert answers.headline() == dependence
+    # one study: the normal valve once per diameter, every graft at both values
+    names = _case_names(out)
+    normals = [n for n in names if n.startswith("normal")]
+    assert normals == [f"normal__root.loaded_diameter={d}" for d in (21, 22, 23)]
+    grid = [n for n in names if not n.startswith("normal")
+            and n.split("__")[0] in ("W7_H13", "W7_H27", "W14_H13", "W14_H27")]
+    assert len(grid) == 2 * 4 * 3 * 2
+    # the files: a sizing map per value, the templates of both answers, the page
+    for value in (200, 2000):
+        assert (out / f"sizing_map__graft_bending_modulus_kpa={value}.png").stat().st_size \
+            > 10_000
+    assert not (out / "sizing_map.png").exists()
+    assert {t.graft for t in outcome.templates} == {GraftSize(14.0, 13.0), graft}
+    summary = json.loads((out / "summary.json").read_text())["answers"]
+    assert summary["axes"] == {"graft_bending_modulus_kpa": [200.0, 2000.0]}
+    assert summary["common"]["label"] == graft.label
+    assert [v["comparison"] for v in summary["values"]] == [
+        {"graft_bending_modulus_kpa": 200.0}, {"graft_bending_modulus_kpa": 2000.0}]
+    assert [v["graft"]["label"] for v in summary["values"]] == ["W14/H13", graft.label]
+    markdown = (out / "plan.md").read_text()
+    for words in (f"**{dependence}**", "### At graft_bending_modulus_kpa=2000",
+                  f"**Recommended graft {graft.label}",
+                  "sizing_map__graft_bending_modulus_kpa=2000.png",
+                  "## Every graft over the members at graft_bending_modulus_kpa=200",
+                  "| compared (--vary) | graft_bending_modulus_kpa: 200, 2000 |"):
+        assert words in markdown, words
+    text = _pdf_text(out / "plan.pdf")
+    for words in ("Sizing map at graft_bending_modulus_kpa=200",
+                  "Sizing map at graft_bending_modulus_kpa=2000",
+                  f"At graft_bending_modulus_kpa=2000: {graft.label} (+14 % width",
+                  "The closed valve of each value's graft: plan.md"):
+        assert words in text, words
+    # patient.toml keeps the axis: rerunning it recomputes nothing
+    assert read_patient(out / "patient.toml") == replace(patient, mesh_size_mm=2.0)
+    run_plan(read_patient(out / "patient.toml"), out, MPI.COMM_SELF, case_function=no_case)
 
 
 # --- the command line --------------------------------------------------------------------
@@ -720,6 +827,19 @@ def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory):
     (["--root-diameter", "22", "--paths", "4"], "paths (--paths)"),
     (["--root-diameter", "22", "--paths", "0"], "paths (--paths)"),
     ([], "root_diameter_mm is missing"),
+    # comparison axes: checked as a sweep's, none the plan sets itself, at most 3 values
+    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200,-5"],
+     "vary (--vary) graft_bending_modulus_kpa=-5"),
+    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa"], "give KEY=V1,V2"),
+    (["--root-diameter", "22", "--vary", "root.loaded_diameter=21,23"],
+     "the plan sets it from --root-diameter and --root-uncertainty"),
+    (["--root-diameter", "22", "--vary", "pressure_mmhg=80,100"], "from --pressure"),
+    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200,2000",
+      "--vary", "graft_material.thickness=0.4,0.5"], "2 × 2 = 4 combinations"),
+    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200",
+      "--vary", "graft_bending_modulus_kpa=2000"], "given twice"),
+    (["--root-diameter", "22", "--vary", "geometry.graft_placement=billowed"],
+     "numerical path 2"),
 ])
 def test_cli_plan_stops_on_bad_input_before_any_computation(tmp_path, caplog, args, expected):
     from valve_dolfinx.cli import main

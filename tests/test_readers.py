@@ -487,8 +487,8 @@ def test_a_target_from_a_normal_valve_that_leaks_is_said_so(tmp_path):
     outcome = run_plan(_patient(), out, MPI.COMM_SELF, mesh_size_mm=2.0,
                        case_function=leaking_at_23)
     warning = f"the normal valve is not competent (leaks 0.40 mm²) at {_words(23.0, 1)}"
-    assert warning in outcome.recommendation.headline()
-    assert warning in json.loads((out / "summary.json").read_text())["recommendation"][
+    assert warning in outcome.answers.headline()
+    assert warning in json.loads((out / "summary.json").read_text())["answers"]["values"][0][
         "headline"]
     (study,) = json.loads((out / "study" / "summary.json").read_text())["recommendations"]
     assert "Caution: the target is the height of a normal valve that is not competent" in (

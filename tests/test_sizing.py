@@ -225,7 +225,7 @@ def test_sizing_map_draws_the_answer(tmp_path):
     """The study's recommendation of a synthetic study drawn as the continuous sizing map
     (looked at by eye; here: it is written, with the answer's lattice behind it)."""
     from valve_dolfinx.plotting.study import plot_sizing_map
-    from valve_dolfinx.study.recommend import recommend
+    from valve_dolfinx.sizing import recommend
 
     rec = recommend(study(seed=2, leaks=lambda w, h: h == 0 and w >= 14), n_paths=2,
                     ladder=None)
@@ -233,7 +233,46 @@ def test_sizing_map_draws_the_answer(tmp_path):
     fig = plot_sizing_map(rec, tmp_path / "sizing_map.png", title="synthetic")
     assert (tmp_path / "sizing_map.png").stat().st_size > 50_000
     labels = [t.get_text() for t in fig.axes[0].texts]
-    assert f"answer {rec.recommended}" in labels and len(rec.cells) == 20
+    assert f"answer {rec.answer.size.label}" in labels and len(rec.cells) == 20
+
+
+def test_sizing_map_labels_stay_inside_the_axes_and_apart(tmp_path):
+    """Drawn at a plan page's print size, with a solved cell 1 % above a grid cell (as a
+    confirmation lands): every label (the answer, the highest size, each cell's height) lies
+    inside the axes and no two overlap; the map carries no title (the page prints its
+    key)."""
+    from matplotlib.text import Annotation, Text
+
+    from valve_dolfinx.plotting.study import MIN_PRINT_PT, plot_sizing_map
+    from valve_dolfinx.sizing import recommend
+
+    tables = study(seed=2)
+    for table in tables:  # a cell at W14/H14, beside the grid's W14/H13
+        table.rows.append({"graft_width_pct": 14.0, "graft_height_pct": 14.0,
+                           "converged": True, "competent": True,
+                           "min_coaptation_height_mm": float(truth(14.0, 14.0)),
+                           "mesh_size_mm": 0.8})
+    rec = recommend(tables, n_paths=2, ladder=None)
+    assert rec.cell("W14/H14") is not None
+    fig = plot_sizing_map(rec, tmp_path / "map.png", size_in=(91 / 25.4, 62 / 25.4),
+                          caption=False)
+    ax = fig.axes[0]
+    assert ax.get_title() == ""
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    labels = [t for t in ax.texts if isinstance(t, Annotation)]
+    assert len(labels) == len(rec.cells) + 2  # the cells' heights, the answer, the highest
+    boxes = []
+    for label in labels:
+        label.update_positions(renderer)
+        box = Text.get_window_extent(label, renderer)
+        assert label.get_fontsize() >= MIN_PRINT_PT
+        assert (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                and box.y1 <= frame.y1), label.get_text()
+        boxes.append((label.get_text(), box))
+    for i, (a, box) in enumerate(boxes):
+        for b, other in boxes[i + 1:]:
+            assert not box.overlaps(other), (a, b)
 
 
 def test_design_scales_the_inputs_root_first_and_choices_as_indicators():

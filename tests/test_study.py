@@ -592,14 +592,14 @@ def test_recommendation_reads_the_answer_beside_the_solved_cells():
     so the smallest adequate size is where the line meets H = 0: W = 12.5 %, read on the
     1 % lattice as W13/H0 (3.04 mm; W12/H0 is 0.04 mm short, more than the noise of an
     exact plane).  No grid cell qualifies below W14/H0."""
-    from valve_dolfinx.study.recommend import recommend
+    from valve_dolfinx.sizing import recommend
 
     rows = _plane(3.0, 2.0, 0.08, 0.03)
     rec = recommend(rows, ladder=None)
     assert rec.target_mm == 3.0 and "normal valve" in rec.target_source
-    assert rec.size == (13.0, 0.0) and rec.recommended == "W13/H0"
-    assert rec.margin_mm == pytest.approx(0.04, abs=0.01)
-    assert rec.tolerance_mm < 0.01 and rec.answer.resolution.path_scatter_mm is None
+    assert rec.answer.size == (13.0, 0.0) and rec.answer.size.label == "W13/H0"
+    assert rec.answer.margin_mm == pytest.approx(0.04, abs=0.01)
+    assert rec.answer.tolerance_mm < 0.01 and rec.answer.resolution.path_scatter_mm is None
     # every case sealed: every cell's share of sealed cases is 1, and so is the interpolation
     assert rec.answer.seal_probability == 1.0
     assert rec.answer.highest == (14.0, 27.0)
@@ -612,23 +612,24 @@ def test_recommendation_reads_the_answer_beside_the_solved_cells():
     # a given target moves the answer up the plane: 0.08 W + 0.03 H >= 1.3 needs H > 0 at
     # W <= 14 (W14 gives 0.08·14 + 0.03 H >= 1.3 for H >= 6)
     higher = recommend(rows, target_mm=3.3, ladder=None)
-    assert higher.size.width_pct == 14.0 and 5.0 <= higher.size.height_pct <= 7.0
+    assert higher.answer.size.width_pct == 14.0 and 5.0 <= higher.answer.size.height_pct <= 7.0
 
 
 def test_recommendation_when_none_qualifies():
     """The plane 1 + 0.05 W + 0.02 H reaches 2.24 mm at W14/H27 against a target of 3.5 mm:
     no graft, the closest W14/H27, 1.26 mm short; without a converged normal valve there is
     no target."""
-    from valve_dolfinx.study.recommend import recommend
+    from valve_dolfinx.sizing import recommend
 
     rows = _plane(3.5, 1.0, 0.05, 0.02)
     rec = recommend(rows, ladder=None)
-    assert rec.recommended is None and rec.answer.why == "short"
-    assert rec.best == "W14/H27" and rec.shortfall_mm == pytest.approx(1.26, abs=0.01)
+    assert rec.answer.size is None and rec.answer.why == "short"
+    assert rec.answer.closest.label == "W14/H27"
+    assert rec.answer.shortfall_mm == pytest.approx(1.26, abs=0.01)
     assert rec.text.startswith("No graft:") and "1.26 mm short" in rec.text
     no_normal = recommend(rows[1:], ladder=None)
     assert no_normal.target_mm is None and "give --target-coaptation" in no_normal.text
-    assert no_normal.size is None and no_normal.answer.why == "no target"
+    assert no_normal.answer.size is None and no_normal.answer.why == "no target"
     unconverged = recommend([_row(None, None, 3.5, converged=False), *rows[1:]], ladder=None)
     assert unconverged.answer.why == "no target" and "did not converge" in unconverged.text
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from pathlib import Path
 
@@ -84,6 +85,14 @@ def stand_in_case(config, out_dir: Path, comm, *, start: Path | None = None) -> 
 def _runs(out: Path) -> list[str]:
     log = out / "runs.log"
     return log.read_text().split() if log.exists() else []
+
+
+def _grid(names, settings, out: Path) -> list[str]:
+    """``names`` without the cases that confirm an answer (sizes off the grid)."""
+    from valve_dolfinx.study.layout import read_confirmations
+
+    extra = {c.name for c in settings.layout(read_confirmations(out)).cases if c.confirmation}
+    return [n for n in names if n not in extra]
 
 
 def _main(argv: list[str]) -> int:
@@ -171,8 +180,10 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
     layout = settings.layout()
     assert len(layout.cases) == 2 * 2 * (1 + 2 * 6) == 52
-    assert sorted(_runs(out)) == sorted(c.name for c in layout.cases)  # each once
-    assert sorted(outcome.computed) == sorted(c.name for c in layout.cases)
+    # each once (and the answers' confirmations, tested below)
+    assert sorted(_grid(_runs(out), settings, out)) == sorted(c.name for c in layout.cases)
+    assert sorted(_grid(outcome.computed, settings, out)) == sorted(
+        c.name for c in layout.cases)
     assert [c.name for c in layout.cases[:4]] == [
         "normal__bending_modulus_kpa=0__root.loaded_diameter=20",
         "normal__bending_modulus_kpa=0__root.loaded_diameter=21",
@@ -181,7 +192,7 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     assert {c.name for c in layout.cases} >= {
         "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21",
         "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21__path=2"}
-    rows = read_csv_rows(out / "results.csv")
+    rows = [r for r in read_csv_rows(out / "results.csv") if r["confirmation"] == "false"]
     assert len(rows) == 52 and list(rows[0])[13:17] == [
         "case", "bending_modulus_kpa", "root.loaded_diameter", "path"]
     for row in rows:
@@ -231,11 +242,14 @@ def test_rerun_skips_every_finished_member(tmp_path):
     run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case, report=False)
     first = _runs(out)
     again = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert again.computed == [] and _runs(out) == first
+    assert _grid(again.computed, settings, out) == []  # the answer's confirmations only
+    assert _grid(_runs(out), settings, out) == first
     wider = settings.replace(uncertain={"root.loaded_diameter": [20, 21, 22]})
+    before = _runs(out)
     more = run_study(wider, out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(more.computed) == sorted(_runs(out)[len(first):])
-    assert len(more.computed) == 1 + 2 * 6 and all("=22" in n for n in more.computed)
+    assert sorted(more.computed) == sorted(_runs(out)[len(before):])
+    grid = _grid(more.computed, wider, out)
+    assert len(grid) == 1 + 2 * 6 and all("=22" in n for n in grid)
 
 
 def test_first_path_keeps_the_plain_sweep_names(tmp_path):
@@ -244,11 +258,12 @@ def test_first_path_keeps_the_plain_sweep_names(tmp_path):
 
     out = tmp_path / "study"
     plain = run_study(_settings(), out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(plain.computed) == sorted(["normal", "W0_H0", "W0_H13", "W7_H0", "W7_H13",
-                                             "W14_H0", "W14_H13"])
+    grid = _grid(plain.computed, _settings(), out)
+    assert sorted(grid) == sorted(["normal", "W0_H0", "W0_H13", "W7_H0", "W7_H13", "W14_H0",
+                                   "W14_H13"])
     two = run_study(_settings(paths=2), out, MPI.COMM_SELF, case_function=stand_in_case)
-    assert sorted(two.computed) == sorted(f"{n}__path=2" for n in plain.computed
-                                          if n != "normal")
+    assert sorted(_grid(two.computed, _settings(paths=2), out)) == sorted(
+        f"{n}__path=2" for n in grid if n != "normal")
 
 
 # --- the recommendation over axes -------------------------------------------------------------
@@ -264,8 +279,8 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
 
     one = run_study(_settings(), tmp_path / "one", MPI.COMM_SELF,
                     case_function=stand_in_case).report
-    assert [r.recommended for r in one.recommendations] == ["W14/H0"]
-    assert one.recommendations[0].margin_mm == pytest.approx(margin(14, 0, 20, 200, 1),
+    assert [r.answer.size.label for r in one.recommendations] == ["W14/H0"]
+    assert one.recommendations[0].answer.margin_mm == pytest.approx(margin(14, 0, 20, 200, 1),
                                                              abs=0.005)
 
     settings = _settings(vary={"bending_modulus_kpa": [200, 400]},
@@ -281,14 +296,15 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
                             "root.loaded_diameter=21, path 1 (conformal)", worst]
     assert soft.targets_mm == pytest.approx(dict(zip(soft.members, [3.0, 3.0, 2.5, 2.5],
                                                       strict=True)))
-    assert soft.tolerance_mm == pytest.approx(0.1 / 2**0.5)
+    assert soft.answer.tolerance_mm == pytest.approx(0.1 / 2**0.5)
     for rec, height in ((soft, 2.0), (stiff, 12.0)):
-        assert rec.size.width_pct == 14.0 and abs(rec.size.height_pct - height) <= 1
-        assert rec.limiting_member == "root.loaded_diameter=21"
+        size = rec.answer.size
+        assert size.width_pct == 14.0 and abs(size.height_pct - height) <= 1
+        assert rec.answer.limiting_member == "root.loaded_diameter=21"
         eb = rec.comparison["bending_modulus_kpa"]
-        mean = (margin(14, rec.size.height_pct, 21, eb, 1)
-                + margin(14, rec.size.height_pct, 21, eb, 2)) / 2
-        assert rec.margin_mm == pytest.approx(mean, abs=0.02)
+        mean = (margin(14, size.height_pct, 21, eb, 1)
+                + margin(14, size.height_pct, 21, eb, 2)) / 2
+        assert rec.answer.margin_mm == pytest.approx(mean, abs=0.02)
         assert "in `root.loaded_diameter=21`" in rec.text
     # the solved cells beside the answer: the worst case over the four members
     cell = soft.cell("W14/H13")
@@ -301,8 +317,8 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
         for name in ("sizing_map", "coaptation_vs_width"):
             assert (tmp_path / "axes" / f"{name}{suffix}.png").stat().st_size > 10_000
     summary = json.loads((tmp_path / "axes" / "summary.json").read_text())
-    assert [r["recommended"] for r in summary["recommendations"]] == [soft.recommended,
-                                                                       stiff.recommended]
+    assert [r["recommended"] for r in summary["recommendations"]] == [
+        soft.answer.size.label, stiff.answer.size.label]
     text = (tmp_path / "axes" / "report.md").read_text()
     assert "### bending_modulus_kpa=400" in text and "| W14/H13 | " in text
 
@@ -607,6 +623,150 @@ def test_nomogram_on_real_closures(tmp_path, quiet_cli):
                 float(graft["min_coaptation_height_mm"])
                 - float(normal["min_coaptation_height_mm"]))
     assert (out / "nomogram.png").stat().st_size > 20_000
+
+
+def rippled(amplitude: float):
+    """The stand-in (:func:`stand_in_case`) with ``amplitude · sin²(π H / 13)`` added to every
+    graft's height: nothing at the grid's heights 0 and 13 %, so the grid's cells and the
+    first answer are the plane's; between them a ridge (amplitude > 0) or a trough (< 0)
+    that only a solve off the grid sees."""
+    def case(config, out_dir: Path, comm, *, start: Path | None = None) -> dict:
+        result = stand_in_case(config, out_dir, comm, start=start)
+        if config.geometry.has_graft:
+            ripple = math.sin(math.pi * config.geometry.graft_height_pct / 13.0) ** 2
+            result["min_coaptation_height_mm"] += amplitude * ripple
+        return result
+
+    return case
+
+
+def answer_margin(w: float, h: float, d: float, amplitude: float) -> float:
+    """The statistic the answer predicts, solved at one diameter (200 kPa): its two paths'
+    margins averaged (:func:`margin`: path 2 is 0.1 mm lower), plus the ripple."""
+    paths = (margin(w, h, d, 200, 1) + margin(w, h, d, 200, 2)) / 2
+    return paths + amplitude * math.sin(math.pi * h / 13.0) ** 2
+
+
+CONFIRM_SETTINGS = {"uncertain": {"root.loaded_diameter": [20, 21]}, "paths": 2}
+
+
+def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
+    """The answer of two diameters and two paths at 200 kPa is W14/H2, off the 3 × 2 grid
+    (:func:`test_comparison_recommends_per_value_and_uncertainty_over_all`); the plane is
+    its truth there, -0.95 + 0.84 + 0.04 = -0.07 mm at 21 mm, within the path scatter
+    0.1/√2 = 0.071 mm.  Under a trough of depth 2 mm (:func:`rippled`), the sweep solves
+    W14/H2 in all four members as ordinary cases, marked as confirmations in the tables;
+    the statistic the answer predicts (paths averaged, the worse diameter) is
+    -0.07 - 2 sin²(2π/13) = -0.502 mm, short by more than the tolerance: the confirmation
+    misses, its cases join the fit, the answer is read again and the moved answer is
+    confirmed in turn; `report` rebuilds the same from the folder."""
+    from valve_dolfinx.study.layout import CONFIRM_FILE
+    from valve_dolfinx.study.report import build_report
+    from valve_dolfinx.study.runner import run_study
+
+    settings = _settings(**CONFIRM_SETTINGS)
+    out = tmp_path / "confirm"
+    report = run_study(settings, out, MPI.COMM_SELF, case_function=rippled(-2.0)).report
+    rec = report.recommendations[0]
+    confirmed = json.loads((out / CONFIRM_FILE).read_text())["confirm"]["0"]
+    assert confirmed[0] == [14.0, 2.0]
+    first = [n for n in _runs(out) if n.startswith("W14_H2_") or n == "W14_H2"]
+    assert sorted(first) == sorted(["W14_H2__root.loaded_diameter=20",
+                                    "W14_H2__root.loaded_diameter=20__path=2",
+                                    "W14_H2__root.loaded_diameter=21",
+                                    "W14_H2__root.loaded_diameter=21__path=2"])
+    # in the tables, marked, with the worst of the four members as solved
+    rows = {r["case"]: r for r in report.rows}
+    assert all(rows[name]["confirmation"] for name in first)
+    assert not rows["W14_H0__root.loaded_diameter=20"]["confirmation"]
+    cell = rec.cell("W14/H2")
+    assert cell.confirmation and len(cell.heights_mm) == 4
+    trough = -2.0 * math.sin(2 * math.pi / 13) ** 2
+    assert trough == pytest.approx(-0.4319, abs=1e-4)
+    assert cell.margin_mm == pytest.approx(margin(14, 2, 21, 200, 2) + trough, abs=1e-9)
+    assert "| W14/H2 (confirmation) |" in (out / "report.md").read_text()
+    # the miss, judged by the answer's statistic: -0.07 + trough at 21 mm
+    solved = answer_margin(14, 2, 21, -2.0)
+    assert solved == pytest.approx(-0.07 - 0.4319, abs=1e-4)
+    tolerance = rec.answer.tolerance_mm
+    assert 0.1 / 2**0.5 - 1e-9 <= tolerance < -solved
+    assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": pytest.approx(solved),
+                                    "limiting_member": "root.loaded_diameter=21",
+                                    "holds": False}
+    assert "Confirmation 1: W14/H2 solved in every member" in rec.text
+    assert "it misses (0.50 mm short" in rec.text
+    # it joined the fit (a cell per size and diameter: the grid's 6 and each confirmation's,
+    # at both), the answer moved and was confirmed in turn (at most CONFIRM_ROUNDS)
+    assert rec.answer.surface["cells"] == 2 * (6 + len(confirmed))
+    assert 2 <= len(confirmed) == len(rec.confirmations) <= 3
+    assert len({tuple(s) for s in confirmed}) == len(confirmed)
+    for entry, (w, h) in zip(rec.confirmations, confirmed, strict=True):
+        assert entry["margin_mm"] == pytest.approx(answer_margin(w, h, 21, -2.0), abs=1e-9)
+        assert entry["holds"] == (entry["margin_mm"] >= -tolerance)
+    # `report` reads the confirmations from the folder
+    again = build_report(out, settings).recommendations[0]
+    assert again.to_dict() == rec.to_dict()
+
+
+def test_a_confirmation_is_judged_by_the_answers_statistic(tmp_path):
+    """On the plane (no ripple) the answer W14/H2 is the truth's: solved, its paths averaged
+    at 21 mm give -0.95 + 0.84 + 0.04 = -0.07 mm, within the tolerance 0.1/√2 = 0.0707 mm:
+    it holds, and the answer stays, confirmed, although its worst single member (21 mm,
+    path 2) is -0.12 mm, beyond the tolerance: the statistic the answer predicts decides,
+    not the worst path."""
+    from valve_dolfinx.study.layout import CONFIRM_FILE
+    from valve_dolfinx.study.runner import run_study
+
+    settings = _settings(**CONFIRM_SETTINGS)
+    out = tmp_path / "plane"
+    rec = run_study(settings, out, MPI.COMM_SELF, case_function=rippled(0.0)).report \
+        .recommendations[0]
+    assert json.loads((out / CONFIRM_FILE).read_text())["confirm"]["0"] == [[14.0, 2.0]]
+    solved = answer_margin(14, 2, 21, 0.0)
+    assert solved == pytest.approx(-0.07, abs=1e-12)
+    tolerance = rec.answer.tolerance_mm
+    assert tolerance >= 0.1 / 2**0.5 - 1e-12 and solved >= -tolerance
+    assert rec.confirmations == [{"graft": "W14/H2", "margin_mm": pytest.approx(solved),
+                                  "limiting_member": "root.loaded_diameter=21",
+                                  "holds": True}]
+    cell = rec.cell("W14/H2")
+    assert cell.sound and cell.margin_mm == pytest.approx(-0.12, abs=1e-12)
+    assert cell.margin_mm < -tolerance  # the worst path alone would have missed
+    assert rec.answer.size.label == "W14/H2" and rec.confirm == []
+    assert "it holds" in rec.text and "it misses" not in rec.text
+
+
+def test_a_held_confirmation_that_moves_the_answer_is_confirmed_in_turn(tmp_path):
+    """Under a ridge of 1 mm (:func:`rippled`) the first answer is the plane's, W14/H2;
+    solved, its paths averaged at 21 mm give -0.07 + sin²(2π/13) = +0.146 mm: it holds.
+    Its cases join the fit, which now sees the ridge and moves the answer to a smaller size;
+    that one is confirmed in turn, at most CONFIRM_ROUNDS sizes in all, each judged on
+    its own solved statistic; an answer left unsolved says the rounds are spent."""
+    from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS
+    from valve_dolfinx.study.layout import CONFIRM_FILE
+    from valve_dolfinx.study.runner import run_study
+
+    settings = _settings(**CONFIRM_SETTINGS)
+    out = tmp_path / "ridge"
+    rec = run_study(settings, out, MPI.COMM_SELF, case_function=rippled(1.0)).report \
+        .recommendations[0]
+    confirmed = json.loads((out / CONFIRM_FILE).read_text())["confirm"]["0"]
+    assert confirmed[0] == [14.0, 2.0]
+    solved = answer_margin(14, 2, 21, 1.0)
+    assert solved == pytest.approx(-0.07 + 0.2160, abs=1e-4)
+    assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": pytest.approx(solved),
+                                    "limiting_member": "root.loaded_diameter=21",
+                                    "holds": True}
+    assert 2 <= len(confirmed) == len(rec.confirmations) <= CONFIRM_ROUNDS
+    assert len({tuple(s) for s in confirmed}) == len(confirmed)
+    for entry, (w, h) in zip(rec.confirmations, confirmed, strict=True):
+        assert entry["margin_mm"] == pytest.approx(answer_margin(w, h, 21, 1.0), abs=1e-9)
+        assert entry["holds"] == (entry["margin_mm"] >= -rec.answer.tolerance_mm)
+    if rec.confirm:  # the last move is left unsolved only when the rounds are spent
+        assert len(confirmed) == CONFIRM_ROUNDS
+        assert f"the {CONFIRM_ROUNDS} rounds of confirmation are spent" in rec.text
+    else:
+        assert list(rec.answer.size) == confirmed[-1]
 
 
 if __name__ == "__main__":  # the CLI with the stand-in case function

@@ -76,6 +76,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     check_output_folder(args.out)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.geometry.distributed import create_valve_domain, write_domain_xdmf
+    from valve_dolfinx.geometry.outline import GraftSize
     from valve_dolfinx.geometry.valve import build_valve
     from valve_dolfinx.io import export_valve_vtu
 
@@ -86,7 +87,7 @@ def _cmd_mesh(args: argparse.Namespace) -> int:
     elif args.defaults:
         cases = [(None, None), (21.0, 27.0)]
     for w, h in cases:
-        name = "normal_valve" if w is None else f"graft_valve_W{w:g}_H{h:g}"
+        name = "normal_valve" if w is None else f"graft_valve_{GraftSize(w, h).stem}"
         valve = None
         if comm.rank == 0:
             size = {} if args.mesh_size is None else {"mesh_size": args.mesh_size}
@@ -446,7 +447,9 @@ def _report_plan(args: argparse.Namespace) -> int:
 
 def _print_plan(outcome) -> None:
     """The plan's answer and its files, as ``plan`` and ``report`` print them."""
-    print(outcome.recommendation.headline())
+    print(outcome.answers.headline())
+    for line in outcome.answers.lines():
+        print(line)
     print(f"plan: {outcome.out / 'plan.pdf'}, {outcome.out / 'plan.md'}")
     for template in outcome.templates:
         print(f"template {template.graft.label}: {template.pdf} (print at 100 %)")
@@ -513,18 +516,32 @@ _PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root
 
 
 def _patient(args: argparse.Namespace):
-    """The patient of ``plan``: PATIENT.toml with the flags over it, or the flags alone."""
+    """The patient of ``plan``: PATIENT.toml with the flags over it, or the flags alone;
+    ``--vary`` adds comparison axes to the file's ``vary``."""
+    from dataclasses import replace
+
+    from valve_dolfinx.exceptions import ParameterError
     from valve_dolfinx.plan.patient import patient_from_mapping, read_patient
+    from valve_dolfinx.study.axes import parse_axis_option
 
     flags = {key: getattr(args, dest) for dest, key in _PATIENT_FLAGS.items()
              if getattr(args, dest) is not None}
     if args.patient is not None:
-        return read_patient(args.patient, flags)
-    return patient_from_mapping(flags, source="command line")
+        patient = read_patient(args.patient, flags)
+    else:
+        patient = patient_from_mapping(flags, source="command line")
+    vary = dict(patient.vary)
+    for text in args.vary:
+        key, values = parse_axis_option("--vary", text)
+        if key in vary:
+            raise ParameterError(f"--vary {key}: {key} is already an axis (given twice, or "
+                                 "also in the patient file's vary); give each key once")
+        vary[key] = values
+    return replace(patient, vary=vary) if args.vary else patient
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    from valve_dolfinx.plan.recommendation import GraftSize
+    from valve_dolfinx.geometry.outline import GraftSize
     from valve_dolfinx.plan.runner import plan_study_settings
 
     patient = _patient(args)  # every bad input stops here, before DOLFINx is imported
@@ -570,6 +587,11 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--paths", type=int, default=None, metavar="N",
                    help="solve every graft along the first N of the study's numerical paths "
                    "(docs/study.md, Paths); the recommendation takes the worst (default 2)")
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
+                   help="a comparison axis: the plan answers at each value of the case "
+                   "setting KEY that is not measured, e.g. --vary "
+                   "graft_bending_modulus_kpa=200,2000 (repeatable: every combination, at "
+                   "most 3; docs/plan.md)")
     p.add_argument("--label", default=None, help="plan name printed on the template and the "
                    "report (no identifying data needed)")
     p.add_argument("--template", action="append", default=[], metavar="W/H",

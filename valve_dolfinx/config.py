@@ -233,7 +233,9 @@ def case_name(geometry: ValveParameters) -> str:
     """``normal`` or ``W<width>_H<height>``: a case's name in a study before its axis values."""
     if not geometry.has_graft:
         return "normal"
-    return f"W{geometry.graft_width_pct:g}_H{geometry.graft_height_pct:g}"
+    from valve_dolfinx.geometry.outline import GraftSize
+
+    return GraftSize(geometry.graft_width_pct, geometry.graft_height_pct).stem
 
 
 # --- meaning and unit of every setting ------------------------------------------------------

@@ -23,14 +23,17 @@ height (:meth:`LeafletShape.measured`), written with the outline's own parameter
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.integrate import cumulative_simpson
 
-from valve_dolfinx.exceptions import check_range
+from valve_dolfinx.exceptions import ParameterError, check_range
 
-__all__ = ["LeafletShape", "MAX_GRAFT_PCT", "GRAFT_TOO_SMALL", "GRAFT_TOO_LARGE"]
+__all__ = ["LeafletShape", "GraftSize", "flat_area_ratio", "MAX_GRAFT_PCT", "GRAFT_TOO_SMALL",
+           "GRAFT_TOO_LARGE"]
 
 #: Largest graft enlargement accepted (per cent).  Pericardial patches in the
 #: study go to 27 % (width) and 40 % (height); doubling the leaflet is already
@@ -42,6 +45,49 @@ GRAFT_TOO_SMALL = ("a graft smaller than the native leaflet cannot be sewn onto 
 GRAFT_TOO_LARGE = (f"more than {MAX_GRAFT_PCT:g} % (doubling the native leaflet) is far outside "
                    "surgical practice and taken for a typing error; the study's grafts go to "
                    "27 % wider and 40 % higher")
+
+
+def flat_area_ratio(width_pct: float, height_pct: float) -> float:
+    """Flat graft area over the native leaflet's, (1 + W)(1 + H)."""
+    return (1 + width_pct / 100) * (1 + height_pct / 100)
+
+
+class GraftSize(NamedTuple):
+    """A graft's enlargement over the native leaflet, per cent of its width and height."""
+
+    width_pct: float
+    height_pct: float
+
+    @property
+    def label(self) -> str:
+        """``W14/H13``, as every table and figure names a graft."""
+        return f"W{self.width_pct:g}/H{self.height_pct:g}"
+
+    @property
+    def stem(self) -> str:
+        """``W14_H13``: the graft's part of a file name."""
+        return f"W{self.width_pct:g}_H{self.height_pct:g}"
+
+    @property
+    def area_ratio(self) -> float:
+        """Flat area over the native leaflet's, (1 + W)(1 + H)."""
+        return flat_area_ratio(self.width_pct, self.height_pct)
+
+    @classmethod
+    def parse(cls, text: str, option: str = "--template") -> GraftSize:
+        """``"14/13"`` or ``"W14/H13"`` (per cent), range-checked."""
+        match = re.fullmatch(r"\s*W?\s*([-+0-9.eE]+)\s*[/_,]\s*H?\s*([-+0-9.eE]+)\s*", text)
+        try:
+            size = cls(float(match.group(1)), float(match.group(2)))
+        except (AttributeError, ValueError):
+            raise ParameterError(f"{option} {text!r}: give the graft as W/H in per cent of "
+                                 "the measured leaflet, e.g. 14/13") from None
+        for value in size:
+            if not 0.0 <= value <= MAX_GRAFT_PCT:
+                reason = GRAFT_TOO_SMALL if value < 0 else GRAFT_TOO_LARGE
+                raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
+                                     f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
+        return size
 
 
 @dataclass(frozen=True, slots=True)

@@ -38,6 +38,7 @@ from valve_dolfinx.geometry.outline import (
     GRAFT_TOO_LARGE,
     GRAFT_TOO_SMALL,
     MAX_GRAFT_PCT,
+    GraftSize,
     LeafletShape,
 )
 from valve_dolfinx.io import atomic_write
@@ -467,7 +468,7 @@ def build_valve(params: ValveParameters | None = None, **overrides) -> ValveMesh
         parameters=params,
     )
     log.info("valve mesh: %d nodes, %d triangles%s", valve.num_nodes, valve.num_cells,
-             f", graft W{params.graft_width_pct:g}/H{params.graft_height_pct:g}"
+             f", graft {GraftSize(params.graft_width_pct, params.graft_height_pct).label}"
              if params.has_graft else "")
     return valve.validate()
 

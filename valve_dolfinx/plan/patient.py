@@ -8,6 +8,9 @@ A plan takes what the surgeon measures before cutting the graft:
 * optionally the diastolic pressure, the graft grid, the target coaptation height, the
   graft's fibre angle, the number of numerical paths each graft is solved along and a
   label printed on the template and the report;
+* optionally comparison axes (``vary``, ``--vary KEY=V1,V2``): case settings that are not
+  measured, such as the graft's flexural modulus, each value answered on its own, so
+  that the plan shows whether the size depends on them;
 * the numerics the plan's cases run with, when not the defaults: the mesh size and the
   wall-clock limit of each case.  ``patient.toml`` keeps them with the rest, so that
   ``valve-dolfinx plan DIR/patient.toml --out DIR`` runs the plan it records.
@@ -26,13 +29,14 @@ import json
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.exceptions import ConfigurationError, InputFileError, ParameterError, check_range
 from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.io import atomic_write
+from valve_dolfinx.study.axes import axis_table, check_axis_values
 from valve_dolfinx.study.grid import (
     STUDY_HEIGHTS_PCT,
     STUDY_WIDTHS_PCT,
@@ -44,6 +48,7 @@ from valve_dolfinx.study.paths import study_paths
 __all__ = [
     "DEFAULT_LEAFLET",
     "FIELDS",
+    "MAX_COMPARISONS",
     "PATIENT_FILE",
     "PatientInput",
     "patient_from_mapping",
@@ -109,6 +114,9 @@ FIELDS: dict[str, Field] = {
         -90.0, 90.0, why="0 lays the fibres parallel to the free edge"),
     "paths": Field("--paths", "", "numerical paths every graft is solved along (the first N "
                    "of the study's; the recommendation takes the worst)"),
+    "vary": Field("--vary", "", "comparison axes: case settings that are not measured, each "
+                  "value answered on its own (docs/plan.md), e.g. vary = "
+                  "{ graft_bending_modulus_kpa = [200.0, 2000.0] }"),
     "mesh_size_mm": Field(
         "--mesh-size", "mm", "target triangle edge length of every case (unset: the case "
         "default, 0.8 mm)", 0.05, 2.5,
@@ -125,6 +133,22 @@ _NUMBERS = ("root_diameter_mm", "root_uncertainty_mm", "leaflet_free_edge_mm",
 _OPTIONAL = ("target_coaptation_mm", "mesh_size_mm", "wall_time_limit_s")
 _LEAFLET = ("leaflet_free_edge_mm", "leaflet_height_mm")
 _LABEL_LENGTH = 60
+#: the most comparison values (combinations of the ``vary`` axes) a plan answers: its one
+#: page draws a sizing map for each, legible at print size up to three across
+MAX_COMPARISONS = 3
+#: case settings the plan sets from its own inputs, with the flags that set them: no
+#: comparison axis may set them
+_PLAN_KEYS = {
+    "root.loaded_diameter": "--root-diameter and --root-uncertainty (the diameters the plan "
+                            "solves over are its uncertainty)",
+    "pressure_mmhg": "--pressure",
+    "geometry.root_diameter": "--leaflet-free-edge (the measured leaflet)",
+    "geometry.gamma_deg": "--leaflet-free-edge and --leaflet-height (the measured leaflet)",
+    "geometry.commissure_height": "--leaflet-free-edge and --leaflet-height (the measured "
+                                  "leaflet)",
+    "geometry.graft_fibre_angle_deg": "--graft-fibre-angle",
+    "geometry.mesh_size": "--mesh-size",
+}
 
 
 @dataclass(frozen=True)
@@ -147,6 +171,7 @@ class PatientInput:
     target_coaptation_mm: float | None = None
     graft_fibre_angle_deg: float = 0.0
     paths: int = 2
+    vary: Mapping[str, tuple] = field(default_factory=dict)
     mesh_size_mm: float | None = None
     wall_time_limit_s: float | None = None
     label: str = "patient"
@@ -170,6 +195,7 @@ class PatientInput:
             raise ParameterError(f"{_name('label')} = {label!r}: give a plan name of 1-"
                                  f"{_LABEL_LENGTH} printable characters on one line")
         set_(self, "label", label.strip())
+        set_(self, "vary", _checked_vary(self.vary, self.case_settings()))
 
     # --- what the model takes ---------------------------------------------------------
     @property
@@ -206,6 +232,26 @@ class PatientInput:
 def _name(key: str) -> str:
     """``key (--flag)``: how a message names an input, for the file and the command line."""
     return f"{key} ({FIELDS[key].flag})"
+
+
+def _checked_vary(vary: Any, base: Mapping) -> dict[str, tuple]:
+    """The comparison axes ``{key: values}``, each value checked as a sweep's ``--vary``
+    (:func:`~valve_dolfinx.study.axes.check_axis_values`), none a setting the plan sets
+    from its inputs, at most :data:`MAX_COMPARISONS` combinations."""
+    option = _name("vary")
+    out = {}
+    for key, values in axis_table(option, vary).items():
+        if key in _PLAN_KEYS:
+            raise ParameterError(f"{option} {key}: the plan sets it from {_PLAN_KEYS[key]}; "
+                                 "give it there, or vary it with `valve-dolfinx sweep`")
+        out[key] = check_axis_values(option, key, values, base)
+    combinations = math.prod(len(v) for v in out.values())
+    if combinations > MAX_COMPARISONS:
+        given = " × ".join(str(len(v)) for v in out.values())
+        raise ParameterError(f"{option}: {given} = {combinations} combinations of values; a "
+                             f"plan answers at most {MAX_COMPARISONS} on its page: give fewer "
+                             "values, or compare more with `valve-dolfinx sweep --vary`")
+    return out
 
 
 def _checked_number(key: str, value: Any) -> float:
@@ -279,7 +325,7 @@ def patient_toml(patient: PatientInput) -> str:
     for key, value in patient.to_dict().items():
         spec = FIELDS[key]
         comment = f"# {spec.unit}; {spec.meaning}" if spec.unit else f"# {spec.meaning}"
-        if value is None:
+        if value is None or value == {}:
             lines.append(f"# {key} = (unset)  {comment}")
         else:
             lines.append(f"{key} = {_toml_value(value)}  {comment}")
@@ -289,6 +335,14 @@ def patient_toml(patient: PatientInput) -> str:
 def _toml_value(value: Any) -> str:
     if isinstance(value, str):
         return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, Mapping):
+        return "{ " + ", ".join(f"{json.dumps(k)} = {_toml_value(v)}"
+                                for k, v in value.items()) + " }"
+    if value is None:
+        raise ParameterError("cannot write the value none to a patient file (TOML has no "
+                             "null); give the setting's values explicitly")
     if isinstance(value, tuple | list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, int) and not isinstance(value, bool):

@@ -1,82 +1,56 @@
-"""What a plan answers: a graft size, the robust recommendation and its margin, in plain words.
+"""What a plan answers: the study's recommendation with its members named in words.
 
-:class:`PlanRecommendation` is the plan's answer as the report prints it, independent of
-how the study behind it is organised: the plan's study (:func:`valve_dolfinx.plan.runner.
-run_plan_study`) maps the answer read from its response surface
-(:mod:`valve_dolfinx.sizing.answer`) onto it.  It is one of three answers:
+:class:`PlanRecommendation` holds the sizing answer of the plan's study
+(:class:`~valve_dolfinx.sizing.recommendation.Recommendation`: the answer read from the
+response surface, its wording and every graft's worst case) and what only a plan adds,
+from the closed-form bound of :mod:`valve_dolfinx.plan.reach`.  It is one of three
+answers:
 
 * a graft is recommended: the smallest size whose predicted worst case over the root
   diameters reaches the target within the model's resolution and that seals (a size off
   the grid, to 1 %), with its predicted margin in the root diameter that limits it;
 * no graft is robust: the closest size and its shortfall -- or, when some root diameters
-  of the uncertainty are ones that the closed-form bound of :mod:`valve_dolfinx.plan.reach`
-  rules out (not computed), the size that qualifies in every member computed, with its
-  margin there;
+  of the uncertainty are ones that the bound rules out (not computed), the size that
+  qualifies in every member computed, with its margin there;
 * the native leaflets cannot seal the measured root whatever the graft (the same
   bound): nothing was computed.
+
+A plan with comparison axes (``--vary``) answers at each of their values:
+:class:`PlanAnswers` holds one :class:`PlanRecommendation` per value and says whether the
+size depends on them (the smallest size that qualifies at every value,
+:func:`~valve_dolfinx.sizing.answer.common_size`).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
-from valve_dolfinx.exceptions import ParameterError
-from valve_dolfinx.result import margin_text, shortfall_digits
-from valve_dolfinx.sizing.cells import GraftSize
+from valve_dolfinx.geometry.outline import GraftSize
+from valve_dolfinx.result import margin_text
+from valve_dolfinx.sizing.answer import common_size
+from valve_dolfinx.sizing.cells import cell_state
+from valve_dolfinx.sizing.recommendation import Recommendation, headline
+from valve_dolfinx.study.axes import axis_label, value_text
 
-__all__ = ["GraftSize", "GraftWorstCase", "PlanRecommendation"]
-
-
-@dataclass(frozen=True)
-class GraftWorstCase:
-    """One graft of the grid over the plan's members (mm; members in words).
-
-    ``worst_height_mm`` is its lowest minimum coaptation height, ``spread_mm`` the highest
-    minus the lowest, ``margin_mm`` the least of its height minus each member's target, in
-    ``limiting_member``; ``state`` says in words where it did not converge or seal.
-    """
-
-    graft: GraftSize
-    worst_height_mm: float | None
-    spread_mm: float | None
-    margin_mm: float | None
-    limiting_member: str | None
-    qualifies: bool
-    state: str
-
-    def to_dict(self) -> dict:
-        return {**asdict(self), "graft": self.graft.label}
+__all__ = ["PlanRecommendation", "PlanAnswers"]
 
 
 @dataclass(frozen=True)
 class PlanRecommendation:
-    """The plan's answer (mm); exactly one of ``graft``, ``closest`` and ``cannot_seal``
-    says what it is (``closest`` may also be None when no graft case produced a figure).
+    """The plan's answer.
 
     Attributes
     ----------
-    graft
-        The recommended graft: it converges, seals and reaches the target in every member.
-    margin_mm
-        The lowest minimum coaptation height over the members minus the target, of the
-        recommended graft -- or of the closest one when it qualifies in every member that
-        was computed but some root diameters are beyond the leaflets' reach (the closest
-        carries a margin in that case only).
-    limiting_member
-        The member (root diameter, path) where that margin, or shortfall, is taken.
-    closest, shortfall_mm
-        When no graft is robust: the graft closest to qualifying and by how much its
-        worst member falls short of the target (None: it reaches the target in every
-        member computed).
-    target_mm, target_source
-        The minimum coaptation height a graft must reach (None when it differs between
-        members, see ``targets_mm``), and where it comes from.
-    members
-        The members the recommendation was taken over (root diameter, path), in words.
-    targets_mm
-        Each member's target.
-    grafts
-        Every graft of the grid over the members.
+    recommendation
+        The sizing answer of the plan's study; None when nothing was computed
+        (``cannot_seal``).
+    names
+        The members in words (``root 22.0 mm, path 1 (...)``, ``root 22.0 mm``), by the
+        labels the recommendation uses.
+    target_source
+        Where the target comes from, in the plan's words.
     unsealable_roots_mm, unsealable_reason
         Root diameters of the measurement's uncertainty that the closed-form bound rules
         out (no graft seals them; their cases are not computed), and its one-line verdict
@@ -84,47 +58,44 @@ class PlanRecommendation:
     cannot_seal
         The closed-form verdict (one line) when the native leaflets cannot seal the
         measured root whatever the graft; nothing was computed then.
-    tolerance_mm
-        The model's measured resolution (:mod:`valve_dolfinx.sizing.resolution`): a size
-        whose predicted worst case comes within it of the target qualifies.
     """
 
-    graft: GraftSize | None = None
-    margin_mm: float | None = None
-    limiting_member: str | None = None
-    closest: GraftSize | None = None
-    shortfall_mm: float | None = None
-    target_mm: float | None = None
+    recommendation: Recommendation | None = None
+    names: Mapping[str, str] = field(default_factory=dict)
     target_source: str = ""
-    members: tuple[str, ...] = ()
-    targets_mm: dict[str, float | None] = field(default_factory=dict)
-    grafts: tuple[GraftWorstCase, ...] = ()
     unsealable_roots_mm: tuple[float, ...] = ()
     unsealable_reason: str = ""
     cannot_seal: str | None = None
-    tolerance_mm: float | None = None
 
-    def __post_init__(self) -> None:
-        answers = sum(x is not None for x in (self.graft, self.closest, self.cannot_seal))
-        if answers > 1:
-            raise ParameterError("a plan recommends a graft, or names the closest one, or "
-                                 "says the leaflets cannot seal: give one of graft, closest "
-                                 "and cannot_seal")
-        if self.graft is not None and self.margin_mm is None:
-            raise ParameterError("a recommended graft needs its margin_mm over the target")
-        if self.graft is not None and self.unsealable_roots_mm:
-            raise ParameterError("no graft is robust over root diameters the leaflets cannot "
-                                 "seal: name it closest, not graft")
+    @property
+    def graft(self) -> GraftSize | None:
+        """The recommended graft: it seals and reaches the target in every member."""
+        if self.recommendation is None or self.unsealable_roots_mm:
+            return None
+        return self.recommendation.answer.size
+
+    @property
+    def closest(self) -> GraftSize | None:
+        """Without a robust graft, the one closest to it (the answer's size when it
+        qualifies in the members computed only)."""
+        if self.recommendation is None:
+            return None
+        answer = self.recommendation.answer
+        return (answer.size or answer.closest) if self.unsealable_roots_mm else answer.closest
 
     @property
     def template_graft(self) -> GraftSize | None:
         """The graft to draw: the recommended one, else the closest."""
         return self.graft or self.closest
 
-    def _target(self) -> str:
-        return ("the target minimum coaptation height ("
-                + (f"{self.target_mm:.2f} mm, " if self.target_mm is not None else "")
-                + f"{self.target_source or 'as given'})")
+    @property
+    def comparison(self) -> dict[str, Any]:
+        """The comparison value answered (``{key: value}``; empty without ``--vary``)."""
+        return {} if self.recommendation is None else dict(self.recommendation.comparison)
+
+    def name(self, label: str | None) -> str | None:
+        """A member's label in words."""
+        return None if label is None else self.names.get(label, label)
 
     def _unsealable(self) -> str:
         roots = " and ".join(f"{d:.1f}" for d in self.unsealable_roots_mm)
@@ -133,57 +104,161 @@ class PlanRecommendation:
                 "bound; not computed).")
 
     def headline(self) -> str:
-        """The answer in one sentence or two, as the surgeon reads it first."""
+        """The answer in one sentence or two
+        (:func:`~valve_dolfinx.sizing.recommendation.headline`)."""
         if self.cannot_seal is not None:
             return self.cannot_seal
-        n = len(self.members)
-        where = f", in {self.limiting_member}" if self.limiting_member else ""
-        resolution = ("" if self.tolerance_mm is None else
-                      f" (the model's resolution: {margin_text(self.tolerance_mm)} mm)")
-        if self.graft is not None:
-            scope = f" in all {n} members" if n > 1 else ""
-            within = "" if self.tolerance_mm is None else " within the model's resolution"
-            return (f"Recommended graft {self.graft.label} (+{self.graft.width_pct:g} % width, "
-                    f"+{self.graft.height_pct:g} % height). It converges, seals and reaches "
-                    f"{self._target()}{scope}{within}; its smallest margin is "
-                    f"{margin_text(self.margin_mm)} mm{where}{resolution}.")
-        computed = " computed" if self.unsealable_roots_mm else ""
-        if self.closest is not None and self.margin_mm is not None:  # fails beyond reach only
-            return (f"{self._unsealable()} In the {n} members{computed}, {self.closest.label} "
-                    f"(+{self.closest.width_pct:g} % width, +{self.closest.height_pct:g} % "
-                    f"height) converges, seals and reaches {self._target()}; its smallest "
-                    f"margin is {margin_text(self.margin_mm)} mm{where}{resolution}.")
-        scope = f" in every one of the {n} members{computed}" if n > 1 else ""
-        if self.closest is None and not self.unsealable_roots_mm:
-            return ("No answer: no size could be read, for too few solved cases or no "
-                    "target (the study's report says which); this says nothing for or "
-                    "against any graft.")
-        if self.unsealable_roots_mm:
-            text = (f"{self._unsealable()} Nor does any graft converge, seal and reach "
-                    f"{self._target()}{scope}.")
-        else:
-            text = (f"No graft in the studied range is robust: none converges, seals and "
-                    f"reaches {self._target()}{scope}.")
-        if self.closest is None:
-            return (f"{text} No size could be read: too few solved cases, or no target "
-                    "(the study's report says which).")
-        if self.shortfall_mm is not None and self.shortfall_mm > 0:
-            d = shortfall_digits(self.shortfall_mm)
-            short = (f", {self.shortfall_mm:.{d}f} mm short in its worst member{where}"
-                     f"{resolution}")
-        else:
-            state = next((g.state for g in self.grafts if g.graft == self.closest), "")
-            short = f" ({state})" if state else ""
-        return f"{text} The closest is {self.closest.label}{short}."
+        return headline(self.recommendation, self.names, target_source=self.target_source,
+                        excluded=self._unsealable() if self.unsealable_roots_mm else "")
 
     def to_dict(self) -> dict:
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
-        for key in ("graft", "closest"):
-            size = out[key]
-            out[key] = None if size is None else {"label": size.label, **size._asdict()}
-        out["members"] = list(self.members)
-        out["targets_mm"] = dict(self.targets_mm)
-        out["grafts"] = [g.to_dict() for g in self.grafts]
-        out["unsealable_roots_mm"] = list(self.unsealable_roots_mm)
-        out["headline"] = self.headline()
+        """The answer as ``summary.json`` holds it, members in words."""
+        rec = self.recommendation
+        answer = None if rec is None else rec.answer
+
+        def size(value: GraftSize | None) -> dict | None:
+            return None if value is None else {"label": value.label, **value._asdict()}
+
+        grafts = [] if rec is None else [
+            {"graft": c.label, "worst_height_mm": c.worst_height_mm, "spread_mm": c.spread_mm,
+             "margin_mm": c.margin_mm, "limiting_member": self.name(c.limiting_member),
+             "qualifies": c.qualifies, "state": cell_state(c)} for c in rec.cells]
+        return {"comparison": self.comparison, "graft": size(self.graft),
+                "margin_mm": None if answer is None or answer.size is None
+                else answer.margin_mm,
+                "limiting_member": None if answer is None else self.name(answer.limiting_member),
+                "closest": size(self.closest),
+                "shortfall_mm": None if answer is None else answer.shortfall_mm,
+                "target_mm": None if rec is None else rec.target_mm,
+                "target_source": self.target_source,
+                "members": [] if rec is None else [self.name(m) for m in rec.members],
+                "targets_mm": {} if rec is None else {self.name(m): t
+                                                      for m, t in rec.targets_mm.items()},
+                "grafts": grafts, "unsealable_roots_mm": list(self.unsealable_roots_mm),
+                "unsealable_reason": self.unsealable_reason, "cannot_seal": self.cannot_seal,
+                "tolerance_mm": None if answer is None else answer.tolerance_mm,
+                "headline": self.headline()}
+
+
+@dataclass(frozen=True)
+class PlanAnswers:
+    """The plan's answer at each comparison value (one :class:`PlanRecommendation`, with an
+    empty ``comparison``, when nothing is varied), in the study's order of the values."""
+
+    values: tuple[PlanRecommendation, ...]
+
+    @property
+    def varied(self) -> bool:
+        return len(self.values) > 1
+
+    @property
+    def axes(self) -> dict[str, list[Any]]:
+        """``{key: [values]}`` of the comparison axes (empty when nothing is varied)."""
+        out: dict[str, list[Any]] = {}
+        for value in self.values:
+            for key, v in value.comparison.items():
+                if v not in out.setdefault(key, []):
+                    out[key].append(v)
         return out
+
+    @property
+    def kind(self) -> str:
+        """``"cannot_seal"``, ``"graft"`` (a graft at every value) or ``"closest"``."""
+        if any(v.cannot_seal is not None for v in self.values):
+            return "cannot_seal"
+        return "graft" if all(v.graft is not None for v in self.values) else "closest"
+
+    @property
+    def common(self) -> GraftSize | None:
+        """With comparison axes, the smallest size that qualifies at every value (read from
+        the one surface of the plan's study); None when nothing is varied, or no size
+        qualifies at every value."""
+        recs = [v.recommendation for v in self.values]
+        if not self.varied or any(r is None for r in recs) or any(
+                v.unsealable_roots_mm for v in self.values):
+            return None
+        return common_size([r.answer for r in recs])
+
+    @property
+    def template_grafts(self) -> list[GraftSize]:
+        """The grafts to draw: the common size (if any), then each value's recommended or
+        closest graft, each once."""
+        grafts = [self.common, *(v.template_graft for v in self.values)]
+        return list(dict.fromkeys(g for g in grafts if g is not None))
+
+    def label(self, value: PlanRecommendation) -> str:
+        """A value as the page names it (``graft_bending_modulus_kpa=200``)."""
+        return axis_label(value.comparison.items())
+
+    def _value(self, value: PlanRecommendation) -> str:
+        """A value in a list over one axis (``200``; every key with several axes)."""
+        if len(self.axes) == 1:
+            return value_text(next(iter(value.comparison.values())))
+        return self.label(value)
+
+    def dependence(self) -> str:
+        """Whether the size depends on the comparison axes, in a sentence or two ("" when
+        nothing is varied or nothing was computed)."""
+        if not self.varied or self.kind == "cannot_seal":
+            return ""
+        axes = " and ".join(self.axes)
+        sizes = [v.graft for v in self.values]
+        if all(s is not None for s in sizes) and len(set(sizes)) == 1:
+            values = ", ".join(self._value(v) for v in self.values)
+            return (f"The recommended graft is {sizes[0].label} at every value of {axes} "
+                    f"studied ({values}): the size does not depend on it.")
+        answers = ", ".join(f"{s.label if s else 'no graft'} at {self._value(v)}"
+                            for v, s in zip(self.values, sizes, strict=True))
+        head = f"The answer differs with {axes}: {answers}."
+        common = self.common
+        if common is None:
+            return f"{head} No size qualifies at every value."
+        solved = [v.recommendation.cell(common.label) is not None for v in self.values]
+        if all(solved):
+            how = "solved at every value"
+        elif any(solved):
+            at = [", ".join(self._value(v) for v, s in zip(self.values, solved, strict=True)
+                            if s is flag) for flag in (True, False)]
+            how = f"solved at {at[0]}, read from the surface at {at[1]}"
+        else:
+            how = "read from the surface, not solved"
+        return (f"{head} {common.label} (+{common.width_pct:g} % width, "
+                f"+{common.height_pct:g} % height) is the smallest size that qualifies at "
+                f"every value ({how}).")
+
+    def headline(self) -> str:
+        """The plan's answer as it opens the page: the one value's headline, or whether the
+        size depends on the comparison axes."""
+        if not self.varied:
+            return self.values[0].headline()
+        return self.dependence() or self.values[0].headline()
+
+    def lines(self) -> list[str]:
+        """Each value's answer in a line, named by its value ([] when nothing is varied)."""
+        if not self.varied:
+            return []
+        out = []
+        for value in self.values:
+            answer = value.recommendation.answer if value.recommendation else None
+            where = value.name(answer.limiting_member) if answer else None
+            where = f" in {where}" if where else ""
+            if value.graft is not None:
+                graft = value.graft
+                text = (f"{graft.label} (+{graft.width_pct:g} % width, +{graft.height_pct:g} % "
+                        f"height), predicted worst-case margin "
+                        f"{margin_text(answer.margin_mm, signed=True)} mm{where}.")
+            elif answer is not None and answer.shortfall_mm is not None and value.closest:
+                text = (f"no graft is robust; the closest, {value.closest.label}, is "
+                        f"{margin_text(answer.shortfall_mm)} mm short{where}.")
+            else:
+                text = value.headline()
+            out.append(f"At {self.label(value)}: {text}")
+        return out
+
+    def to_dict(self) -> dict:
+        common = self.common
+        return {"axes": self.axes,
+                "common": None if common is None else {"label": common.label,
+                                                       **common._asdict()},
+                "dependence": self.dependence(), "headline": self.headline(),
+                "values": [v.to_dict() for v in self.values]}

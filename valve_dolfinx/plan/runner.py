@@ -8,9 +8,11 @@
    (:mod:`valve_dolfinx.plan.reach`); if not, that is the answer and nothing is computed;
 3. runs the plan's study, :func:`run_plan_study` -- the one function that decides which
    cases are solved -- over the members (the root diameters D − U, D, D + U within the
-   leaflets' reach, the numerical paths), and turns its worst-case recommendation into a
-   :class:`PlanRecommendation` (:func:`plan_study_answer`);
-4. draws the template of the recommended (or closest) graft and of any graft asked for;
+   leaflets' reach, the numerical paths) and the patient's comparison values (``vary``),
+   and turns each value's worst-case recommendation into a :class:`PlanRecommendation`
+   (:func:`plan_study_answer`; all of them: :class:`PlanAnswers`);
+4. draws the template of the recommended (or closest) graft of each value, of the size
+   that qualifies at every value, and of any graft asked for;
 5. writes ``plan.md``, ``plan.pdf`` and ``summary.json``.
 
 :func:`rebuild_plan` (``valve-dolfinx report DIR``) does 4 and 5 again from the case
@@ -21,6 +23,8 @@ Layout of a plan folder ``DIR``::
     DIR/patient.toml                 the inputs as they ran (reloadable)
     DIR/plan.md, DIR/plan.pdf        the one-page report
     DIR/summary.json                 the answer, the reach check, the templates' dimensions
+    DIR/sizing_map.png               the study's sizing map at the size the page prints it
+                                     (with --vary: sizing_map__KEY=VALUE.png per value)
     DIR/template_W<w>_H<h>.svg/.pdf  the graft at true size (and .png, the report's thumbnail)
     DIR/study/                       the study folder (a sweep's layout: cases/, results.csv...)
 
@@ -45,20 +49,21 @@ from valve_dolfinx.exceptions import (
     ParameterError,
     StudyIncompleteError,
 )
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
-from valve_dolfinx.plan.recommendation import GraftSize, GraftWorstCase, PlanRecommendation
+from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
 from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
 from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
+from valve_dolfinx.sizing.cells import NORMAL_TARGET
 from valve_dolfinx.study.axes import axis_label
 from valve_dolfinx.study.grid import StudySettings
-from valve_dolfinx.study.recommend import NORMAL_TARGET, cell_state
 from valve_dolfinx.study.store import CASES_DIR, RESULT_FILE, SETTINGS_FILE
 
 if TYPE_CHECKING:
+    from valve_dolfinx.sizing.recommendation import Recommendation
     from valve_dolfinx.study.layout import Member
-    from valve_dolfinx.study.recommend import Recommendation
     from valve_dolfinx.study.report import StudyReport
 
 __all__ = ["LIMITATIONS", "ROOT_KEY", "STUDY_DIR", "PlanOutcome", "PlanStudy", "member_words",
@@ -83,20 +88,21 @@ ROOT_KEY = "root.loaded_diameter"
 
 @dataclass
 class PlanStudy:
-    """What the plan's study hands back (on rank 0; the other ranks get None)."""
+    """What the plan's study hands back (on rank 0; the other ranks get None): the answer
+    and the pictures of each comparison value (one without ``vary``), what was run."""
 
-    recommendation: PlanRecommendation
-    figures: PlanFigures
+    answers: PlanAnswers
+    figures: list[PlanFigures]
     run: RunInfo
     folder: Path
 
 
 @dataclass
 class PlanOutcome:
-    """What :func:`run_plan` did (its files and answer on rank 0)."""
+    """What :func:`run_plan` did (its files and answers on rank 0)."""
 
     out: Path
-    recommendation: PlanRecommendation
+    answers: PlanAnswers
     reach: FreeEdgeReach
     templates: list[TemplateFiles] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
@@ -121,8 +127,9 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
     ``wall_time_limit_s``) unless given here.  The case settings are the patient's valve
     (:meth:`PatientInput.case_settings`); the
     loaded root diameter is an uncertainty axis over the plan's diameters that the native
-    leaflets can span (:func:`reachable_roots`), and every graft is solved along the
-    patient's number of numerical paths.  (A plan whose measured root they cannot span
+    leaflets can span (:func:`reachable_roots`), every graft is solved along the
+    patient's number of numerical paths, and the patient's ``vary`` axes are the study's
+    comparison axes.  (A plan whose measured root they cannot span
     runs no study; its settings then only check the inputs.)
 
     Raises
@@ -144,7 +151,8 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
                          mesh_size_mm=mesh_size_mm, wall_time_limit_s=wall_time_limit_s,
                          target_coaptation_mm=patient.target_coaptation_mm,
                          panel_cases=(), case=patient.case_settings(),
-                         uncertain={ROOT_KEY: list(diameters)}, paths=patient.paths)
+                         uncertain={ROOT_KEY: list(diameters)}, paths=patient.paths,
+                         vary={k: list(v) for k, v in patient.vary.items()})
 
 
 # --- the plan's study ----------------------------------------------------------------------
@@ -159,7 +167,8 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
     it returns.  The study (:func:`valve_dolfinx.study.runner.run_study` with
     :func:`plan_study_settings`) solves the normal valve and every graft of the grid in
     every *member*: each root diameter D − U, D, D + U that the native leaflets can span,
-    along each of the patient's numerical paths (the normal valve once per diameter).  A
+    along each of the patient's numerical paths (the normal valve once per diameter), at
+    each of the patient's comparison values (``vary``).  A
     diameter beyond their reach is not computed: no graft seals it
     (:mod:`valve_dolfinx.plan.reach`), so no graft is robust over the uncertainty, and the
     answer says so (:func:`plan_study_answer`).
@@ -202,10 +211,11 @@ def run_plan_study(patient: PatientInput, settings: StudySettings, out: Path,
 
 
 def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
-    """The plan's answer, pictures and run from its study's report (what ``build_report``
-    of the study folder finds): the worst-case recommendation over the members mapped onto
-    :class:`PlanRecommendation`, the worst-case sizing map, the closed valve of the
-    recommended (or closest) graft at the measured diameter along the first path."""
+    """The plan's answers, pictures and run from its study's report (what ``build_report``
+    of the study folder finds): each comparison value's worst-case recommendation over the
+    members mapped onto :class:`PlanRecommendation` and the closed valve of its
+    recommended (or closest) graft at the measured diameter along the first path (the
+    report draws the sizing maps, at the size its page prints them)."""
     layout = report.layout
     words = {member.label: member_words(member) for member in layout.members}
     # the answer's members are the root diameters, the paths being its replicates
@@ -216,25 +226,28 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     if beyond:
         reason = free_edge_reach(patient.leaflet_free_edge_mm, beyond[-1],
                                  patient.pressure_mmhg).sentence()
-    recommendation = _from_worst_case(report.recommendations[0], words, beyond, reason)
+    answers = PlanAnswers(tuple(_from_worst_case(rec, words, beyond, reason)
+                                for rec in report.recommendations))
     out = report.out
-    shown = recommendation.template_graft
     member = next(i for i, m in enumerate(layout.members)
                   if dict(m.values)[ROOT_KEY] == patient.root_diameter_mm
                   and m.path == layout.paths[0])
-    name = layout.slots.get((0, member, None if shown is None else tuple(shown)))
-    aortic, ventricular = _closed_views(out / CASES_DIR / name if name else None, out)
-    figures = PlanFigures(sizing_map=_existing(out / "sizing_map.png"),
-                          closed_aortic=aortic, closed_ventricular=ventricular,
-                          closed_member=f"root {patient.root_diameter_mm:.1f} mm, path "
-                                        f"{layout.paths[0].number}")
+    figures = []
+    for c, value in enumerate(answers.values):
+        shown = value.template_graft
+        name = layout.slots.get((c, member, None if shown is None else tuple(shown)))
+        aortic, ventricular = _closed_views(out / CASES_DIR / name if name else None, out)
+        figures.append(PlanFigures(closed_aortic=aortic,
+                                   closed_ventricular=ventricular,
+                                   closed_member=f"root {patient.root_diameter_mm:.1f} mm, "
+                                                 f"path {layout.paths[0].number}"))
     rows = report.rows
     first = rows[0] if rows else {}
     run = RunInfo(versions=first.get("versions") or {},
                   mesh_size_mm=next(iter(layout.configs.values())).geometry.mesh_size,
                   cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
                   wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
-    return PlanStudy(recommendation, figures, run, out)
+    return PlanStudy(answers, figures, run, out)
 
 
 def member_words(member: Member) -> str:
@@ -262,36 +275,20 @@ def _closed_views(case: Path | None, out: Path) -> tuple[Path | None, Path | Non
 
 def _from_worst_case(rec: Recommendation, words: dict[str, str], beyond: tuple[float, ...],
                      reason: str) -> PlanRecommendation:
-    """The plan's answer from the study's worst-case :class:`~valve_dolfinx.study.recommend.
+    """The plan's answer from the study's :class:`~valve_dolfinx.sizing.recommendation.
     Recommendation` (members named in ``words``; ``beyond``: the root diameters not
     computed, which no graft seals)."""
-    sizes = {c.label: GraftSize(c.width_pct, c.height_pct) for c in rec.cells}
-    limiting = words.get(rec.limiting_member) if rec.limiting_member else None
-    grafts = tuple(GraftWorstCase(sizes[c.label], c.worst_height_mm, c.spread_mm, c.margin_mm,
-                                  words.get(c.limiting_member), c.qualifies, cell_state(c))
-                   for c in rec.cells)
     source = ("the normal valve's at the same root" if rec.target_source.startswith(
         NORMAL_TARGET) else "given in the plan's inputs")
     for member, why in rec.incompetent_targets.items():
         source += f"; caution, the normal valve is {why} at {words[member]}"
-    common = dict(target_mm=rec.target_mm, target_source=source,
-                  members=tuple(words[m] for m in rec.members),
-                  targets_mm={words[m]: t for m, t in rec.targets_mm.items()}, grafts=grafts,
-                  unsealable_roots_mm=beyond, unsealable_reason=reason,
-                  limiting_member=limiting, tolerance_mm=rec.tolerance_mm)
-    if rec.size is not None:
-        answer = {"closest": rec.size} if beyond else {"graft": rec.size}
-        return PlanRecommendation(**answer, margin_mm=rec.margin_mm, **common)
-    if rec.best_size is not None:
-        return PlanRecommendation(closest=rec.best_size, shortfall_mm=rec.shortfall_mm,
-                                  **common)
-    return PlanRecommendation(**common)
+    return PlanRecommendation(rec, words, source, beyond, reason)
 
 
 # --- the plan ----------------------------------------------------------------------------
 #: the files of a plan that state its answer (glob patterns): removed by ``--force`` before
 #: anything is computed, and when the plan's study turns out incomplete
-ANSWER_FILES = ("plan.md", "plan.pdf", SUMMARY_FILE)
+ANSWER_FILES = ("plan.md", "plan.pdf", SUMMARY_FILE, "sizing_map*.png")
 #: the templates a plan draws (``--force`` removes them with the answer: they are cut
 #: from the old inputs' leaflet)
 TEMPLATE_FILES = ("template_*.svg", "template_*.pdf", "template_*.png")
@@ -473,28 +470,27 @@ def _drawn_templates(out: Path) -> list[GraftSize]:
 def _write_plan(out: Path, patient: PatientInput, reach: FreeEdgeReach,
                 study: PlanStudy | None, extra: Sequence[GraftSize]) -> PlanOutcome:
     """Templates, plan.md, plan.pdf and summary.json (rank 0): the templates of the
-    recommended (or closest) graft, of ``extra`` and of every graft already drawn in
-    ``out``."""
+    answers' grafts (:attr:`PlanAnswers.template_grafts`), of ``extra`` and of every graft
+    already drawn in ``out``."""
     if study is None:
-        recommendation = PlanRecommendation(cannot_seal=reach.sentence())
-        figures, run = PlanFigures(), RunInfo()
+        answers = PlanAnswers((PlanRecommendation(cannot_seal=reach.sentence()),))
+        figures, run = [PlanFigures()], RunInfo()
     else:
-        recommendation, figures, run = study.recommendation, study.figures, study.run
-    grafts = [g for g in (recommendation.template_graft, *extra, *_drawn_templates(out))
-              if g is not None]
+        answers, figures, run = study.answers, study.figures, study.run
+    grafts = [*answers.template_grafts, *extra, *_drawn_templates(out)]
     line = (f"Measured leaflet: free edge {patient.leaflet_free_edge_mm:.1f} mm, height "
             f"{patient.leaflet_height_mm:.1f} mm; root {patient.root_diameter_mm:.1f} ± "
             f"{patient.root_uncertainty_mm:.1f} mm")
     drawn = [write_template(GraftTemplate(patient.native_shape, g, patient.graft_fibre_angle_deg,
                                           label=patient.label), out, line)
              for g in dict.fromkeys(grafts)]
-    if drawn and recommendation.template_graft is not None:
-        figures = replace(figures, template=drawn[0].png)
-    md, pdf = write_plan_report(out, patient, recommendation, figures, run, LIMITATIONS, reach)
+    pictures = {t.graft: t.png for t in drawn}
+    md, pdf = write_plan_report(out, patient, answers, figures, run, LIMITATIONS, reach,
+                                templates=pictures)
     summary = write_json(out / SUMMARY_FILE, {
-        "patient": patient.to_dict(), "recommendation": recommendation.to_dict(),
+        "patient": patient.to_dict(), "answers": answers.to_dict(),
         "reach": reach.to_dict(), "templates": [t.to_dict() for t in drawn],
         "run": run.to_dict(), "study": STUDY_DIR if study is not None else None})
     files = [md, pdf, summary, *(p for t in drawn for p in (t.svg, t.pdf, t.png))]
-    log.debug("plan %s: %s", patient.label, recommendation.headline())
-    return PlanOutcome(out, recommendation, reach, drawn, files)
+    log.debug("plan %s: %s", patient.label, answers.headline())
+    return PlanOutcome(out, answers, reach, drawn, files)

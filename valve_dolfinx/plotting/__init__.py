@@ -1,4 +1,5 @@
-"""Every figure of the package: 3-D views, sections, flat maps, the orifice, the sizing study.
+"""Every figure of the package: 3-D views, sections, flat maps, the orifice, the sizing study,
+the plan's page and templates.
 
 * :mod:`~valve_dolfinx.plotting.style`: the colour scheme (Okabe-Ito), leaflet
   labels, the key numbers of a case, figure creation and saving.
@@ -9,6 +10,9 @@
 * :mod:`~valve_dolfinx.plotting.orifice`: the regurgitant orifice.
 * :mod:`~valve_dolfinx.plotting.case`: every figure of a case folder.
 * :mod:`~valve_dolfinx.plotting.study`: the sizing study's figures.
+* :mod:`~valve_dolfinx.plotting.page`: a page described in millimetres, as SVG and as an A4
+  figure at true size (the graft templates).
+* :mod:`~valve_dolfinx.plotting.plan`: the plan's one-page report.
 
 Matplotlib figures are returned as :class:`matplotlib.figure.Figure` objects,
 3-D views as picture arrays; each function writes a PNG when given a path.

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.plotting.flat import plot_coaptation_map
 from valve_dolfinx.plotting.orifice import plot_orifice_map
 from valve_dolfinx.plotting.scene import ViewRenderer, plot_gap_3d, plot_valve_3d
@@ -54,7 +55,7 @@ def case_label(result) -> str:
     width = _get(result, "graft_width_pct")
     if width is None:
         return "normal valve"
-    return f"graft W{width:g}/H{_get(result, 'graft_height_pct'):g}"
+    return f"graft {GraftSize(width, _get(result, 'graft_height_pct')).label}"
 
 
 def write_case_figures(out: str | Path, positions: np.ndarray, valve, coaptation, result, *,

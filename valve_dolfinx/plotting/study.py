@@ -32,10 +32,10 @@ from valve_dolfinx.plotting.style import OKABE_ITO, new_figure, save_figure
 from valve_dolfinx.result import margin_text
 
 if TYPE_CHECKING:
-    from valve_dolfinx.study.recommend import CellSummary, Recommendation
+    from valve_dolfinx.sizing import CellSummary, Recommendation
 
-__all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "plot_nomogram", "plot_case_panel",
-           "PANEL_IMAGES"]
+__all__ = ["plot_coaptation_vs_width", "plot_sizing_map", "sizing_map_key", "plot_nomogram",
+           "plot_case_panel", "PANEL_IMAGES", "MIN_PRINT_PT"]
 
 log = logging.getLogger(__name__)
 
@@ -116,26 +116,137 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     return save_figure(fig, path, dpi=130)
 
 
+#: the sizing map's default size (inches)
+_MAP_SIZE_IN = (8.6, 7.4)
+#: the smallest text of a figure drawn at its print size (points)
+MIN_PRINT_PT = 7.5
 #: the diverging colour map of a margin over the target (blue above, red below)
 _MARGIN_CMAP = "RdBu"
 
 
-def _solved_cells(ax, rec: Recommendation) -> None:
+#: label directions around a point: (dx, dy, ha, va), in order of preference
+_AROUND = ((0, -1, "center", "top"), (0, 1, "center", "bottom"), (1, 0, "left", "center"),
+           (-1, 0, "right", "center"), (1, -1, "left", "top"), (-1, -1, "right", "top"),
+           (1, 1, "left", "bottom"), (-1, 1, "right", "bottom"))
+#: how far from its point a label may go, in multiples of its gap (beyond the first, a thin
+#: line leads back to the point)
+_REACH = (1.0, 2.2, 3.6, 5.0)
+
+
+def _label_box(label, renderer):
+    """The display box of an annotation's text and its background (not its leader line)."""
+    from matplotlib.text import Text
+
+    label.update_positions(renderer)
+    patch = label.get_bbox_patch()
+    pad = 0.0 if patch is None else patch.get_boxstyle().pad * label.get_fontsize()
+    return Text.get_window_extent(label, renderer).padded(
+        pad * label.get_figure(root=True).dpi / 72.0)
+
+
+def _overflow(ax, box, taken, renderer) -> float:
+    """How far a label's ``box`` (display units) leaves the axes or covers a ``taken`` box
+    (0: it fits)."""
+    frame = ax.get_window_extent(renderer)
+    out = (max(0.0, frame.x0 - box.x0) + max(0.0, box.x1 - frame.x1)
+           + max(0.0, frame.y0 - box.y0) + max(0.0, box.y1 - frame.y1))
+    for other in taken:
+        w = min(box.x1, other.x1) - max(box.x0, other.x0)
+        h = min(box.y1, other.y1) - max(box.y0, other.y0)
+        if w > 0 and h > 0:
+            out += min(w, h)
+    return out
+
+
+def _place(ax, label, gap: float, taken: list, renderer) -> None:
+    """Put the annotation ``label`` beside its point, the nearest of :data:`_REACH` times
+    ``gap`` points away and on the first side of :data:`_AROUND` where it stays inside the
+    axes and covers no ``taken`` box (else where it overflows least); its box joins
+    ``taken``, and a label set off from its point gets a thin line back to it."""
+    best = None
+    for reach in _REACH:
+        for dx, dy, ha, va in _AROUND:
+            label.xyann = (dx * gap * reach, dy * gap * reach)
+            label.set_horizontalalignment(ha)
+            label.set_verticalalignment(va)
+            cost = _overflow(ax, _label_box(label, renderer), taken, renderer)
+            if best is None or cost < best[0]:
+                best = (cost, reach, (dx, dy, ha, va))
+            if cost == 0.0:
+                break
+        if best[0] == 0.0:
+            break
+    _, reach, (dx, dy, ha, va) = best
+    label.xyann = (dx * gap * reach, dy * gap * reach)
+    label.set_horizontalalignment(ha)
+    label.set_verticalalignment(va)
+    label.arrow_patch.set_visible(reach > 1.0)
+    taken.append(_label_box(label, renderer))
+
+
+def _label(ax, text: str, xy, gap: float, **kw):
+    """An annotation of point ``xy`` to be placed by :func:`_place` (``gap``: points from the
+    point's centre), with the line that leads back to it when set off."""
+    label = ax.annotate(text, xy, xytext=(0, 0), textcoords="offset points", zorder=6,
+                        annotation_clip=False,
+                        arrowprops=dict(arrowstyle="-", color="0.2", lw=0.6, shrinkA=0,
+                                        shrinkB=max(gap - 1.5, 0.0)), **kw)
+    label.set_in_layout(False)
+    return label, gap
+
+
+def _marker_box(ax, xy, size_pt: float, renderer):
+    """The display box of a marker of ``size_pt`` points at data point ``xy``."""
+    from matplotlib.transforms import Bbox
+
+    x, y = ax.transData.transform(xy)
+    half = 0.4 * size_pt * ax.get_figure(root=True).dpi / 72.0  # the mark, not its corners
+    return Bbox.from_extents(x - half, y - half, x + half, y + half)
+
+
+def _solved_cells(ax, rec: Recommendation, pt) -> list:
     """The solved cells on a sizing map: filled where sound in every member, a cross where
-    not, each with its worst-case height (mm)."""
+    not; returns each cell's label of its worst-case height (mm), with its gap, to be
+    placed."""
+    labels = []
     for c in rec.cells:
         value = _worst(c)
         marker = dict(marker="o", mfc="black", mec="white") if c.sound else dict(
             marker="X", mfc=_LEAK_COLOUR, mec="black")
-        ax.plot(c.width_pct, c.height_pct, ms=8, mew=1.0, ls="none", zorder=4, **marker)
+        ax.plot(c.width_pct, c.height_pct, ms=pt(8), mew=1.0, ls="none", zorder=4, **marker)
         if math.isfinite(value):
-            ax.annotate(f"{value:.2f}", (c.width_pct, c.height_pct), xytext=(0, -13),
-                        textcoords="offset points", ha="center", va="top", fontsize=8,
-                        zorder=4, bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none",
-                                            alpha=0.7))
+            labels.append(_label(ax, f"{value:.2f}", (c.width_pct, c.height_pct),
+                                 pt(8) / 2 + 1.5, fontsize=pt(8),
+                                 bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none",
+                                           alpha=0.7)))
+    return labels
 
 
-def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = ""):
+#: what the sizing map's colours show
+_COLOURS = "predicted worst-case margin over the target (mm)"
+
+
+def sizing_map_key(rec: Recommendation, *, names: bool = False) -> str:
+    """What the lines and marks of :func:`plot_sizing_map` mean, in a sentence or two;
+    ``names`` adds what its axes and colours are (a map drawn without its caption)."""
+    answer = rec.answer
+    lines = []
+    if names:
+        lines.append("W, H: the graft's width and height enlargements over the native leaflet "
+                     f"(%); colours: the {_COLOURS}.")
+    if answer.lattice is not None:
+        lines.append(f"Solid: the target; dashed: the tolerance, −{answer.tolerance_mm:.2f} mm; "
+                     f"dash-dotted: probability of sealing {answer.seal_threshold:g} in every "
+                     "member, grey hatched below it; green: the band of sizes that qualify; "
+                     "star: the answer; triangle: the highest predicted coaptation.")
+    lines.append("Solved cells: dot sound in every member, cross not; number: worst-case "
+                 "minimum coaptation height (mm).")
+    return " ".join(lines)
+
+
+def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str = "",
+                    size_in: tuple[float, float] = _MAP_SIZE_IN, caption: bool = True,
+                    dpi: int = 130):
     """The answer's sizing map over W × H (:mod:`valve_dolfinx.sizing.answer`).
 
     Filled contours of the predicted worst-case margin over the target (mm; its 0 line
@@ -143,23 +254,37 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     threshold, dash-dotted, the side that does not seal hatched), the band of qualifying
     sizes outlined in green, the answer (star) and the highest size (triangle), and the
     solved cells with their worst-case heights.  Without a surface, the solved cells
-    alone."""
+    alone.  Every label is placed beside its point where it stays inside the axes and
+    covers no other label or mark.  ``size_in`` is the figure's size (inches): drawn
+    smaller than the default (to be printed at that size, as on the plan's page), its
+    texts shrink with it down to :data:`MIN_PRINT_PT`.  ``caption`` false leaves out the
+    title and the key (:func:`sizing_map_key`), for a page that prints them itself."""
     answer = rec.answer
     lattice = answer.lattice
-    fig = new_figure(8.6, 7.4)
+    scale = size_in[0] / _MAP_SIZE_IN[0]
+
+    def pt(size: float) -> float:
+        return max(MIN_PRINT_PT, size * scale)
+
+    fig = new_figure(*size_in)
     ax = fig.add_subplot()
-    lines = []
+    labels = []  # (annotation, gap in points), placed once the layout is settled
+    marks = []  # (data point, size in points): what a label may not cover
     if lattice is not None:
         w, h = np.meshgrid(lattice.widths_pct, lattice.heights_pct)
         margin = lattice.worst_margin_mm
         reach = max(float(np.abs(margin).max()), 0.05)
         levels = np.linspace(-reach, reach, 21)
         filled = ax.contourf(w, h, margin, levels=levels, cmap=_MARGIN_CMAP, extend="both")
-        bar = fig.colorbar(filled, ax=ax, shrink=0.9)
-        bar.set_label("predicted worst-case margin over the target (mm)", fontsize=10)
+        # a map printed small keeps its width for the plane: the colour bar goes below it
+        bar = fig.colorbar(filled, ax=ax, shrink=0.9, aspect=20 if scale >= 1 else 40,
+                           location="right" if scale >= 1 else "bottom")
+        if caption:  # else the key says it
+            bar.set_label(_COLOURS, fontsize=pt(10))
         bar.set_ticks(levels[::4], labels=[f"{v:+.2f}" for v in levels[::4]])
+        bar.ax.tick_params(labelsize=pt(10))
         steps = ax.contour(w, h, margin, levels=levels[::4], colors="0.3", linewidths=0.6)
-        ax.clabel(steps, fmt="%.2f", fontsize=8)
+        ax.clabel(steps, fmt="%.2f", fontsize=pt(8))
         tol = answer.tolerance_mm
         ax.contour(w, h, margin, levels=[0.0], colors="black", linewidths=2.0)
         ax.contour(w, h, margin, levels=[-tol], colors="black", linewidths=1.5,
@@ -174,55 +299,48 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
         if lattice.qualifies.any():
             ax.contour(w, h, lattice.qualifies.astype(float), levels=[0.5],
                        colors=OKABE_ITO["bluish_green"], linewidths=3.0)
-        lines += [f"solid: the target; dashed: the tolerance, −{tol:.2f} mm; dash-dotted: "
-                  f"probability of sealing {threshold:g} in every member, grey hatched below "
-                  f"it; green: the band of sizes that qualify"]
-        # labels towards the map's middle, so that they stay inside the axes; the highest
-        # size's label on the other side when it sits next to the answer
-        mid_w, mid_h = lattice.widths_pct.mean(), lattice.heights_pct.mean()
-        left = up = None
         if answer.size is not None:
-            ax.plot(*answer.size, marker="*", ms=20, mfc="white", mec="black", mew=1.5,
+            ax.plot(*answer.size, marker="*", ms=pt(20), mfc="white", mec="black", mew=1.5,
                     ls="none", zorder=5)
-            left, up = answer.size.width_pct > mid_w, answer.size.height_pct < mid_h
-            ax.annotate(f"answer {answer.size.label}", answer.size,
-                        xytext=(-10 if left else 10, 10 if up else -20),
-                        textcoords="offset points", ha="right" if left else "left",
-                        fontsize=10, fontweight="bold", zorder=6,
-                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black"))
+            marks.append((tuple(answer.size), pt(20)))
+            labels.append(_label(ax, f"answer {answer.size.label}", answer.size,
+                                 pt(20) / 2 + 2, fontsize=pt(10), fontweight="bold",
+                                 bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black")))
         if answer.highest is not None:
-            ax.plot(*answer.highest, marker="^", ms=11, mfc="white", mec="black", mew=1.2,
+            ax.plot(*answer.highest, marker="^", ms=pt(11), mfc="white", mec="black", mew=1.2,
                     ls="none", zorder=5)
-            h_left = answer.highest.width_pct > mid_w
-            h_up = answer.highest.height_pct < mid_h
-            if left is not None and h_left == left:
-                h_left = answer.highest.width_pct < answer.size.width_pct
-            ax.annotate(f"highest {answer.highest.label}", answer.highest,
-                        xytext=(-8 if h_left else 8, 10 if h_up else -18),
-                        textcoords="offset points", ha="right" if h_left else "left",
-                        fontsize=9, zorder=6,
-                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4"))
-    else:
-        lines.append(answer.text.split(". ")[0] + ".")
-    _solved_cells(ax, rec)
-    lines.append("solved cells: dot sound in every member, cross not; number: worst-case "
-                 "minimum coaptation height (mm)")
-    widths = sorted({c.width_pct for c in rec.cells})
-    heights = sorted({c.height_pct for c in rec.cells})
+            marks.append((tuple(answer.highest), pt(11)))
+            labels.append(_label(ax, f"highest {answer.highest.label}", answer.highest,
+                                 pt(11) / 2 + 2, fontsize=pt(9),
+                                 bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4")))
+    marks += [((c.width_pct, c.height_pct), pt(8)) for c in rec.cells]
+    labels += _solved_cells(ax, rec, pt)
+    grid = [c for c in rec.cells if not c.confirmation]  # ticks at the grid's sizes
+    widths = sorted({c.width_pct for c in grid})
+    heights = sorted({c.height_pct for c in grid})
     if widths:
         ax.set_xticks(widths, [f"+{x:g}" for x in widths])
         ax.set_yticks(heights, [f"+{y:g}" for y in heights])
         pad_w = 0.04 * ((widths[-1] - widths[0]) or 10)
         pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
         ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)
-        ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + pad_h)
-    ax.tick_params(labelsize=10)
-    ax.set_xlabel("graft width enlargement W (%)", fontsize=11)
-    ax.set_ylabel("graft height enlargement H (%)", fontsize=11)
-    head = _title(rec, "Graft sizing map", title)
-    note = "\n".join(textwrap.fill(line, 100) for line in lines)
-    ax.set_title(f"{head}\n{note}", fontsize=9)
-    return save_figure(fig, path, dpi=130)
+        ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + 2 * pad_h)
+    ax.tick_params(labelsize=pt(10))
+    # a map drawn for a page has the short names, the key the long ones
+    ax.set_xlabel("graft width enlargement W (%)" if caption else "W (%)", fontsize=pt(11))
+    ax.set_ylabel("graft height enlargement H (%)" if caption else "H (%)", fontsize=pt(11))
+    if caption:
+        key = answer.text.split(". ")[0] + ". " if lattice is None else ""
+        chars = int(100 * scale * 9 / pt(9))
+        ax.set_title(_title(rec, "Graft sizing map", title) + "\n"
+                     + textwrap.fill(key + sizing_map_key(rec), chars), fontsize=pt(9))
+    fig.draw_without_rendering()  # settle the layout, then place the labels in it
+    fig.set_layout_engine("none")
+    renderer = fig.canvas.get_renderer()
+    taken = [_marker_box(ax, xy, size, renderer) for xy, size in marks]
+    for label, gap in labels:
+        _place(ax, label, gap, taken, renderer)
+    return save_figure(fig, path, dpi=dpi)
 
 
 def _normal_words(row: dict) -> str:

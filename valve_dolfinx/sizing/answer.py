@@ -19,8 +19,13 @@ The one home of the answer that the study, the nomogram and the plan report:
    of highest predicted worst case.  "No graft" only when no size seals, or none comes
    within the tolerance of the target; the closest size's shortfall is then given
    against the tolerance.
-3. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer;
-   :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
+3. :func:`common_size` reads, over several comparison values' answers, the smallest size
+   that qualifies at every one of them.
+4. :func:`sizes_to_confirm` lists the off-grid solves that confirm an answer, and
+   :func:`solved_worst_case` gives the same statistic as the prediction from a size's
+   solves: per uncertainty member the mean of its paths' heights minus the member's
+   target, the least over the members.
+5. :func:`bootstrap_stability` measures how far the answer moves when each cell's paths
    are resampled with replacement and the surfaces refitted.
 
 Nothing here imports DOLFINx.
@@ -55,8 +60,8 @@ from valve_dolfinx.sizing.surface import (
 )
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
-           "sizes_to_confirm", "resample_paths", "bootstrap_stability", "SEAL_PROBABILITY",
-           "MIN_CELLS"]
+           "common_size", "sizes_to_confirm", "solved_worst_case", "resample_paths",
+           "bootstrap_stability", "SEAL_PROBABILITY", "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
@@ -152,6 +157,11 @@ class SizingAnswer:
     @property
     def tolerance_mm(self) -> float | None:
         return self.resolution.tolerance_mm
+
+    @property
+    def closest(self) -> GraftSize | None:
+        """Without a graft, the size of highest predicted worst case; else None."""
+        return self.highest if self.size is None else None
 
     def to_dict(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "lattice"}
@@ -405,9 +415,7 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"{band['area_ratio'][1]:.3f} ×); the highest predicted coaptation is at "
             f"{answer.highest.label} (margin {margin_text(answer.highest_margin_mm, signed=True)}"
             f" mm).")
-    confirm = (f"{size.label} is read from the surface: solve it in every member to confirm "
-               "it.")
-    return " ".join((head, margin, also, _resolution(answer), confirm))
+    return " ".join((head, margin, also, _resolution(answer)))
 
 
 def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:
@@ -423,6 +431,32 @@ def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:
             + _resolution(answer))
 
 
+def common_size(answers: Sequence[SizingAnswer]) -> GraftSize | None:
+    """The smallest flat area that qualifies in every one of ``answers`` (comparison values
+    read from one fit, on one lattice), ties going to the narrower, then the lower; None
+    when no size qualifies in all of them or one of them has no lattice (no answer read).
+
+    Raises
+    ------
+    ValueError
+        For answers read on different lattices (not from one fit).
+    """
+    lattices = [a.lattice for a in answers]
+    if not lattices or any(lattice is None for lattice in lattices):
+        return None
+    first = lattices[0]
+    if any(not (np.array_equal(lat.widths_pct, first.widths_pct)
+                and np.array_equal(lat.heights_pct, first.heights_pct)) for lat in lattices):
+        raise ValueError("common_size: the answers were read on different lattices (give the "
+                         "answers of one fit)")
+    every = np.logical_and.reduce([lattice.qualifies for lattice in lattices])
+    if not every.any():
+        return None
+    ww, hh = np.meshgrid(first.widths_pct, first.heights_pct)
+    sizes = [GraftSize(float(w), float(h)) for w, h in zip(ww[every], hh[every], strict=True)]
+    return min(sizes, key=lambda s: (s.area_ratio, *s))
+
+
 def sizes_to_confirm(answer: SizingAnswer, tables: Sequence[MemberTable]
                      ) -> list[tuple[GraftSize, MemberTable]]:
     """The solves that confirm ``answer``: its size in every member (each uncertainty value
@@ -436,6 +470,33 @@ def sizes_to_confirm(answer: SizingAnswer, tables: Sequence[MemberTable]
         if tuple(answer.size) not in solved:
             out.append((answer.size, table))
     return out
+
+
+def solved_worst_case(answer: SizingAnswer, tables: Sequence[MemberTable], size: GraftSize
+                      ) -> tuple[float | None, str | None]:
+    """The solved counterpart of ``answer``'s predicted worst case, at ``size``.
+
+    The statistic the answer predicts: per uncertainty member (``answer.members``; its
+    paths are replicates, as in the fit), the mean minimum coaptation height of the size's
+    converged cases along its paths minus the member's target (``answer.targets_mm``); the
+    least of these over the members.  Returns that margin (mm) and its member, or
+    ``(None, None)`` when some member has no converged case of the size or no target.
+    """
+    heights: dict[str, list[float]] = {}
+    for table in tables:
+        for row in _graft_rows(table):
+            value = _number(row, FIGURE)
+            if ((float(row["graft_width_pct"]), float(row["graft_height_pct"])) == tuple(size)
+                    and row.get("converged") and math.isfinite(value)):
+                heights.setdefault(_member_label(table.uncertain), []).append(value)
+    margins = {}
+    for member in answer.members:
+        target = answer.targets_mm.get(member)
+        if target is None or not heights.get(member):
+            return None, None
+        margins[member] = float(np.mean(heights[member])) - target
+    limiting = min(margins, key=margins.get)
+    return margins[limiting], limiting
 
 
 def resample_paths(tables: Sequence[MemberTable], rng: np.random.Generator

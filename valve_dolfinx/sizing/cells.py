@@ -18,19 +18,17 @@ A cell *qualifies* when it converged, is competent and reaches the target in eve
 member.  These are the solved numbers as they are, shown in every report beside the
 answer; the answer itself is read from the response surface fitted to them
 (:mod:`valve_dolfinx.sizing.answer`).  :class:`GraftSize` is the one value type of a
-graft's size, on the grid or off it.  Nothing here imports DOLFINx.
+graft's size, on the grid or off it (defined beside the leaflet's outline,
+:mod:`valve_dolfinx.geometry.outline`).  Nothing here imports DOLFINx.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import NamedTuple
 
-from valve_dolfinx.exceptions import ParameterError
-from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
+from valve_dolfinx.geometry.outline import GraftSize, flat_area_ratio
 from valve_dolfinx.result import competence_text, leaflets_intersect
 
 __all__ = ["FIGURE", "NORMAL_TARGET", "GraftSize", "CellSummary", "summarise_cells",
@@ -39,49 +37,6 @@ __all__ = ["FIGURE", "NORMAL_TARGET", "GraftSize", "CellSummary", "summarise_cel
 FIGURE = "min_coaptation_height_mm"
 #: the normal valve's figure, as the target says where it comes from
 NORMAL_TARGET = "the normal valve's minimum coaptation height"
-
-
-def flat_area_ratio(width_pct: float, height_pct: float) -> float:
-    """Flat graft area over the native leaflet's, (1 + W)(1 + H)."""
-    return (1 + width_pct / 100) * (1 + height_pct / 100)
-
-
-class GraftSize(NamedTuple):
-    """A graft's enlargement over the native leaflet, per cent of its width and height."""
-
-    width_pct: float
-    height_pct: float
-
-    @property
-    def label(self) -> str:
-        """``W14/H13``, as every table and figure names a graft."""
-        return f"W{self.width_pct:g}/H{self.height_pct:g}"
-
-    @property
-    def stem(self) -> str:
-        """``W14_H13``: the graft's part of a file name."""
-        return f"W{self.width_pct:g}_H{self.height_pct:g}"
-
-    @property
-    def area_ratio(self) -> float:
-        """Flat area over the native leaflet's, (1 + W)(1 + H)."""
-        return flat_area_ratio(self.width_pct, self.height_pct)
-
-    @classmethod
-    def parse(cls, text: str, option: str = "--template") -> GraftSize:
-        """``"14/13"`` or ``"W14/H13"`` (per cent), range-checked."""
-        match = re.fullmatch(r"\s*W?\s*([-+0-9.eE]+)\s*[/_,]\s*H?\s*([-+0-9.eE]+)\s*", text)
-        try:
-            size = cls(float(match.group(1)), float(match.group(2)))
-        except (AttributeError, ValueError):
-            raise ParameterError(f"{option} {text!r}: give the graft as W/H in per cent of "
-                                 "the measured leaflet, e.g. 14/13") from None
-        for value in size:
-            if not 0.0 <= value <= MAX_GRAFT_PCT:
-                reason = GRAFT_TOO_SMALL if value < 0 else GRAFT_TOO_LARGE
-                raise ParameterError(f"{option} {text!r}: {value:g} is outside the allowed "
-                                     f"range [0, {MAX_GRAFT_PCT:g}] %: {reason}")
-        return size
 
 
 def _number(row: Mapping | None, key: str) -> float:
@@ -115,6 +70,8 @@ class CellSummary:
     margin_mm: float | None = None
     limiting_member: str | None = None
     qualifies: bool = False
+    #: solved to confirm an answer (a size off the grid)
+    confirmation: bool = False
 
     @property
     def size(self) -> GraftSize:

@@ -4,13 +4,12 @@
 * :mod:`~valve_dolfinx.study.axes`: comparison and uncertainty axes (``--vary``,
   ``--uncertain``);
 * :mod:`~valve_dolfinx.study.paths`: the numerical paths (``--paths``);
-* :mod:`~valve_dolfinx.study.layout`: the cases, their names and configurations, and the
-  slot (comparison value, member, graft) each fills;
+* :mod:`~valve_dolfinx.study.layout`: the cases, their names and configurations, the
+  slot (comparison value, member, graft) each fills, and the member tables the answer
+  reads (:mod:`valve_dolfinx.sizing`: one response surface over every comparison value);
 * :mod:`~valve_dolfinx.study.store`: case folders and exclusive claims;
 * :mod:`~valve_dolfinx.study.runner`: every case once, over MPI rank groups, resumable;
 * :mod:`~valve_dolfinx.study.table`: ``results.csv`` / ``results.json`` (SPEC §7 schema);
-* :mod:`~valve_dolfinx.study.recommend`: the study's answer (:mod:`valve_dolfinx.sizing`: one
-  response surface over every comparison value) beside the worst case of each solved graft;
 * :mod:`~valve_dolfinx.study.nomogram`: the recommendation against the root diameter;
 * :mod:`~valve_dolfinx.study.report`: tables, figures (:mod:`valve_dolfinx.plotting.study`) and
   report.md.
@@ -33,7 +32,6 @@ from valve_dolfinx.study.grid import (
 from valve_dolfinx.study.layout import Member, StudyCase, StudyLayout
 from valve_dolfinx.study.nomogram import NOMOGRAM_KEY, nomogram_rows
 from valve_dolfinx.study.paths import PATHS, StudyPath
-from valve_dolfinx.study.recommend import CellSummary, Recommendation, recommend
 from valve_dolfinx.study.report import StudyReport, build_report
 from valve_dolfinx.study.table import SPEC_COLUMNS, case_rows
 
@@ -46,9 +44,7 @@ __all__ = [
     "STUDY_WIDTHS_PCT",
     "SPEC_COLUMNS",
     "UNCERTAINTY",
-    "CellSummary",
     "Member",
-    "Recommendation",
     "StudyAxis",
     "StudyCase",
     "StudyLayout",
@@ -60,7 +56,6 @@ __all__ = [
     "load_study_toml",
     "nomogram_rows",
     "parse_percentages",
-    "recommend",
     "run_study",
 ]
 

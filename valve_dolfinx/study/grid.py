@@ -282,11 +282,11 @@ class StudySettings:
         return (*(StudyAxis(k, v, COMPARISON) for k, v in self.vary.items()),
                 *(StudyAxis(k, v, UNCERTAINTY) for k, v in self.uncertain.items()))
 
-    def layout(self) -> StudyLayout:
-        """Every case, its configuration and where it stands among the axes
-        (:func:`valve_dolfinx.study.layout.study_layout`)."""
+    def layout(self, confirm: dict | None = None) -> StudyLayout:
+        """Every case, its configuration and where it stands among the axes, with the
+        confirmations ``confirm`` (:func:`valve_dolfinx.study.layout.study_layout`)."""
         return study_layout(self.base_case(), self.axes, self.paths, self.widths_pct,
-                            self.heights_pct, self.include_normal)
+                            self.heights_pct, self.include_normal, confirm)
 
     def cases(self) -> list[StudyCase]:
         """Every case, in the fixed order that ``--case-index`` counts."""

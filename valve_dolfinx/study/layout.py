@@ -27,7 +27,8 @@ the source's, so a changed source recomputes it.
 Order: the normal valves first, then the grafts, each in slot order
 (comparison values, then members, then W, then H, as given).  The case index
 (``--case-index``) is the position in that order; a source always precedes the
-cases that start from it.
+cases that start from it.  The confirmations of an answer (sizes off the grid, listed in
+the study folder's :data:`CONFIRM_FILE`) come after the grid's cases.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import itertools
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.config import (
@@ -46,21 +48,29 @@ from valve_dolfinx.config import (
     settings_hash,
 )
 from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.geometry.outline import GraftSize
+from valve_dolfinx.sizing.answer import MemberTable
 from valve_dolfinx.study.axes import PATH_KEY, StudyAxis, axis_label, value_text
 from valve_dolfinx.study.paths import START_FROM_NORMAL, StudyPath, study_paths
 
 __all__ = [
     "NORMAL_CASE",
+    "CONFIRM_FILE",
+    "read_confirmations",
     "StudyCase",
     "Member",
     "StudyLayout",
     "case_name",
     "case_digest",
     "study_layout",
+    "layout_tables",
 ]
 
 #: Name of the normal valve's case folder (before any axis values)
 NORMAL_CASE = "normal"
+#: the study folder's list of the sizes solved to confirm an answer, per comparison index
+#: (``{"confirm": {"0": [[W, H], ...]}}``), written by the sweep, read by every reader
+CONFIRM_FILE = "confirm.json"
 
 Size = tuple[float, float] | None
 #: (comparison index, member index, graft size or None for the normal valve)
@@ -74,7 +84,7 @@ def case_name(width_pct: float | None, height_pct: float | None) -> str:
     """
     if width_pct is None:
         return NORMAL_CASE
-    return f"W{width_pct:g}_H{height_pct:g}"
+    return GraftSize(width_pct, height_pct).stem
 
 
 def case_digest(config: Mapping[str, Any], start: str | None = None) -> str:
@@ -110,6 +120,9 @@ class StudyCase:
     start_from
         Name of the case whose loaded state this one starts from; ``None``: the unloaded
         valve.
+    confirmation
+        A size off the grid that the answer proposed, solved to confirm it
+        (:data:`CONFIRM_FILE`).
     """
 
     index: int
@@ -118,6 +131,7 @@ class StudyCase:
     name: str = ""
     values: tuple[tuple[str, Any], ...] = ()
     start_from: str | None = None
+    confirmation: bool = False
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -164,7 +178,10 @@ class StudyLayout:
     members
         The members of every cell, in order (uncertainty values, then path).
     sizes
-        The graft sizes ``(W, H)``, width by width.
+        The graft sizes ``(W, H)`` of the grid, width by width.
+    confirm
+        Per comparison index, the sizes off the grid solved to confirm its answer, in the
+        order they were proposed.
     cases
         Every case in the fixed order of ``--case-index``.
     configs, digests
@@ -182,6 +199,7 @@ class StudyLayout:
     configs: Mapping[str, CaseConfig] = field(repr=False)
     digests: Mapping[str, str] = field(repr=False)
     slots: Mapping[Slot, str] = field(repr=False)
+    confirm: Mapping[int, tuple[tuple[float, float], ...]] = field(default_factory=dict)
 
     def case(self, name: str) -> StudyCase:
         return next(c for c in self.cases if c.name == name)
@@ -225,10 +243,12 @@ def _members(axes: Sequence[StudyAxis], paths: Sequence[StudyPath]) -> tuple[Mem
     return tuple(members)
 
 
-def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, sizes
+def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, sizes, confirm
                   ) -> dict[Slot, CaseConfig]:
-    """The configuration of every slot (errors name the slot's axis values)."""
+    """The configuration of every slot (errors name the slot's axis values): the grid's, then
+    the confirmations' (so that the grid's case indices do not depend on them)."""
     configs: dict[Slot, CaseConfig] = {}
+    plain: dict[tuple[int, int], CaseConfig] = {}
     for c, comparison in enumerate(comparisons):
         for m, member in enumerate(members):
             where = ", ".join(p for p in (axis_label(comparison + member.values),
@@ -237,6 +257,7 @@ def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, siz
             for key, value in (*comparison, *member.values, *member.path.overrides.items()):
                 set_dotted(data, key, value)
             config = config_from_dict(data, source=f"study case settings at {where}")
+            plain[(c, m)] = config
             try:
                 if include_normal:
                     configs[(c, m, None)] = config.normal_valve()
@@ -244,6 +265,11 @@ def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, siz
                     configs[(c, m, size)] = config.with_graft(*size)
             except ParameterError as err:
                 raise ParameterError(f"study case settings at {where}: {err}") from None
+    for c, extra in confirm.items():
+        for m in range(len(members)):
+            for size in extra:
+                if (c, m, size) not in configs:
+                    configs[(c, m, size)] = plain[(c, m)].with_graft(*size)
     return configs
 
 
@@ -276,14 +302,19 @@ def _name(size: Size, values: tuple[tuple[str, Any], ...]) -> str:
 
 def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
                  widths_pct: Sequence[float], heights_pct: Sequence[float],
-                 include_normal: bool = True) -> StudyLayout:
+                 include_normal: bool = True,
+                 confirm: Mapping[int, Sequence[tuple[float, float]]] | None = None
+                 ) -> StudyLayout:
     """Enumerate a study's cases: build every slot's configuration, merge slots that are the
     same case, name the cases and order them (see the module docstring).
 
     ``base_case`` is the case settings every case starts from, ``axes`` the comparison and
     uncertainty axes, ``paths`` the number of numerical paths, and the grid's widths and
     heights the graft sizes (:meth:`valve_dolfinx.study.grid.StudySettings.layout` passes
-    its own, checked).
+    its own, checked).  ``confirm`` adds, per comparison index, sizes off the grid in every
+    member of that comparison value (the confirmations of its answer,
+    :data:`CONFIRM_FILE`): ordinary cases, named and identified as every other, after the
+    grid's.
 
     Raises
     ------
@@ -297,7 +328,9 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
     comparisons = tuple(_product([a for a in axes if a.is_comparison]))
     members = _members([a for a in axes if not a.is_comparison], paths)
     sizes = tuple((w, h) for w in widths_pct for h in heights_pct)
-    configs = _slot_configs(base_case, include_normal, comparisons, members, sizes)
+    confirm = {int(c): tuple((float(w), float(h)) for w, h in extra)
+               for c, extra in (confirm or {}).items() if int(c) < len(comparisons)}
+    configs = _slot_configs(base_case, include_normal, comparisons, members, sizes, confirm)
     digests: dict[Slot, str] = {}
     for slot, config in configs.items():  # normal valves first: the grafts' sources
         if slot[2] is None:
@@ -327,10 +360,34 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
             start = names[digests[(c, m, None)]]
         cases.append(StudyCase(index, *(size or (None, None)), name=names[digest],
                                values=_values(slots, axes, comparisons, members),
-                               start_from=start))
+                               start_from=start,
+                               confirmation=size is not None and size not in sizes))
     return StudyLayout(
         axes=axes, paths=paths, comparisons=comparisons, members=members, sizes=sizes,
         cases=tuple(cases),
         configs={names[d]: configs[slots[0]] for d, slots in groups.items()},
         digests={names[d]: d for d in groups},
-        slots={slot: names[digests[slot]] for slot in digests})
+        slots={slot: names[digests[slot]] for slot in digests}, confirm=confirm)
+
+
+def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
+                  ) -> list[MemberTable]:
+    """The member tables of one comparison value of a study, from the rows at hand (a case
+    not finished yet, damaged or stale is left out)."""
+    by_name = {r["case"]: r for r in rows if r.get("status") not in ("damaged", "stale")}
+    members = {m.label: m for m in layout.members}
+    return [MemberTable(label, [by_name[name] for name in cases.values() if name in by_name],
+                        comparison=layout.comparisons[comparison],
+                        uncertain=members[label].values, path=members[label].path.number)
+            for label, cases in layout.member_cases(comparison).items()]
+
+
+def read_confirmations(out) -> dict[int, list[tuple[float, float]]]:
+    """The sizes solved to confirm each comparison value's answer, from the study folder
+    ``out``'s :data:`CONFIRM_FILE` (empty without one)."""
+    path = Path(out) / CONFIRM_FILE
+    if not path.is_file():
+        return {}
+    data = json.loads(path.read_text(encoding="utf-8"))
+    return {int(c): [(float(w), float(h)) for w, h in sizes]
+            for c, sizes in (data.get("confirm") or {}).items()}

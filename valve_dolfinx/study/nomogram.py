@@ -18,9 +18,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from valve_dolfinx.plotting.study import plot_nomogram
+from valve_dolfinx.sizing.recommendation import Recommendation
 from valve_dolfinx.study.axes import value_text
 from valve_dolfinx.study.layout import StudyLayout
-from valve_dolfinx.study.recommend import Recommendation
 from valve_dolfinx.study.table import write_csv
 
 __all__ = ["NOMOGRAM_KEY", "NOMOGRAM_COLUMNS", "is_nomogram", "nomogram_rows",
@@ -61,26 +61,27 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
     rows = []
     for rec in recommendations:
         normal = normals.get(rec.comparison[NOMOGRAM_KEY], {})
-        chosen, best, band = rec.size, rec.best_size, rec.answer.band
-        limit = rec.limiting_member
+        answer = rec.answer
+        chosen, best, band = answer.size, answer.closest, answer.band
+        limit = answer.limiting_member
         rows.append({
             "root_loaded_diameter_mm": rec.comparison[NOMOGRAM_KEY],
-            "recommended": rec.recommended or "",
+            "recommended": chosen.label if chosen else "",
             "graft_width_pct": chosen.width_pct if chosen else None,
             "graft_height_pct": chosen.height_pct if chosen else None,
-            "flat_area_ratio": rec.recommended_area_ratio,
-            "margin_mm": rec.margin_mm,
+            "flat_area_ratio": chosen.area_ratio if chosen else None,
+            "margin_mm": answer.margin_mm,
             "limiting_member": limit if limit is not None else "",
-            "min_coaptation_height_mm": rec.recommended_height_mm,
-            "target_mm": rec.answer.targets_mm.get(limit) if limit is not None else rec.target_mm,
-            "best": rec.best or "",
+            "min_coaptation_height_mm": answer.predicted_height_mm,
+            "target_mm": answer.targets_mm.get(limit) if limit is not None else rec.target_mm,
+            "best": best.label if best else "",
             "best_width_pct": best.width_pct if best else None,
             "best_height_pct": best.height_pct if best else None,
-            "shortfall_mm": rec.shortfall_mm,
+            "shortfall_mm": answer.shortfall_mm,
             "members": len(rec.members),
             "normal_min_coaptation_mm": normal.get("min_coaptation_height_mm"),
             "normal_competent": normal.get("competent"),
-            "tolerance_mm": rec.tolerance_mm,
+            "tolerance_mm": answer.tolerance_mm,
             **{f"band_{what}_{end}_pct": (band[f"{what}_pct"][k] if band else None)
                for what in ("width", "height") for k, end in enumerate(("min", "max"))},
         })

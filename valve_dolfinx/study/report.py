@@ -26,11 +26,17 @@ from valve_dolfinx.plotting.study import (
     plot_sizing_map,
 )
 from valve_dolfinx.result import competence_text, margin_text
+from valve_dolfinx.sizing.recommendation import Recommendation, recommend_all
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
-from valve_dolfinx.study.layout import NORMAL_CASE, StudyLayout, case_name
+from valve_dolfinx.study.layout import (
+    NORMAL_CASE,
+    StudyLayout,
+    case_name,
+    layout_tables,
+    read_confirmations,
+)
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
-from valve_dolfinx.study.recommend import Recommendation, layout_tables, recommend_all
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE, claim_owner, owner_text
 from valve_dolfinx.study.table import case_rows, write_tables
 
@@ -199,7 +205,8 @@ def _worst_case_table(rec: Recommendation) -> list[str]:
     for c in rec.cells:
         counts = [f"{len(m)}/{n}" if m else "–" for m in (c.unconverged + c.missing,
                                                           c.leaking, c.intersecting)]
-        cells = (c.label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
+        label = f"{c.label} (confirmation)" if c.confirmation else c.label
+        cells = (label, _fmt(c.worst_height_mm), _fmt(c.spread_mm),
                  "–" if c.margin_mm is None else margin_text(c.margin_mm, signed=True),
                  c.limiting_member or "–", *counts, _fmt(c.qualifies))
         lines.append("| " + " | ".join(cells) + " |")
@@ -337,7 +344,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     settings = settings or read_settings(out)
     rows = case_rows(out)
     inferred = settings or _settings_from_rows(rows)
-    layout = inferred.layout() if inferred is not None else None
+    layout = inferred.layout(read_confirmations(out)) if inferred is not None else None
     if target_mm is None and settings is not None:
         target_mm = settings.target_coaptation_mm
     report = StudyReport(out, rows, layout, [])
@@ -353,7 +360,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         if report.complete:
             report.recommendations = recommend_all(
                 [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
-                target_mm, n_paths=len(layout.paths))
+                target_mm, n_paths=len(layout.paths), confirmed=layout.confirm)
     files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None, "complete": report.complete,

@@ -66,8 +66,9 @@ from valve_dolfinx.config import case_name
 from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.io import write_json
 from valve_dolfinx.result import CaseResult, competence_text, load_case
+from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
-from valve_dolfinx.study.layout import StudyCase, StudyLayout
+from valve_dolfinx.study.layout import CONFIRM_FILE, StudyCase, StudyLayout, read_confirmations
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
 from valve_dolfinx.study.store import (
     RESULT_FILE,
@@ -487,7 +488,8 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(out)
     t0, started = time.perf_counter(), _now()
-    layout = settings.layout()
+    layout = settings.layout(comm.bcast(_confirmations(out, settings) if comm.rank == 0
+                                        else None, root=0))
     cases = layout.select(case_indices)
     todo = _with_sources(layout, cases)
     _check_ranks(comm, settings.ranks_per_case)
@@ -524,6 +526,13 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
         if monitor:
             monitor.stop()
         group.Free()
+    if case_indices is None and report:
+        layout, more = _confirm(settings, out, comm, group_size=settings.ranks_per_case,
+                                layout=layout, case_function=case_function, poll_s=poll_s,
+                                run=run, wait=wait)
+        computed += more
+        todo = list(layout.cases)
+        cases = list(layout.cases)
     outcome = SweepOutcome(out, cases, computed, time.perf_counter() - t0)
     states = comm.bcast(_states(out, layout, todo) if comm.rank == 0 else None)
     outcome.failed = [case.name for case, state in states if state == "failed"]
@@ -539,6 +548,69 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             outcome.report = build_report(out, settings)
     comm.barrier()
     return outcome
+
+
+def _confirmations(out: Path, settings: StudySettings) -> dict:
+    """The confirmations of a study folder's answers, if it was run with these settings
+    (another study's, in a folder being reused, are dropped with their file)."""
+    saved = out / SETTINGS_FILE
+    try:
+        same = (saved.is_file() and StudySettings.from_dict(
+            json.loads(saved.read_text())["settings"]) == settings)
+    except (ValueError, KeyError, ValveError, OSError):
+        same = False
+    if not same:
+        if (out / CONFIRM_FILE).is_file():
+            (out / CONFIRM_FILE).unlink()
+        return {}
+    return read_confirmations(out)
+
+
+def _confirm(settings: StudySettings, out: Path, comm: MPI.Comm, *, group_size: int,
+             layout: StudyLayout, case_function: CaseFunction, poll_s: float, run: str,
+             wait: bool) -> tuple[StudyLayout, list[str]]:
+    """Confirm each comparison value's answer by simulation, in at most
+    :data:`~valve_dolfinx.sizing.recommendation.CONFIRM_ROUNDS` rounds.
+
+    A round reads the answers from the cases so far (:func:`build_report`); each answer
+    whose size is not solved in every member, and whose last confirmation (if any) missed,
+    is added to :data:`~valve_dolfinx.study.layout.CONFIRM_FILE` and solved in every
+    member as ordinary cases.  The next round's fit includes them: a confirmation that
+    misses moves the answer, which the next round confirms in turn.  Returns the layout
+    with every confirmation and the cases computed."""
+    computed: list[str] = []
+    for _ in range(CONFIRM_ROUNDS):
+        confirm = None
+        if comm.rank == 0:
+            report = build_report(out, settings)
+            confirm = {c: list(v) for c, v in layout.confirm.items()}
+            added = False
+            for c, rec in enumerate(report.recommendations):
+                size = rec.next_confirmation
+                if size is not None and tuple(size) not in confirm.get(c, []):
+                    confirm.setdefault(c, []).append(tuple(size))
+                    added = True
+                    log.info("confirming %s%s: solving it in every member", size.label,
+                             f" ({layout.comparison_label(c)})" if rec.comparison else "")
+            if added:
+                write_json(out / CONFIRM_FILE, {"confirm": {str(c): [list(s) for s in v]
+                                                            for c, v in confirm.items()}})
+            else:
+                confirm = None
+        confirm = comm.bcast(confirm, root=0)
+        if confirm is None:
+            break
+        known = {c.name for c in layout.cases}
+        layout = settings.layout(confirm)
+        new = [c for c in layout.cases if c.name not in known]
+        group = comm.Split(comm.rank // group_size, comm.rank)
+        try:
+            done, _ = _work(group, out, layout, _with_sources(layout, new), case_function,
+                            poll_s, run, wait)
+        finally:
+            group.Free()
+        computed += sorted(sum(comm.allgather(done), []))
+    return layout, computed
 
 
 def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
@@ -559,5 +631,5 @@ def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
 def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
     """Each case and its state in ``out``: finished, failed, damaged, changed, running or
     pending."""
-    layout = settings.layout()
+    layout = settings.layout(read_confirmations(out))
     return _states(Path(out), layout, layout.cases)

@@ -71,7 +71,8 @@ def case_rows(out: Path, layout: StudyLayout | None = None, *, identity: bool = 
               ) -> list[dict]:
     """Rows of every case folder under ``out/cases``.
 
-    With ``layout`` (the study's cases): in its order, then any other case folder, and (with
+    With ``layout`` (the study's cases): in its order, then any other case folder, each
+    marked ``confirmation`` when it confirms an answer (a size off the grid), and (with
     ``identity``) each of its cases checked against the identity the layout expects;
     without it, the normal valve first, then by W and H, every whole case taken as it is.
     A case whose files are missing, unreadable or disagree is a row with status ``damaged``
@@ -106,6 +107,9 @@ def case_rows(out: Path, layout: StudyLayout | None = None, *, identity: bool = 
     if layout is not None:
         place = {case.name: i for i, case in enumerate(layout.cases)}
         rows.sort(key=lambda row: place.get(row["case"], len(place)))
+        confirmations = {case.name for case in layout.cases if case.confirmation}
+        for row in rows:
+            row["confirmation"] = row["case"] in confirmations
     return rows
 
 
