@@ -38,8 +38,9 @@ def contact_hook(models, triangles, pressure):
                                         lag_driving_force=True)
 
 
-def two_sheets(comm):
-    """Two clamped squares 1 mm apart, normals facing each other (tags 1 and 2)."""
+def two_sheets(comm, n: int = CELLS):
+    """Two clamped squares 1 mm apart, ``n`` and ``n + 1`` cells a side, normals facing each
+    other (tags 1 and 2)."""
     if comm.rank != 0:
         return membrane_domain_from_arrays(comm, None, None, None, None, None), None
     def grid(n, z):
@@ -52,8 +53,8 @@ def two_sheets(comm):
         return np.stack([X.ravel(), Y.ravel(), np.full(X.size, z)], axis=1), cells
 
     # different resolutions, so that no node meets another node head-on
-    low_points, lower = grid(CELLS, 0.0)
-    up_points, upper = grid(CELLS + 1, GAP)
+    low_points, lower = grid(n, 0.0)
+    up_points, upper = grid(n + 1, GAP)
     upper = upper[:, ::-1] + len(low_points)                                      # normal -z
     points = np.concatenate([low_points, up_points])
     cells = np.concatenate([lower, upper])

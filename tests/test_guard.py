@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_contact_fe import SOFT, clamp_boundary, two_sheets
+from test_contact_fe import SIDE, SOFT, clamp_boundary, two_sheets
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.analysis.intersection import find_intersections
@@ -199,3 +199,32 @@ def test_a_start_whose_leaflets_intersect_is_refused_for_the_unloaded_valve():
     assert state.report.start["from"] == "the unloaded valve"
     assert "a crossed valve" in state.report.start["refused"]
     assert state.report.converged
+
+
+def test_sheets_pressed_under_the_law_rest_outside_the_guards_reach():
+    """The valve's contact (the law with its 0.25 mm thickness, and the guard) on two sheets
+    pressed by 2 kPa: the law rests them about its thickness apart, beyond the guard's
+    shorter reach, so at rest the guard has no pair and the law alone sets the gap."""
+    import ipctk
+
+    comm = MPI.COMM_SELF
+    domain, (points, cells, tags) = two_sheets(comm, 16)
+    model = MembraneModel(domain, {1: SOFT, 2: SOFT}, pressure_side=1.0)
+    params = ContactParameters()
+    law = SurfaceContact(cells, len(points), params, triangle_body=tags)
+    guard = SurfaceGuard(points, cells, distance=params.guard_distance,
+                         stiffness=params.guard_stiffness)
+    hook = lambda coupling: ContactHook(coupling, [law], cells, model.pressure, 1.0,  # noqa: E731
+                                        guard=guard)
+    solver = PseudoTransientSolver(model, [clamp_boundary(model)], 2.0,
+                                   PseudoTransientParameters(residual_tolerance=1e-6),
+                                   hooks=[hook])
+    report = solver.solve()
+    assert report.converged, report.reason
+    x = solver.coupling.positions(model.u)
+    upper = np.unique(cells[tags == 2])
+    centre = upper[np.argmin(np.linalg.norm(x[upper, :2] - SIDE / 2, axis=1))]
+    gap = min(np.sqrt(ipctk.point_triangle_distance(x[centre], *x[t]))  # (squared)
+              for t in cells[tags == 1])
+    assert params.thickness <= gap < 1.1 * params.thickness
+    assert solver.hooks[0].diagnostics()["guard_pairs"] == 0
