@@ -316,3 +316,15 @@ def test_sealing_is_read_from_the_solved_cells_not_smoothed():
                            SurfacePoint(30.0, 40.0), SurfacePoint(10.0, 40.0)])
     np.testing.assert_allclose(p, [0.5, 1.0, 1.0, 0.5, 0.0, 1.0], atol=1e-12)
     assert model.summary()["cells"] == len(widths) * len(heights)
+
+
+def test_a_confirmation_misses_beyond_the_tolerance_and_twice_a_solves_scatter():
+    """A single solve scatters about the surface by the larger of the path scatter and the
+    surface's noise: it misses only when short by more than the tolerance plus twice that
+    (worked: 0.28 + 2 x 0.08 = 0.44 mm; with paths scattering 0.12 mm, 0.28 + 0.24)."""
+    from valve_dolfinx.sizing.recommendation import miss_limit_mm
+    from valve_dolfinx.sizing.resolution import Resolution
+
+    assert miss_limit_mm(Resolution(None, 0, 0.08, 0.28, "ladder")) == pytest.approx(0.44)
+    assert miss_limit_mm(Resolution(0.12, 6, 0.08, 0.28, "ladder")) == pytest.approx(0.52)
+    assert miss_limit_mm(Resolution(None, 0, None, None, "none")) == 0.0

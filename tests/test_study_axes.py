@@ -22,6 +22,7 @@ import pytest
 from test_study import cli_with, stable_csv
 
 from valve_dolfinx._compat import MPI
+from valve_dolfinx.sizing.recommendation import miss_limit_mm
 
 GRID = ["--widths", "0", "7", "14", "--heights", "0", "13"]
 
@@ -689,7 +690,8 @@ def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
     solved = answer_margin(14, 2, 21, -2.0)
     assert solved == pytest.approx(-0.07 - 0.4319, abs=1e-4)
     tolerance = rec.answer.tolerance_mm
-    assert 0.1 / 2**0.5 - 1e-9 <= tolerance < -solved
+    limit = miss_limit_mm(rec.answer.resolution)
+    assert 0.1 / 2**0.5 - 1e-9 <= tolerance < limit < -solved
     assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": pytest.approx(solved),
                                     "limiting_member": "root.loaded_diameter=21",
                                     "holds": False}
@@ -702,7 +704,7 @@ def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
     assert len({tuple(s) for s in confirmed}) == len(confirmed)
     for entry, (w, h) in zip(rec.confirmations, confirmed, strict=True):
         assert entry["margin_mm"] == pytest.approx(answer_margin(w, h, 21, -2.0), abs=1e-9)
-        assert entry["holds"] == (entry["margin_mm"] >= -tolerance)
+        assert entry["holds"] == (entry["margin_mm"] >= -limit)
     # `report` reads the confirmations from the folder
     again = build_report(out, settings).recommendations[0]
     assert again.to_dict() == rec.to_dict()
@@ -761,7 +763,7 @@ def test_a_held_confirmation_that_moves_the_answer_is_confirmed_in_turn(tmp_path
     assert len({tuple(s) for s in confirmed}) == len(confirmed)
     for entry, (w, h) in zip(rec.confirmations, confirmed, strict=True):
         assert entry["margin_mm"] == pytest.approx(answer_margin(w, h, 21, 1.0), abs=1e-9)
-        assert entry["holds"] == (entry["margin_mm"] >= -rec.answer.tolerance_mm)
+        assert entry["holds"] == (entry["margin_mm"] >= -miss_limit_mm(rec.answer.resolution))
     if rec.confirm:  # the last move is left unsolved only when the rounds are spent
         assert len(confirmed) == CONFIRM_ROUNDS
         assert f"the {CONFIRM_ROUNDS} rounds of confirmation are spent" in rec.text

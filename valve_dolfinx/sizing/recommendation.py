@@ -34,10 +34,10 @@ from valve_dolfinx.sizing.cells import (
     member_targets,
     summarise_cells,
 )
-from valve_dolfinx.sizing.resolution import MESH_LADDER
+from valve_dolfinx.sizing.resolution import MESH_LADDER, Resolution
 
 __all__ = ["Recommendation", "recommend", "recommend_all", "headline", "confirmation_holds",
-           "CONFIRM_ROUNDS"]
+           "miss_limit_mm", "CONFIRM_ROUNDS"]
 
 #: the most rounds of confirmation a study solves (each: the answer's size in every member)
 CONFIRM_ROUNDS = 3
@@ -102,15 +102,31 @@ class Recommendation:
                 "incompetent_targets": self.incompetent_targets, "text": self.text}
 
 
+#: a confirmation misses when its solved statistic falls short of the target by more than
+#: the tolerance plus this many times the scatter of a single solve (a one-sided test): a
+#: smaller shortfall is within what one solve scatters about the surface, no evidence
+#: against the answer
+CONFIRM_SCATTERS = 2.0
+
+
+def miss_limit_mm(resolution: Resolution) -> float:
+    """How far short of the target (mm) a confirmation may solve and still hold: the
+    tolerance plus :data:`CONFIRM_SCATTERS` times a single solve's scatter (the larger of
+    the scatter between paths and the surface's noise; 0 when neither is measured)."""
+    scatter = max((v for v in (resolution.path_scatter_mm, resolution.surface_noise_mm)
+                   if v is not None), default=0.0)
+    return (resolution.tolerance_mm or 0.0) + CONFIRM_SCATTERS * scatter
+
+
 def confirmation_holds(cell: CellSummary, margin_mm: float | None,
-                       tolerance_mm: float | None) -> bool:
+                       resolution: Resolution) -> bool:
     """A confirmation holds when its size converged and sealed in every member (every
     uncertainty value along every path: ``cell``) and its solved worst case ``margin_mm``
     (:func:`~valve_dolfinx.sizing.answer.solved_worst_case`: the statistic the answer
-    predicts, paths averaged per uncertainty member, the least over those) comes within
-    the tolerance of the target (none measured: reaches it); otherwise it misses, joins
-    the fit, and the answer is read again."""
-    return cell.sound and margin_mm is not None and margin_mm >= -(tolerance_mm or 0.0)
+    predicts, paths averaged per uncertainty member, the least over those) is not short of
+    the target by more than :func:`miss_limit_mm`; otherwise it misses, joins the fit, and
+    the answer is read again."""
+    return cell.sound and margin_mm is not None and margin_mm >= -miss_limit_mm(resolution)
 
 
 def _confirmation_text(rec: Recommendation) -> list[str]:
@@ -128,21 +144,22 @@ def _confirmation_text(rec: Recommendation) -> list[str]:
                      f" ± {answer.margin_sd_mm:.2f} mm)"
                      if answer.size is not None and answer.size.label == entry["graft"] else "")
         verdict = ("it holds" if entry["holds"] else
-                   f"it misses ({_miss(cell, entry['margin_mm'], answer.tolerance_mm)}): it "
+                   f"it misses ({_miss(cell, entry['margin_mm'], answer.resolution)}): it "
                    "joined the fit and the answer was read again")
         out.append(f"Confirmation {k}: {entry['graft']} solved in every member, {solved}"
                    f"{predicted}; {verdict}.")
     return out
 
 
-def _miss(cell: CellSummary, margin_mm: float | None, tolerance_mm: float | None) -> str:
+def _miss(cell: CellSummary, margin_mm: float | None, resolution: Resolution) -> str:
     """Why a confirmation missed, in words."""
     if not cell.sound:
         return cell_state(cell)
     if margin_mm is None:
         return "no worst case"
     return (f"{margin_text(-margin_mm)} mm short, beyond the tolerance of "
-            f"{margin_text(tolerance_mm or 0.0)} mm")
+            f"{margin_text(resolution.tolerance_mm or 0.0)} mm and twice a solve's scatter "
+            f"({margin_text(miss_limit_mm(resolution))} mm in all)")
 
 
 def _in_member(member: str | None) -> str:
@@ -166,7 +183,7 @@ def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
             solved, member = solved_worst_case(answer, tables, cell.size)
             rec.confirmations.append({
                 "graft": cell.label, "margin_mm": solved, "limiting_member": member,
-                "holds": confirmation_holds(cell, solved, answer.tolerance_mm)})
+                "holds": confirmation_holds(cell, solved, answer.resolution)})
     lines = [answer.text, *_confirmation_text(rec)]
     if rec.confirm:
         then = ("a sweep solves it there to confirm it" if rec.next_confirmation is not None
