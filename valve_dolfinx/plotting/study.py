@@ -76,8 +76,8 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     heights = sorted({c.height_pct for c in cells})
     widths = sorted({c.width_pct for c in cells})
     step = min(np.diff(widths)) if len(widths) > 1 else 10.0
-    fig = new_figure(7.5, 5.0)
-    ax = fig.add_subplot()
+    fig = new_figure(9.5, 5.0)
+    ax = fig.add_axes((0.08, 0.11, 0.58, 0.78))
     for k, h in enumerate(heights):
         colour = _CURVE_COLOURS[k % len(_CURVE_COLOURS)]
         curve = sorted((c for c in cells if c.height_pct == h), key=lambda c: c.width_pct)
@@ -96,10 +96,11 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     targets = _targets(rec)
     if len(targets) == 1:
         ax.axhline(targets[0], color=_TARGET_COLOUR, ls="--", lw=1.2,
-                   label=f"target {targets[0]:.2f} mm ({rec.target_source})")
+                   label=textwrap.fill(f"target {targets[0]:.2f} mm ({rec.target_source})", 30))
     elif targets:
         ax.axhspan(targets[0], targets[-1], color=_TARGET_COLOUR, alpha=0.15, lw=0,
-                   label=f"targets {targets[0]:.2f}–{targets[-1]:.2f} mm ({rec.target_source})")
+                   label=textwrap.fill(f"targets {targets[0]:.2f}–{targets[-1]:.2f} mm "
+                                       f"({rec.target_source})", 30))
     ax.plot([], [], "o", mfc="white", mec="0.3", label="not competent"
             + (" in some member" if len(rec.members) > 1 else ""))
     if len(rec.members) > 1:
@@ -110,7 +111,8 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     if widths:
         ax.set_xticks(widths)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    # the key beside the plot: inside it, it would cover some cell's point
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.set_title(_title(rec, "Minimum coaptation height of the native leaflets", title),
                  fontsize=11)
     return save_figure(fig, path, dpi=130)
