@@ -869,3 +869,19 @@ def test_patient_toml_documents_every_key():
     assert "# target_coaptation_mm = (unset)" in text
     for key, spec in FIELDS.items():
         assert f"{key} = " in text and spec.meaning[:20] in text
+
+
+def test_an_answer_not_solved_itself_is_said_to_be_a_prediction():
+    """An answer whose size is unsolved in some member (the rounds of confirmation spent)
+    claims nothing a solve did not show: its headline says it is read from the surface and
+    which sizes were solved to confirm it; one solved in every member keeps the plain claim."""
+    rec = answer((14, 23), -0.04, limiting="root 20.0 mm", members=("root 20.0 mm", "b"))
+    assert "It converges, seals and reaches" in rec.headline()
+    rec.recommendation.confirm = ["root 20.0 mm", "b"]
+    rec.recommendation.confirmations = [{"graft": "W14/H26", "margin_mm": -0.10,
+                                "limiting_member": "b", "holds": True}]
+    words = rec.headline()
+    assert "read from the surface fitted to the solved grafts" in words
+    assert "predicted margin is -0.04 mm" in words
+    assert "It was not solved itself" in words and "(W14/H26)" in words
+    assert "It converges, seals and reaches" not in words

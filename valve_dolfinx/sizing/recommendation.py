@@ -290,10 +290,20 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
     if size is not None and not excluded:
         scope = f" in all {n} members" if n > 1 else ""
         within = "" if tol is None else " within the model's resolution"
+        if not rec.confirm:  # solved in every member
+            return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
+                    f"+{size.height_pct:g} % height). It converges, seals and reaches "
+                    f"{target}{scope}{within}; its smallest margin is "
+                    f"{margin_text(answer.margin_mm)} mm{where}{resolution}.")
+        solved = ", ".join(entry["graft"] for entry in rec.confirmations)
         return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
-                f"+{size.height_pct:g} % height). It converges, seals and reaches "
-                f"{target}{scope}{within}; its smallest margin is "
-                f"{margin_text(answer.margin_mm)} mm{where}{resolution}.")
+                f"+{size.height_pct:g} % height), read from the surface fitted to the solved "
+                f"grafts, which predicts that it converges, seals and reaches "
+                f"{target}{scope}{within}; its smallest predicted margin is "
+                f"{margin_text(answer.margin_mm)} mm{where}{resolution}.  It was not solved "
+                f"itself: " + (f"the sizes solved to confirm the answer ({solved}) each moved "
+                               "it, and the rounds of confirmation are spent."
+                               if solved else "the study has not confirmed it yet."))
     if size is not None:  # qualifies in the members computed, fails beyond them
         return (f"{excluded} In the {n} members{computed}, {size.label} "
                 f"(+{size.width_pct:g} % width, +{size.height_pct:g} % height) converges, "
