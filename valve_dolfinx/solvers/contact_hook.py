@@ -113,11 +113,12 @@ class ContactHook:
         self._key, self._pressure_key, self._has_jacobian = x, p, jacobian
         return self._results
 
-    def _guard_gradient(self, state: dolfinx.fem.Function) -> np.ndarray | None:
-        """The guard's energy gradient at ``state`` in this rank's rows (zero elsewhere)."""
+    def _guard_gradient(self) -> np.ndarray | None:
+        """The guard's energy gradient at the positions last evaluated (:meth:`_evaluate`)
+        in this rank's rows (zero elsewhere)."""
         if self.guard is None:
             return None
-        gradient = self.guard.gradient(self.coupling.positions(state))
+        gradient = self.guard.gradient(self._key)
         if gradient is None:
             return None
         return np.where(self._guard_rows[:, None], gradient, 0.0)
@@ -125,7 +126,7 @@ class ContactHook:
     def add_residual(self, state: dolfinx.fem.Function, b: PETSc.Vec) -> None:
         for result in self._evaluate(state, jacobian=False):
             self.coupling.add_forces(b, result.forces, scale=-1.0)
-        gradient = self._guard_gradient(state)
+        gradient = self._guard_gradient()
         if gradient is not None:
             self.coupling.add_forces(b, gradient)
 
@@ -137,8 +138,7 @@ class ContactHook:
             merged = [self.coupling.merge_blocks(r.jac_rows, r.jac_cols, -r.jac_blocks)
                       for r in results]
             if self.guard is not None:  # (summed per node pair by the library already)
-                merged.append(self.guard.hessian_blocks(self.coupling.positions(state),
-                                                        self._guard_rows))
+                merged.append(self.guard.hessian_blocks(self._key, self._guard_rows))
             self._merged = (results, merged)
         return self._merged[1]
 
@@ -169,7 +169,7 @@ class ContactHook:
         local = sum(r.forces for r in self._evaluate(state, jacobian=False))
         if isinstance(local, int):
             local = np.zeros((self.coupling.num_nodes, 3))
-        gradient = self._guard_gradient(state)
+        gradient = self._guard_gradient()
         if gradient is not None:
             local = local - gradient
         return self.coupling.comm.allreduce(local, op=MPI.SUM)
