@@ -30,7 +30,7 @@ import sys
 import time
 from pathlib import Path
 
-from valve_dolfinx.exceptions import ExitCode, StudyIncompleteError
+from valve_dolfinx.exceptions import ExitCode, NextRoundError, StudyIncompleteError
 from valve_dolfinx.interrupts import interrupt_on_signals
 
 __all__ = ["main"]
@@ -248,7 +248,8 @@ def _study_settings(args: argparse.Namespace, compared: dict | None = None):
         settings = StudySettings(case=case)
     changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
                "target_coaptation_mm": args.target_coaptation,
-               "wall_time_limit_s": args.wall_time_limit, "paths": args.paths}
+               "wall_time_limit_s": args.wall_time_limit, "paths": args.paths,
+               "budget": args.budget, "design": "adaptive" if args.adaptive else None}
     if args.widths is not None:
         changes["widths_pct"] = parse_percentages("--widths", args.widths, "width")
     if args.heights is not None:
@@ -418,6 +419,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
                              f"`valve-dolfinx plan PATIENT.toml --out {args.dir}`), or give the "
                              f"study folder itself ({args.dir / STUDY_DIR})")
     from valve_dolfinx.study.report import build_report
+    from valve_dolfinx.study.rounds import append_round
 
     report = build_report(args.dir, target_mm=target)
     print(f"{len(report.rows)} case(s)" + "".join(
@@ -429,6 +431,13 @@ def _cmd_report(args: argparse.Namespace) -> int:
             f"{args.dir}: {report.incomplete_text} report.md lists them and why" if report.rows
             else f"{args.dir}: no case has finished yet; run `valve-dolfinx sweep --out "
             f"{args.dir}`")
+    plan = report.next_round
+    if plan is not None and plan.points and target is None:
+        append_round(args.dir, plan)
+        raise NextRoundError(f"{args.dir}: round {plan.rounds} written, {plan.new_cases} new "
+                             "case(s): run them (`valve-dolfinx sweep ... --list` gives their "
+                             "indices, or a sweep runs them all), then `valve-dolfinx report` "
+                             "again")
     return 0
 
 
@@ -471,6 +480,9 @@ def _add_grid_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-wait", action="store_true",
                    help="do not wait for the cases another process is computing in --out: "
                    "end with status 9 naming them, writing no answer (default: wait)")
+    p.add_argument("--budget", type=int, default=None, metavar="N",
+                   help="the most graft cases an adaptive design solves per comparison value "
+                   "(default 40)")
 
 
 def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> None:
@@ -479,6 +491,10 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
                    help="an uncertainty axis: values of KEY that are not known, e.g. "
                    "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
                    "of them (repeatable)")
+    p.add_argument("--adaptive", action="store_true",
+                   help="solve a small design over the grid's width and height range, then "
+                   "rounds of cases chosen by the fitted surface until the answer is settled "
+                   "or --budget is spent, instead of every graft of the grid (docs/study.md)")
     p.add_argument("--paths", type=int, default=paths, metavar="N",
                    help="solve every graft along the first N numerical paths (1: from the "
                    "closed normal valve, 2: from the open valve, billowed, 3: from the open "
@@ -512,7 +528,7 @@ _PATIENT_FLAGS = {"root_diameter": "root_diameter_mm", "root_uncertainty": "root
                   "target_coaptation": "target_coaptation_mm",
                   "graft_fibre_angle": "graft_fibre_angle_deg", "paths": "paths",
                   "mesh_size": "mesh_size_mm", "wall_time_limit": "wall_time_limit_s",
-                  "label": "label"}
+                  "label": "label", "design": "design", "budget": "budget"}
 
 
 def _patient(args: argparse.Namespace):
@@ -587,6 +603,10 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--paths", type=int, default=None, metavar="N",
                    help="solve every graft along the first N of the study's numerical paths "
                    "(docs/study.md, Paths); the recommendation takes the worst (default 2)")
+    p.add_argument("--full-grid", action="store_const", const="grid", default=None,
+                   dest="design",
+                   help="solve every graft of the grid in every member instead of the "
+                   "adaptive design (about four times the cases)")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
                    help="a comparison axis: the plan answers at each value of the case "
                    "setting KEY that is not measured, e.g. --vary "
@@ -617,6 +637,8 @@ _EXIT_STATUS = """exit status:
   8    --out (or report's DIR) cannot be created or written (nothing computed)
   9    sweep, nomogram, plan, report: a case failed, is damaged, stale, not run or in
        progress in another process: no answer written (report.md says which and why)
+  10   report: the study's next round was written (an answer to confirm, or an adaptive
+       design's cases): run its cases, then report again
   130  interrupted (SIGINT, Ctrl-C): nothing unfinished recorded; rerun to continue
   143  terminated (SIGTERM): the same
 Under mpirun, an error on any rank ends every rank with that status."""

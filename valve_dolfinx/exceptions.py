@@ -14,6 +14,7 @@ from enum import IntEnum
 
 __all__ = [
     "ExitCode",
+    "NextRoundError",
     "ValveError",
     "ParameterError",
     "ConfigurationError",
@@ -44,6 +45,7 @@ class ExitCode(IntEnum):
     OUTPUT_NOT_FOLDER = 7  #: the output path, or a folder above it, is a file
     OUTPUT_NOT_WRITABLE = 8  #: the output folder cannot be created or written
     STUDY_INCOMPLETE = 9  #: a study's case failed, is damaged, stale, not run or running: no answer
+    NEXT_ROUND = 10  #: ``report`` wrote the study's next round: run its cases, report again
     INTERRUPTED = 130  #: Ctrl-C (SIGINT): 128 + 2; nothing unfinished is recorded
     TERMINATED = 143  #: SIGTERM (kill, a batch system's time limit): 128 + 15
 
@@ -111,6 +113,13 @@ class StudyIncompleteError(ValveError):
     progress in another process): it has no answer, and its report lists them."""
 
     exit_code = ExitCode.STUDY_INCOMPLETE
+
+
+class NextRoundError(ValveError):
+    """``report`` decided the study's next round (an answer to confirm, an adaptive
+    design's cases) and wrote it: the answer printed is not final until its cases are run."""
+
+    exit_code = ExitCode.NEXT_ROUND
 
 
 class Interrupted(KeyboardInterrupt):

@@ -38,6 +38,9 @@ from valve_dolfinx.geometry.outline import LeafletShape
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.study.axes import axis_table, check_axis_values
 from valve_dolfinx.study.grid import (
+    ADAPTIVE,
+    ADAPTIVE_BUDGET,
+    DESIGNS,
     STUDY_HEIGHTS_PCT,
     STUDY_WIDTHS_PCT,
     TARGET_COAPTATION_MAX_MM,
@@ -124,6 +127,11 @@ FIELDS: dict[str, Field] = {
     "wall_time_limit_s": Field(
         "--wall-time-limit", "s", "wall-clock limit of each case (unset: the solver's)", 0.0,
         30 * 24 * 3600.0, low_open=True, why="the wall-clock limit of each case in seconds"),
+    "design": Field("--full-grid", "", "'adaptive': cases chosen in rounds by the fitted "
+                    "surface, within the budget; 'grid' (--full-grid): every graft of the grid "
+                    "in every member (docs/plan.md)"),
+    "budget": Field("--budget", "", "the most graft cases an adaptive plan solves per "
+                    "comparison value"),
 }
 #: keys whose value is a length, pressure or angle
 _NUMBERS = ("root_diameter_mm", "root_uncertainty_mm", "leaflet_free_edge_mm",
@@ -175,6 +183,8 @@ class PatientInput:
     mesh_size_mm: float | None = None
     wall_time_limit_s: float | None = None
     label: str = "patient"
+    design: str = ADAPTIVE
+    budget: int = ADAPTIVE_BUDGET
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise in place once
@@ -195,6 +205,13 @@ class PatientInput:
             raise ParameterError(f"{_name('label')} = {label!r}: give a plan name of 1-"
                                  f"{_LABEL_LENGTH} printable characters on one line")
         set_(self, "label", label.strip())
+        if self.design not in DESIGNS:
+            raise ParameterError(f"{_name('design')} = {self.design!r}: give 'adaptive' (the "
+                                 "default) or 'grid' (every graft of the grid)")
+        budget = self.budget
+        if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+            raise ParameterError(f"{_name('budget')} = {budget!r}: give a whole number of "
+                                 "graft cases >= 1")
         set_(self, "vary", _checked_vary(self.vary, self.case_settings()))
 
     # --- what the model takes ---------------------------------------------------------

@@ -152,7 +152,8 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
                          target_coaptation_mm=patient.target_coaptation_mm,
                          panel_cases=(), case=patient.case_settings(),
                          uncertain={ROOT_KEY: list(diameters)}, paths=patient.paths,
-                         vary={k: list(v) for k, v in patient.vary.items()})
+                         vary={k: list(v) for k, v in patient.vary.items()},
+                         design=patient.design, budget=patient.budget)
 
 
 # --- the plan's study ----------------------------------------------------------------------

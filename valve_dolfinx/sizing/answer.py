@@ -61,7 +61,8 @@ from valve_dolfinx.sizing.surface import (
 
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
            "common_size", "sizes_to_confirm", "solved_worst_case", "resample_paths",
-           "bootstrap_stability", "SEAL_PROBABILITY", "MIN_CELLS"]
+           "bootstrap_stability", "same_size", "SAME_SIZE_PCT", "member_label",
+           "member_values", "SEAL_PROBABILITY", "MIN_CELLS"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
@@ -69,6 +70,19 @@ SEAL_PROBABILITY = 0.9
 MIN_CELLS = 6
 #: the lattice step of the answer (per cent of the native leaflet)
 STEP_PCT = 1.0
+#: two sizes within this many per cent in width and in height are the same answer: about
+#: 0.6 mm of the native free edge and 0.4 mm of its height, below the millimetre a graft is
+#: trimmed to
+SAME_SIZE_PCT = 3.0
+
+
+def same_size(a: GraftSize | None, b: GraftSize | None) -> bool:
+    """Whether two sizes are the same answer: within :data:`SAME_SIZE_PCT` in W and H (two
+    "no graft" answers are the same)."""
+    if a is None or b is None:
+        return a is b
+    return (abs(a.width_pct - b.width_pct) <= SAME_SIZE_PCT
+            and abs(a.height_pct - b.height_pct) <= SAME_SIZE_PCT)
 
 
 @dataclass(frozen=True)
@@ -150,6 +164,9 @@ class SizingAnswer:
     highest: GraftSize | None = None
     highest_margin_mm: float | None = None
     shortfall_mm: float | None = None
+    #: the smallest qualifying size, when a confirmed size within :data:`SAME_SIZE_PCT` of
+    #: it is the answer instead (``read_answer``'s ``prefer``)
+    smallest: GraftSize | None = None
     why: str = ""
     text: str = ""
     lattice: Lattice | None = field(default=None, repr=False)
@@ -165,7 +182,7 @@ class SizingAnswer:
 
     def to_dict(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "lattice"}
-        for key in ("size", "highest"):
+        for key in ("size", "highest", "smallest"):
             size = out[key]
             out[key] = None if size is None else {"label": size.label, **size._asdict()}
         out["resolution"] = self.resolution.to_dict()
@@ -258,10 +275,18 @@ def _axis(low: float, high: float) -> np.ndarray:
     return np.unique(np.concatenate([[low], inner[(inner > low) & (inner < high)], [high]]))
 
 
-def _member_label(uncertain: tuple[tuple[str, Any], ...]) -> str:
+def member_label(uncertain: tuple[tuple[str, Any], ...]) -> str:
     """``key=value, ...`` of an uncertainty member ("" without uncertainty axes)."""
     return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                      for k, v in uncertain)
+
+
+def member_values(tables: Sequence[MemberTable]) -> dict[str, tuple]:
+    """The uncertainty members of ``tables`` (paths merged): ``{label: axis values}``."""
+    values: dict[str, tuple] = {}
+    for table in tables:
+        values.setdefault(member_label(table.uncertain), table.values)
+    return values
 
 
 def _members(tables: Sequence[MemberTable], target_mm: float | None
@@ -271,7 +296,7 @@ def _members(tables: Sequence[MemberTable], target_mm: float | None
     values: dict[str, tuple] = {}
     merged: dict[str, float | None] = {}
     for table in tables:
-        label = _member_label(table.uncertain)
+        label = member_label(table.uncertain)
         values.setdefault(label, table.values)
         if merged.get(label) is None:
             merged[label] = targets[table.label]
@@ -288,11 +313,15 @@ def _dims(leaflet: LeafletShape, size: GraftSize) -> tuple[float, float]:
 
 def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float | None = None,
                 *, comparison: Mapping[str, Any] | None = None,
-                seal_threshold: float = SEAL_PROBABILITY) -> SizingAnswer:
+                seal_threshold: float = SEAL_PROBABILITY,
+                prefer: Sequence[GraftSize] = ()) -> SizingAnswer:
     """The answer of one comparison value (its member ``tables``) from ``fit``.
 
     ``target_mm`` is the minimum coaptation height to reach in every member; None takes
-    each member's normal valve's.
+    each member's normal valve's.  ``prefer`` are sizes solved in every member whose
+    confirmation held: the first of them that qualifies and is the same answer as the
+    smallest qualifying size (:func:`same_size`) is the answer instead, so that an answer
+    does not creep by a per cent per round of confirmation.
     """
     values, targets, source = _members(tables, target_mm)
     answer = SizingAnswer(dict(comparison or {}), list(values), targets, source,
@@ -311,8 +340,8 @@ def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float |
     ww, hh = np.meshgrid(widths, heights)
     grid = [GraftSize(float(w), float(h)) for w, h in zip(ww.ravel(), hh.ravel(), strict=True)]
     margins, sds, probabilities = [], [], []
-    for label, member_values in values.items():
-        points = [SurfacePoint(s.width_pct, s.height_pct, member_values) for s in grid]
+    for label, axis_values in values.items():
+        points = [SurfacePoint(s.width_pct, s.height_pct, axis_values) for s in grid]
         mean, sd = fit.surface.predict(points)
         margins.append(mean - targets[label])
         sds.append(sd)
@@ -346,6 +375,12 @@ def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float |
             answer.text = _short_text(answer, fit)
         return answer
     chosen = min(np.flatnonzero(qualifies), key=lambda i: (grid[i].area_ratio, *grid[i]))
+    index = {tuple(size): i for i, size in enumerate(grid)}
+    kept = [index[tuple(p)] for p in prefer if tuple(p) in index]
+    kept = [i for i in kept if qualifies[i] and same_size(grid[i], grid[chosen])]
+    if kept and kept[0] != chosen:
+        answer.smallest = grid[chosen]
+        chosen = kept[0]
     m = int(limiting[chosen])
     answer.size = grid[chosen]
     answer.margin_mm, answer.margin_sd_mm = float(worst[chosen]), float(sds[m, chosen])
@@ -408,6 +443,11 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
                   f"the target{where} ({answer.predicted_height_mm:.2f} mm against "
                   f"{target:.2f} mm, ± {answer.margin_sd_mm:.2f} mm), within the resolution "
                   f"of {margin_text(tol)} mm.")
+    if answer.smallest is not None:
+        margin += (f" It is a size solved in every member whose confirmation held; the "
+                   f"smallest qualifying size, {answer.smallest.label}, is within "
+                   f"{SAME_SIZE_PCT:g} points of it in width and height, the same answer at "
+                   "the millimetre a graft is trimmed to.")
     band = answer.band
     also = (f"Sizes that also qualify: {band['sizes']} at {STEP_PCT:g} % steps, W "
             f"{band['width_pct'][0]:g}–{band['width_pct'][1]:g} %, H {band['height_pct'][0]:g}"
@@ -488,7 +528,7 @@ def solved_worst_case(answer: SizingAnswer, tables: Sequence[MemberTable], size:
             value = _number(row, FIGURE)
             if ((float(row["graft_width_pct"]), float(row["graft_height_pct"])) == tuple(size)
                     and row.get("converged") and math.isfinite(value)):
-                heights.setdefault(_member_label(table.uncertain), []).append(value)
+                heights.setdefault(member_label(table.uncertain), []).append(value)
     margins = {}
     for member in answer.members:
         target = answer.targets_mm.get(member)
@@ -525,7 +565,7 @@ def resample_paths(tables: Sequence[MemberTable], rng: np.random.Generator
 
 
 def bootstrap_stability(tables: Sequence[MemberTable], answer: SizingAnswer,
-                        resamples: int = 20, *, points: float = 3.0, seed: int = 0,
+                        resamples: int = 20, *, points: float = SAME_SIZE_PCT, seed: int = 0,
                         target_mm: float | None = None) -> tuple[float, list[GraftSize | None]]:
     """The share of path resamples (:func:`resample_paths`) whose answer stays within
     ``points`` per cent of ``answer`` in both W and H (a "no graft" matches only "no graft"),

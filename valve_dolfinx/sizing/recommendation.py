@@ -22,6 +22,7 @@ from valve_dolfinx.result import margin_text, shortfall_digits
 from valve_dolfinx.sizing.answer import (
     MemberTable,
     SizingAnswer,
+    StudyFit,
     fit_study,
     read_answer,
     sizes_to_confirm,
@@ -71,6 +72,9 @@ class Recommendation:
     incompetent_targets: dict[str, str] = field(default_factory=dict)
     confirmations: list[dict] = field(default_factory=list)
     text: str = ""
+    #: the fit the answer was read from and the member tables it read (not written out)
+    fit: StudyFit | None = field(default=None, repr=False)
+    tables: list[MemberTable] = field(default_factory=list, repr=False)
 
     @property
     def next_confirmation(self) -> GraftSize | None:
@@ -237,11 +241,20 @@ def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | No
     """
     confirmed = confirmed or {}
     fit = fit_study([t for tables in groups for t in tables], ladder=ladder)
-    return [_recommendation(read_answer(fit, tables, target_mm,
-                                        comparison=dict(tables[0].comparison) if tables else {}),
-                            tables, target_mm, n_paths,
-                            [GraftSize(*s) for s in confirmed.get(c, ())])
-            for c, tables in enumerate(groups)]
+    recs = []
+    for c, tables in enumerate(groups):
+        comparison = dict(tables[0].comparison) if tables else {}
+        sizes = [GraftSize(*s) for s in confirmed.get(c, ())]
+        answer = read_answer(fit, tables, target_mm, comparison=comparison)
+        rec = _recommendation(answer, tables, target_mm, n_paths, sizes)
+        held = [rec.cell(entry["graft"]).size for entry in rec.confirmations if entry["holds"]]
+        if held and answer.size is not None and answer.size not in held:
+            again = read_answer(fit, tables, target_mm, comparison=comparison, prefer=held)
+            if again.size != answer.size:
+                rec = _recommendation(again, tables, target_mm, n_paths, sizes)
+        rec.fit, rec.tables = fit, list(tables)
+        recs.append(rec)
+    return recs
 
 
 def recommend(tables: Sequence[MemberTable] | Sequence[Mapping], target_mm: float | None = None,

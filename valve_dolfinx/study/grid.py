@@ -35,6 +35,7 @@ from valve_dolfinx.config import (
 )
 from valve_dolfinx.exceptions import ParameterError, check_range
 from valve_dolfinx.geometry.outline import GRAFT_TOO_LARGE, GRAFT_TOO_SMALL, MAX_GRAFT_PCT
+from valve_dolfinx.sizing.design import initial_design
 from valve_dolfinx.study.axes import (
     COMPARISON,
     UNCERTAINTY,
@@ -44,6 +45,8 @@ from valve_dolfinx.study.axes import (
 )
 from valve_dolfinx.study.layout import (
     NORMAL_CASE,
+    Point,
+    Rounds,
     StudyCase,
     StudyLayout,
     case_name,
@@ -69,6 +72,11 @@ log = logging.getLogger(__name__)
 #: The published study grid (SPEC §1, §7): graft width and height enlargements in per cent
 STUDY_WIDTHS_PCT = (0.0, 7.0, 14.0, 21.0, 27.0)
 STUDY_HEIGHTS_PCT = (0.0, 13.0, 27.0, 40.0)
+#: the designs of a study: every graft of the grid, or rounds chosen by the surface
+GRID, ADAPTIVE = "grid", "adaptive"
+DESIGNS = (GRID, ADAPTIVE)
+#: an adaptive study's default case budget (graft cases)
+ADAPTIVE_BUDGET = 40
 #: Cases drawn as figure panels besides the normal valve
 DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
 #: the range (mm) of a target minimum coaptation height, in every command: above 0, at
@@ -175,6 +183,13 @@ class StudySettings:
     paths
         Numerical paths along which every graft is solved
         (:data:`valve_dolfinx.study.paths.PATHS`; always uncertainty).
+    design
+        ``"grid"``: every graft of the grid in every member; ``"adaptive"``: the grid's
+        width and height range only, solved from a small initial design in rounds chosen
+        by the fitted surface (:mod:`valve_dolfinx.sizing.design`).
+    budget
+        An adaptive study's most graft cases per comparison value (the normal valves not
+        counted); it stops there, saying what is not settled.
 
     An axis key may not also be set by ``mesh_size_mm`` or ``wall_time_limit_s``, by a path
     of the study, or by ``case`` to anything but its default value.
@@ -192,6 +207,8 @@ class StudySettings:
     vary: dict = field(default_factory=dict)
     uncertain: dict = field(default_factory=dict)
     paths: int = 1
+    design: str = GRID
+    budget: int = ADAPTIVE_BUDGET
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise in place once
@@ -216,6 +233,14 @@ class StudySettings:
         if isinstance(ranks, bool) or not isinstance(ranks, int) or ranks < 1:
             raise ParameterError(f"ranks_per_case = {ranks!r} must be a whole number >= 1 "
                                  "(MPI ranks that share one case)")
+        if self.design not in DESIGNS:
+            raise ParameterError(f"design = {self.design!r} is not one of "
+                                 f"{', '.join(DESIGNS)}: 'grid' solves every graft of the "
+                                 "grid, 'adaptive' (--adaptive) a design chosen in rounds")
+        budget = self.budget
+        if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+            raise ParameterError(f"budget = {budget!r} must be a whole number >= 1: the most "
+                                 "graft cases an adaptive study solves (--budget)")
         panels = (self.panel_cases,) if isinstance(self.panel_cases, str) else self.panel_cases
         set_(self, "panel_cases", tuple(str(p) for p in panels))
         if not isinstance(self.case, dict):
@@ -282,11 +307,30 @@ class StudySettings:
         return (*(StudyAxis(k, v, COMPARISON) for k, v in self.vary.items()),
                 *(StudyAxis(k, v, UNCERTAINTY) for k, v in self.uncertain.items()))
 
-    def layout(self, confirm: dict | None = None) -> StudyLayout:
+    @property
+    def adaptive(self) -> bool:
+        return self.design == ADAPTIVE
+
+    def initial_points(self) -> tuple[Point, ...]:
+        """Round 0 of an adaptive study (:func:`valve_dolfinx.sizing.design.initial_design`
+        over the grid's range, for every comparison value); none for a grid."""
+        if not self.adaptive:
+            return ()
+        n_uncertain = math.prod(len(v) for v in self.uncertain.values())
+        n_comparisons = math.prod(len(v) for v in self.vary.values())
+        design = initial_design((self.widths_pct[0], self.widths_pct[-1]),
+                                (self.heights_pct[0], self.heights_pct[-1]), n_uncertain,
+                                self.paths)
+        return tuple(Point(c, m, tuple(size)) for c in range(n_comparisons)
+                     for m, size in design)
+
+    def layout(self, rounds: Rounds = ()) -> StudyLayout:
         """Every case, its configuration and where it stands among the axes, with the
-        confirmations ``confirm`` (:func:`valve_dolfinx.study.layout.study_layout`)."""
-        return study_layout(self.base_case(), self.axes, self.paths, self.widths_pct,
-                            self.heights_pct, self.include_normal, confirm)
+        rounds after round 0 ``rounds`` (:func:`valve_dolfinx.study.layout.read_rounds`;
+        :func:`valve_dolfinx.study.layout.study_layout`)."""
+        grid = ((), ()) if self.adaptive else (self.widths_pct, self.heights_pct)
+        return study_layout(self.base_case(), self.axes, self.paths, *grid,
+                            self.include_normal, (self.initial_points(), *rounds))
 
     def cases(self) -> list[StudyCase]:
         """Every case, in the fixed order that ``--case-index`` counts."""

@@ -24,11 +24,17 @@ A path may start its grafts from the loaded normal valve of the same member
 that source (``start_from``), and its identity (:func:`case_digest`) includes
 the source's, so a changed source recomputes it.
 
-Order: the normal valves first, then the grafts, each in slot order
-(comparison values, then members, then W, then H, as given).  The case index
-(``--case-index``) is the position in that order; a source always precedes the
-cases that start from it.  The confirmations of an answer (sizes off the grid, listed in
-the study folder's :data:`CONFIRM_FILE`) come after the grid's cases.
+Beside the grid, a study solves *points* added in rounds: a graft size in one member,
+or in every member (the confirmation of an answer), of one comparison value.  An adaptive
+study (:mod:`valve_dolfinx.sizing.design`) has no grid: its round 0 is its initial
+design, and every later round is decided from the cases solved before it.  The rounds
+after round 0 are listed in the study folder's :data:`ROUNDS_FILE`.
+
+Order: the normal valves first, then the grid's grafts, each in slot order
+(comparison values, then members, then W, then H, as given), then the points of each
+round in the order they were added.  The case index (``--case-index``) is the position
+in that order, so a round never renumbers the cases before it; a source always precedes
+the cases that start from it.
 """
 
 from __future__ import annotations
@@ -55,8 +61,10 @@ from valve_dolfinx.study.paths import START_FROM_NORMAL, StudyPath, study_paths
 
 __all__ = [
     "NORMAL_CASE",
-    "CONFIRM_FILE",
-    "read_confirmations",
+    "ROUNDS_FILE",
+    "Point",
+    "read_rounds",
+    "rounds_data",
     "StudyCase",
     "Member",
     "StudyLayout",
@@ -68,13 +76,41 @@ __all__ = [
 
 #: Name of the normal valve's case folder (before any axis values)
 NORMAL_CASE = "normal"
-#: the study folder's list of the sizes solved to confirm an answer, per comparison index
-#: (``{"confirm": {"0": [[W, H], ...]}}``), written by the sweep, read by every reader
-CONFIRM_FILE = "confirm.json"
+#: the study folder's rounds of points after round 0 (``{"rounds": [[{"comparison": c,
+#: "member": m or null, "size": [W, H]}, ...], ...]}``; member null: every member, the
+#: confirmation of an answer), written by the sweep and by ``report``, read by every reader
+ROUNDS_FILE = "rounds.json"
 
 Size = tuple[float, float] | None
 #: (comparison index, member index, graft size or None for the normal valve)
 Slot = tuple[int, int, Size]
+
+
+@dataclass(frozen=True)
+class Point:
+    """A graft size added to a study in a round: in one member (its index among the
+    study's members) or, with ``member`` None, in every member (an answer's confirmation)
+    of comparison value ``comparison``."""
+
+    comparison: int
+    member: int | None
+    size: tuple[float, float]
+
+    @property
+    def confirms(self) -> bool:
+        return self.member is None
+
+    def to_dict(self) -> dict:
+        return {"comparison": self.comparison, "member": self.member,
+                "size": list(self.size)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> Point:
+        member = data.get("member")
+        return cls(int(data["comparison"]), None if member is None else int(member),
+                   (float(data["size"][0]), float(data["size"][1])))
+
+Rounds = Sequence[Sequence[Point]]
 
 
 def case_name(width_pct: float | None, height_pct: float | None) -> str:
@@ -121,8 +157,9 @@ class StudyCase:
         Name of the case whose loaded state this one starts from; ``None``: the unloaded
         valve.
     confirmation
-        A size off the grid that the answer proposed, solved to confirm it
-        (:data:`CONFIRM_FILE`).
+        A size an answer proposed, solved in every member to confirm it.
+    round
+        The round that added it (0: the grid, or an adaptive study's initial design).
     """
 
     index: int
@@ -132,6 +169,7 @@ class StudyCase:
     values: tuple[tuple[str, Any], ...] = ()
     start_from: str | None = None
     confirmation: bool = False
+    round: int = 0
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -178,10 +216,12 @@ class StudyLayout:
     members
         The members of every cell, in order (uncertainty values, then path).
     sizes
-        The graft sizes ``(W, H)`` of the grid, width by width.
+        The graft sizes ``(W, H)`` of the grid, width by width (none in an adaptive study).
+    rounds
+        The points of every round, round 0 first (the grid's cases are not listed).
     confirm
-        Per comparison index, the sizes off the grid solved to confirm its answer, in the
-        order they were proposed.
+        Per comparison index, the sizes solved in every member to confirm its answer, in
+        the order they were proposed.
     cases
         Every case in the fixed order of ``--case-index``.
     configs, digests
@@ -199,7 +239,13 @@ class StudyLayout:
     configs: Mapping[str, CaseConfig] = field(repr=False)
     digests: Mapping[str, str] = field(repr=False)
     slots: Mapping[Slot, str] = field(repr=False)
+    rounds: tuple[tuple[Point, ...], ...] = ()
     confirm: Mapping[int, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+
+    @property
+    def graft_cases(self) -> int:
+        """The number of graft cases (the normal valves left out)."""
+        return sum(not c.is_normal for c in self.cases)
 
     def case(self, name: str) -> StudyCase:
         return next(c for c in self.cases if c.name == name)
@@ -243,10 +289,11 @@ def _members(axes: Sequence[StudyAxis], paths: Sequence[StudyPath]) -> tuple[Mem
     return tuple(members)
 
 
-def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, sizes, confirm
-                  ) -> dict[Slot, CaseConfig]:
+def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, sizes, rounds
+                  ) -> tuple[dict[Slot, CaseConfig], dict[Slot, tuple[int, bool]]]:
     """The configuration of every slot (errors name the slot's axis values): the grid's, then
-    the confirmations' (so that the grid's case indices do not depend on them)."""
+    each round's points in order (so that no round renumbers the cases before it); and the
+    round and confirmation flag of every slot a round added."""
     configs: dict[Slot, CaseConfig] = {}
     plain: dict[tuple[int, int], CaseConfig] = {}
     for c, comparison in enumerate(comparisons):
@@ -265,12 +312,21 @@ def _slot_configs(base: Mapping, include_normal: bool, comparisons, members, siz
                     configs[(c, m, size)] = config.with_graft(*size)
             except ParameterError as err:
                 raise ParameterError(f"study case settings at {where}: {err}") from None
-    for c, extra in confirm.items():
-        for m in range(len(members)):
-            for size in extra:
-                if (c, m, size) not in configs:
-                    configs[(c, m, size)] = plain[(c, m)].with_graft(*size)
-    return configs
+    added: dict[Slot, tuple[int, bool]] = {}
+    for number, points in enumerate(rounds):
+        for point in points:
+            if point.comparison >= len(comparisons):
+                continue
+            where = range(len(members)) if point.confirms else (point.member,)
+            for m in where:
+                slot = (point.comparison, m, point.size)
+                if slot not in configs:
+                    try:
+                        configs[slot] = plain[(point.comparison, m)].with_graft(*point.size)
+                    except ParameterError as err:
+                        raise ParameterError(f"round {number} of the study: {err}") from None
+                    added[slot] = (number, point.confirms)
+    return configs, added
 
 
 def _values(slots: Sequence[Slot], axes: Sequence[StudyAxis], comparisons, members
@@ -302,19 +358,16 @@ def _name(size: Size, values: tuple[tuple[str, Any], ...]) -> str:
 
 def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
                  widths_pct: Sequence[float], heights_pct: Sequence[float],
-                 include_normal: bool = True,
-                 confirm: Mapping[int, Sequence[tuple[float, float]]] | None = None
-                 ) -> StudyLayout:
+                 include_normal: bool = True, rounds: Rounds = ()) -> StudyLayout:
     """Enumerate a study's cases: build every slot's configuration, merge slots that are the
     same case, name the cases and order them (see the module docstring).
 
     ``base_case`` is the case settings every case starts from, ``axes`` the comparison and
     uncertainty axes, ``paths`` the number of numerical paths, and the grid's widths and
     heights the graft sizes (:meth:`valve_dolfinx.study.grid.StudySettings.layout` passes
-    its own, checked).  ``confirm`` adds, per comparison index, sizes off the grid in every
-    member of that comparison value (the confirmations of its answer,
-    :data:`CONFIRM_FILE`): ordinary cases, named and identified as every other, after the
-    grid's.
+    its own, checked; none for an adaptive study).  ``rounds`` adds, round by round, its
+    :class:`Point` s: ordinary cases, named and identified as every other, after the
+    grid's (points of a comparison value the study does not have are left out).
 
     Raises
     ------
@@ -328,9 +381,15 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
     comparisons = tuple(_product([a for a in axes if a.is_comparison]))
     members = _members([a for a in axes if not a.is_comparison], paths)
     sizes = tuple((w, h) for w in widths_pct for h in heights_pct)
-    confirm = {int(c): tuple((float(w), float(h)) for w, h in extra)
-               for c, extra in (confirm or {}).items() if int(c) < len(comparisons)}
-    configs = _slot_configs(base_case, include_normal, comparisons, members, sizes, confirm)
+    rounds = tuple(tuple(p for p in points if p.comparison < len(comparisons))
+                   for points in rounds)
+    confirm: dict[int, tuple[tuple[float, float], ...]] = {}
+    for points in rounds:
+        for p in points:
+            if p.confirms and p.size not in confirm.get(p.comparison, ()):
+                confirm[p.comparison] = (*confirm.get(p.comparison, ()), p.size)
+    configs, added = _slot_configs(base_case, include_normal, comparisons, members, sizes,
+                                   rounds)
     digests: dict[Slot, str] = {}
     for slot, config in configs.items():  # normal valves first: the grafts' sources
         if slot[2] is None:
@@ -358,16 +417,17 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
         start = None
         if size is not None and members[m].path.start == START_FROM_NORMAL:
             start = names[digests[(c, m, None)]]
+        number, confirms = added.get(slots[0], (0, False))
         cases.append(StudyCase(index, *(size or (None, None)), name=names[digest],
                                values=_values(slots, axes, comparisons, members),
-                               start_from=start,
-                               confirmation=size is not None and size not in sizes))
+                               start_from=start, confirmation=confirms, round=number))
     return StudyLayout(
         axes=axes, paths=paths, comparisons=comparisons, members=members, sizes=sizes,
         cases=tuple(cases),
         configs={names[d]: configs[slots[0]] for d, slots in groups.items()},
         digests={names[d]: d for d in groups},
-        slots={slot: names[digests[slot]] for slot in digests}, confirm=confirm)
+        slots={slot: names[digests[slot]] for slot in digests}, rounds=rounds,
+        confirm=confirm)
 
 
 def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
@@ -382,12 +442,17 @@ def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
             for label, cases in layout.member_cases(comparison).items()]
 
 
-def read_confirmations(out) -> dict[int, list[tuple[float, float]]]:
-    """The sizes solved to confirm each comparison value's answer, from the study folder
-    ``out``'s :data:`CONFIRM_FILE` (empty without one)."""
-    path = Path(out) / CONFIRM_FILE
+def read_rounds(out) -> tuple[tuple[Point, ...], ...]:
+    """The rounds after round 0 of the study folder ``out`` (:data:`ROUNDS_FILE`; none
+    without one)."""
+    path = Path(out) / ROUNDS_FILE
     if not path.is_file():
-        return {}
+        return ()
     data = json.loads(path.read_text(encoding="utf-8"))
-    return {int(c): [(float(w), float(h)) for w, h in sizes]
-            for c, sizes in (data.get("confirm") or {}).items()}
+    return tuple(tuple(Point.from_dict(p) for p in points)
+                 for points in data.get("rounds") or ())
+
+
+def rounds_data(rounds: Rounds) -> dict:
+    """What :data:`ROUNDS_FILE` holds for ``rounds`` (those after round 0)."""
+    return {"rounds": [[p.to_dict() for p in points] for points in rounds]}

@@ -34,9 +34,10 @@ from valve_dolfinx.study.layout import (
     StudyLayout,
     case_name,
     layout_tables,
-    read_confirmations,
+    read_rounds,
 )
 from valve_dolfinx.study.nomogram import is_nomogram, write_nomogram
+from valve_dolfinx.study.rounds import RoundPlan, plan_round
 from valve_dolfinx.study.store import CASES_DIR, SETTINGS_FILE, claim_owner, owner_text
 from valve_dolfinx.study.table import case_rows, write_tables
 
@@ -75,6 +76,9 @@ class StudyReport:
     missing: list[str] = field(default_factory=list)
     in_progress: dict[str, str] = field(default_factory=dict)
     files: list[Path] = field(default_factory=list)
+    #: the next round decided from the answers, and why the study stops (complete
+    #: studies only)
+    next_round: RoundPlan | None = None
 
     @property
     def unfinished(self) -> dict[str, list[str]]:
@@ -261,6 +265,8 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
              *_what_was_run(out, rows, report.layout, settings, report.unfinished), ""]
     if report.complete:
         lines += ["## Recommendation", ""]
+        if report.next_round is not None and report.next_round.text:
+            lines += [report.next_round.text, ""]
     else:
         lines += ["## No answer: the study is incomplete", "", report.incomplete_text, "",
                   "No recommendation, sizing map or nomogram is written until every case has "
@@ -344,7 +350,7 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
     settings = settings or read_settings(out)
     rows = case_rows(out)
     inferred = settings or _settings_from_rows(rows)
-    layout = inferred.layout(read_confirmations(out)) if inferred is not None else None
+    layout = inferred.layout(read_rounds(out)) if inferred is not None else None
     if target_mm is None and settings is not None:
         target_mm = settings.target_coaptation_mm
     report = StudyReport(out, rows, layout, [])
@@ -361,10 +367,13 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
             report.recommendations = recommend_all(
                 [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
                 target_mm, n_paths=len(layout.paths), confirmed=layout.confirm)
+            report.next_round = plan_round(report.recommendations, layout, inferred.design,
+                                           inferred.budget)
     files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None, "complete": report.complete,
         "recommendations": [rec.to_dict() for rec in report.recommendations],
+        "design": report.next_round.to_dict() if report.next_round else None,
         "cases": len(rows), "missing": report.missing, "unfinished": report.unfinished}))
     if not report.complete:
         remove_report(out, ANSWER_FILES)

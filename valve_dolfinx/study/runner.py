@@ -66,10 +66,10 @@ from valve_dolfinx.config import case_name
 from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.io import write_json
 from valve_dolfinx.result import CaseResult, competence_text, load_case
-from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
-from valve_dolfinx.study.layout import CONFIRM_FILE, StudyCase, StudyLayout, read_confirmations
+from valve_dolfinx.study.layout import ROUNDS_FILE, StudyCase, StudyLayout, read_rounds
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
+from valve_dolfinx.study.rounds import append_round
 from valve_dolfinx.study.store import (
     RESULT_FILE,
     SETTINGS_FILE,
@@ -488,7 +488,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(out)
     t0, started = time.perf_counter(), _now()
-    layout = settings.layout(comm.bcast(_confirmations(out, settings) if comm.rank == 0
+    layout = settings.layout(comm.bcast(_rounds_of(out, settings) if comm.rank == 0
                                         else None, root=0))
     cases = layout.select(case_indices)
     todo = _with_sources(layout, cases)
@@ -527,9 +527,9 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             monitor.stop()
         group.Free()
     if case_indices is None and report:
-        layout, more = _confirm(settings, out, comm, group_size=settings.ranks_per_case,
-                                layout=layout, case_function=case_function, poll_s=poll_s,
-                                run=run, wait=wait)
+        layout, more = _run_rounds(settings, out, comm, layout=layout,
+                                   case_function=case_function, poll_s=poll_s, run=run,
+                                   wait=wait)
         computed += more
         todo = list(layout.cases)
         cases = list(layout.cases)
@@ -550,8 +550,8 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     return outcome
 
 
-def _confirmations(out: Path, settings: StudySettings) -> dict:
-    """The confirmations of a study folder's answers, if it was run with these settings
+def _rounds_of(out: Path, settings: StudySettings) -> tuple:
+    """The rounds after round 0 of a study folder, if it was run with these settings
     (another study's, in a folder being reused, are dropped with their file)."""
     saved = out / SETTINGS_FILE
     try:
@@ -560,50 +560,42 @@ def _confirmations(out: Path, settings: StudySettings) -> dict:
     except (ValueError, KeyError, ValveError, OSError):
         same = False
     if not same:
-        if (out / CONFIRM_FILE).is_file():
-            (out / CONFIRM_FILE).unlink()
-        return {}
-    return read_confirmations(out)
+        if (out / ROUNDS_FILE).is_file():
+            (out / ROUNDS_FILE).unlink()
+        return ()
+    return read_rounds(out)
 
 
-def _confirm(settings: StudySettings, out: Path, comm: MPI.Comm, *, group_size: int,
-             layout: StudyLayout, case_function: CaseFunction, poll_s: float, run: str,
-             wait: bool) -> tuple[StudyLayout, list[str]]:
-    """Confirm each comparison value's answer by simulation, in at most
-    :data:`~valve_dolfinx.sizing.recommendation.CONFIRM_ROUNDS` rounds.
+def _run_rounds(settings: StudySettings, out: Path, comm: MPI.Comm, *, layout: StudyLayout,
+                case_function: CaseFunction, poll_s: float, run: str, wait: bool
+                ) -> tuple[StudyLayout, list[str]]:
+    """Run the study's rounds after the cases of ``layout``, until one is empty.
 
-    A round reads the answers from the cases so far (:func:`build_report`); each answer
-    whose size is not solved in every member, and whose last confirmation (if any) missed,
-    is added to :data:`~valve_dolfinx.study.layout.CONFIRM_FILE` and solved in every
-    member as ordinary cases.  The next round's fit includes them: a confirmation that
-    misses moves the answer, which the next round confirms in turn.  Returns the layout
-    with every confirmation and the cases computed."""
+    A round reads the answers from the cases so far (:func:`build_report`) and decides the
+    next round (:func:`~valve_dolfinx.study.rounds.plan_round`: the answers'
+    confirmations; in an adaptive study also the sizes that could still move them, within
+    its budget), appends it to :data:`~valve_dolfinx.study.layout.ROUNDS_FILE` and solves
+    its cases as ordinary cases.  An incomplete study (a case failed) decides nothing.
+    Returns the layout with every round and the cases computed."""
     computed: list[str] = []
-    for _ in range(CONFIRM_ROUNDS):
-        confirm = None
+    while True:
+        points = None
         if comm.rank == 0:
             report = build_report(out, settings)
-            confirm = {c: list(v) for c, v in layout.confirm.items()}
-            added = False
-            for c, rec in enumerate(report.recommendations):
-                size = rec.next_confirmation
-                if size is not None and tuple(size) not in confirm.get(c, []):
-                    confirm.setdefault(c, []).append(tuple(size))
-                    added = True
-                    log.info("confirming %s%s: solving it in every member", size.label,
-                             f" ({layout.comparison_label(c)})" if rec.comparison else "")
-            if added:
-                write_json(out / CONFIRM_FILE, {"confirm": {str(c): [list(s) for s in v]
-                                                            for c, v in confirm.items()}})
-            else:
-                confirm = None
-        confirm = comm.bcast(confirm, root=0)
-        if confirm is None:
+            plan = report.next_round
+            if plan is not None and plan.points:
+                append_round(out, plan)
+                points = plan.points
+                log.info("round %d: %d new case(s)%s", len(layout.rounds), plan.new_cases,
+                         f" ({plan.text})" if plan.text else "")
+        points = comm.bcast(points, root=0)
+        if not points:
             break
         known = {c.name for c in layout.cases}
-        layout = settings.layout(confirm)
+        layout = settings.layout(comm.bcast(read_rounds(out) if comm.rank == 0 else None,
+                                            root=0))
         new = [c for c in layout.cases if c.name not in known]
-        group = comm.Split(comm.rank // group_size, comm.rank)
+        group = comm.Split(comm.rank // settings.ranks_per_case, comm.rank)
         try:
             done, _ = _work(group, out, layout, _with_sources(layout, new), case_function,
                             poll_s, run, wait)
@@ -631,5 +623,5 @@ def _states(out: Path, layout: StudyLayout, cases: Sequence[StudyCase]
 def study_status(settings: StudySettings, out: str | Path) -> list[tuple[StudyCase, str]]:
     """Each case and its state in ``out``: finished, failed, damaged, changed, running or
     pending."""
-    layout = settings.layout(read_confirmations(out))
+    layout = settings.layout(read_rounds(out))
     return _states(Path(out), layout, layout.cases)
