@@ -17,10 +17,8 @@ from pathlib import Path
 import pytest
 
 from valve_dolfinx.config import (
-    DESCRIPTIONS,
     CaseConfig,
     config_toml,
-    describe,
     load_config,
     setting_keys,
     settings_hash,
@@ -66,18 +64,6 @@ def test_printed_defaults_load_as_the_defaults(tmp_path, capsys):
     assert len(settings) + len(unset) == len(setting_keys(CaseConfig().to_dict()))
     assert all("  # " in line for line in settings + unset)
     assert "pressure_mmhg = 80.0  # mmHg; " in text and "mesh_size = 0.8  # mm; " in text
-
-
-def test_every_setting_has_a_unit_and_a_meaning():
-    data = CaseConfig().to_dict()
-    for key, value in data.items():
-        for sub in value if isinstance(value, dict) else [None]:
-            section, name = (key, sub) if sub is not None else ("", key)
-            unit, meaning = describe(section, name)
-            assert meaning, f"{section}.{name}"
-    listed = sum(len(v) for k, v in DESCRIPTIONS.items() if k != "material")
-    assert listed + len(DESCRIPTIONS["material"]) * 2 == sum(
-        len(v) if isinstance(v, dict) else 1 for v in data.values())
 
 
 def test_a_changed_configuration_round_trips(tmp_path):

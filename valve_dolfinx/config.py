@@ -5,7 +5,10 @@ the pressure, the tissues, the root, the contact law, the solver path and its
 numerical settings, and the analysis settings.  Numbers that every case takes alike are
 not settings: they are constants of the module that uses them (each solver path's step
 control, the contact's taper at the commissures, ...) or fields of a parameter set marked
-:data:`NOT_A_SETTING`.  Each nested parameter set
+:data:`NOT_A_SETTING`.  Every setting is a dataclass field declared with
+:func:`~valve_dolfinx.setting_fields.setting`, which carries its unit and meaning: the
+comments of :func:`config_toml`, :func:`describe` and the settings table of docs/outputs.md
+(:func:`settings_table_markdown`) read them there.  Each nested parameter set
 validates its own ranges; :class:`CaseConfig` checks how they combine.  Nothing
 here imports DOLFINx or PETSc, so a configuration is loaded and checked in a
 fraction of a second, before any mesh is built.
@@ -19,21 +22,24 @@ import math
 import re
 import tomllib
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.contact_parameters import ContactParameters
-from valve_dolfinx.exceptions import (
-    ConfigurationError,
-    InputFileError,
-    ParameterError,
-    check_range,
-)
+from valve_dolfinx.exceptions import ConfigurationError, InputFileError, ParameterError
 from valve_dolfinx.geometry.valve import ValveParameters
 from valve_dolfinx.io import atomic_write
 from valve_dolfinx.materials import BOVINE_PERICARDIUM, NATIVE_LEAFLET, FungMaterial
 from valve_dolfinx.mechanics.root import RootParameters
+from valve_dolfinx.setting_fields import (
+    NOT_A_SETTING,
+    check_setting,
+    is_graft_only,
+    is_setting,
+    setting,
+    setting_field,
+)
 from valve_dolfinx.solvers.parameters import DynamicsParameters, PseudoTransientParameters
 
 __all__ = [
@@ -45,8 +51,9 @@ __all__ = [
     "ContactParameters",
     "CaseConfig",
     "case_name",
-    "DESCRIPTIONS",
     "describe",
+    "settings_table_markdown",
+    "write_settings_table",
     "load_config",
     "read_config_file",
     "apply_overrides",
@@ -93,20 +100,6 @@ _WALL_CLOCK_KEYS = ("wall_time_limit_s",)
 #: the analysis of a loaded state changes what a result says.
 ANALYSIS_VERSION = 2
 
-#: settings that only a graft uses (dotted keys; a key that names a table covers all of it):
-#: the normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`),
-#: so normal valves that differ in graft settings alone are one case
-GRAFT_ONLY_SETTINGS = ("graft_material", "graft_bending_modulus_kpa", "graft_tension_field",
-                       "geometry.graft_fibre_angle_deg", "geometry.graft_placement",
-                       "geometry.billow_mm")
-
-#: ``metadata`` of a parameter set's field that is not a setting: a fixed number of the
-#: model, or a label, that every case takes at its default.  It is left out of the
-#: configuration, its TOML and its hash; code and tests that build the parameter set
-#: themselves may still give it (:class:`ContactParameters`, ``FungMaterial.name``).
-NOT_A_SETTING = {"setting": False}
-
-
 #: the nested parameter sets of a CaseConfig, by field name
 _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
              "graft_material": FungMaterial, "root": RootParameters,
@@ -116,7 +109,8 @@ _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
 
 @dataclass
 class CaseConfig:
-    """Everything that defines one closure case (written beside every result).
+    """Everything that defines one closure case (written beside every result); each
+    setting's unit and meaning is on its field.
 
     ``symmetric_reference=True`` runs the cheap reference of SPEC §4 instead of
     the valve: the left-coronary leaflet alone, closing against the two planes
@@ -124,56 +118,70 @@ class CaseConfig:
     contact law sees the distance to the mirror image, as between leaflets).
 
     ``bending_modulus_kpa`` gives the native leaflets their flexural rigidity
-    ``D = E_b·t³/12`` (:mod:`valve_dolfinx.mechanics.bending`; 0 = pure membrane): it
-    gives the slack free-edge tip at the triple point a length scale instead of a fold
-    at the scale of the mesh (docs/model.md §3, with its effect on the figure of
-    merit).  ``graft_bending_modulus_kpa`` is the graft's own, with the
-    graft's thickness: fixed pericardium carries compression by bending.
-    ``graft_tension_field`` chooses how the graft carries compression: the tension-field
-    relaxed energy (the default: it wrinkles at no compressive stress, held by its bending
-    stiffness) or, false, the plain Fung law, which resists compression in-plane (SPEC §3;
-    the native leaflets always wrinkle).
-    ``solver`` picks the path to the equilibrium: ``"ptc"`` (the default:
-    pseudo-transient continuation with PETSc TS and SNES, contact and bending
-    in the Newton system from the first step,
-    :mod:`~valve_dolfinx.solvers.pseudo_transient`) or ``"bdf2"`` (SPEC §4: damped
-    BDF2 dynamics with PETSc TS, :mod:`~valve_dolfinx.solvers.dynamics`, the
-    cross-check).  Both stop at a static equilibrium.
-    ``nodulus_length_mm`` (1 mm: one leaflet thickness either side of the triple
-    point) is the free-edge length at the triple point treated as the nodulus of
-    Arantius by the coaptation heights (:mod:`valve_dolfinx.analysis.coaptation`);
-    0 leaves nothing out, and the raw minimum with the tip is always reported.
+    (:mod:`valve_dolfinx.mechanics.bending`): it gives the slack free-edge tip at the
+    triple point a length scale instead of a fold at the scale of the mesh (docs/model.md
+    §3, with its effect on the figure of merit); fixed pericardium carries compression by
+    bending, hence the graft's own.  ``graft_tension_field`` false resists compression
+    in-plane (SPEC §3; the native leaflets always wrinkle).  ``solver`` ``"ptc"``
+    (:mod:`~valve_dolfinx.solvers.pseudo_transient`) puts contact and bending in the Newton
+    system from the first step; ``"bdf2"`` is :mod:`~valve_dolfinx.solvers.dynamics`
+    (SPEC §4); both stop at a static equilibrium.  ``nodulus_length_mm`` (1 mm: one leaflet
+    thickness either side of the triple point) is left out of the coaptation heights
+    (:mod:`valve_dolfinx.analysis.coaptation`); the raw minimum with the tip is always
+    reported.
     """
 
-    geometry: ValveParameters = field(default_factory=ValveParameters)
-    pressure_mmhg: float = 80.0
-    native_material: FungMaterial = NATIVE_LEAFLET
-    graft_material: FungMaterial = BOVINE_PERICARDIUM
-    root: RootParameters = field(default_factory=RootParameters)
-    contact: ContactParameters = field(default_factory=ContactParameters)
-    solver: str = "ptc"
-    pseudo_transient: PseudoTransientParameters = field(
-        default_factory=PseudoTransientParameters)
-    dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
-    coaptation_threshold_mm: float = 0.5
-    nodulus_length_mm: float = NODULUS_LENGTH_MM
-    symmetric_reference: bool = False
-    bending_modulus_kpa: float = BENDING_MODULUS_KPA
-    graft_bending_modulus_kpa: float = GRAFT_BENDING_MODULUS_KPA
-    graft_tension_field: bool = True
+    geometry: ValveParameters = setting(default_factory=ValveParameters,
+                                        meaning="the valve's geometry and mesh (SPEC §1)")
+    pressure_mmhg: float = setting(80.0, "mmHg", "transvalvular diastolic pressure on the "
+                                   "aortic side")
+    native_material: FungMaterial = setting(NATIVE_LEAFLET, "", "the native leaflets' tissue "
+                                            "(Fung law, SPEC §3)")
+    graft_material: FungMaterial = setting(BOVINE_PERICARDIUM, "", "the graft's tissue (Fung "
+                                           "law, SPEC §3)", graft_only=True)
+    root: RootParameters = setting(default_factory=RootParameters,
+                                   meaning="the aortic root's wall (SPEC §2)")
+    contact: ContactParameters = setting(default_factory=ContactParameters,
+                                         meaning="the contact law (SPEC §5)")
+    solver: str = setting("ptc", "", "path to the loaded equilibrium: 'ptc' (pseudo-transient "
+                          "continuation, the default) or 'bdf2' (damped BDF2 dynamics, the "
+                          "cross-check)")
+    pseudo_transient: PseudoTransientParameters = setting(
+        default_factory=PseudoTransientParameters,
+        meaning="numerics of the pseudo-transient continuation (solver = 'ptc')")
+    dynamics: DynamicsParameters = setting(
+        default_factory=DynamicsParameters,
+        meaning="numerics of the damped BDF2 dynamics (solver = 'bdf2')")
+    coaptation_threshold_mm: float = setting(0.5, "mm", "leaflets closer than this to a "
+                                             "neighbour coapt")
+    nodulus_length_mm: float = setting(NODULUS_LENGTH_MM, "mm", "free-edge length at the "
+                                       "triple point treated as the nodulus of Arantius by "
+                                       "the coaptation heights (0: none)")
+    symmetric_reference: bool = setting(False, "", "true: one leaflet against the two ±60° "
+                                        "symmetry planes (the normal valve's cheap reference)")
+    bending_modulus_kpa: float = setting(BENDING_MODULUS_KPA, "kPa", "flexural modulus E_b of "
+                                         "the native leaflets, D = E_b·t³/12 with their "
+                                         "thickness (0: pure membrane)")
+    graft_bending_modulus_kpa: float = setting(GRAFT_BENDING_MODULUS_KPA, "kPa", "flexural "
+                                               "modulus E_b of the graft (fixed pericardium), "
+                                               "D = E_b·t³/12 with the graft's thickness (0: "
+                                               "pure membrane)", graft_only=True)
+    graft_tension_field: bool = setting(True, "", "how the graft carries compression: true, "
+                                        "the tension-field relaxed energy (it wrinkles); "
+                                        "false, the plain Fung law (it resists compression "
+                                        "in-plane)", graft_only=True)
 
     def __post_init__(self) -> None:
-        check_range("pressure_mmhg", self.pressure_mmhg, 0.0, 300.0, low_open=True,
-                    unit="mmHg", hint="diastolic aortic pressure is about 80 mmHg")
-        check_range("coaptation_threshold_mm", self.coaptation_threshold_mm, 0.0, 5.0,
-                    low_open=True, unit="mm")
-        check_range("bending_modulus_kpa", self.bending_modulus_kpa, 0.0, 1e5, unit="kPa",
-                    hint="0 switches the native leaflets' bending off; they are of order "
-                    "100-1000 kPa in flexure")
-        check_range("graft_bending_modulus_kpa", self.graft_bending_modulus_kpa, 0.0, 1e5,
-                    unit="kPa", low_hint="0 switches the graft's bending off",
-                    high_hint="that is beyond even the in-plane tensile modulus of fixed "
-                    "pericardium (tens of MPa)")
+        check_setting(self, "pressure_mmhg", 0.0, 300.0, low_open=True,
+                      hint="diastolic aortic pressure is about 80 mmHg")
+        check_setting(self, "coaptation_threshold_mm", 0.0, 5.0, low_open=True)
+        check_setting(self, "bending_modulus_kpa", 0.0, 1e5,
+                      hint="0 switches the native leaflets' bending off; they are of order "
+                      "100-1000 kPa in flexure")
+        check_setting(self, "graft_bending_modulus_kpa", 0.0, 1e5,
+                      low_hint="0 switches the graft's bending off",
+                      high_hint="that is beyond even the in-plane tensile modulus of fixed "
+                      "pericardium (tens of MPa)")
         if self.solver not in SOLVERS:
             raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
                                  "'ptc' (pseudo-transient continuation, the default) or "
@@ -221,7 +229,27 @@ class CaseConfig:
 def _setting_names(section: Any) -> list[str]:
     """The settings of a parameter set (class or instance): its fields but those marked
     :data:`NOT_A_SETTING`."""
-    return [f.name for f in fields(section) if f.metadata.get("setting", True)]
+    return [f.name for f in fields(section) if is_setting(f)]
+
+
+def _graft_only_settings() -> tuple[str, ...]:
+    """The dotted keys of the settings declared ``graft_only`` (a top-level field that is a
+    table covers all of it)."""
+    keys = []
+    for f in fields(CaseConfig):
+        if is_graft_only(f):
+            keys.append(f.name)
+        elif f.name in _SECTIONS:
+            keys += [f"{f.name}.{g.name}" for g in fields(_SECTIONS[f.name])
+                     if is_setting(g) and is_graft_only(g)]
+    return tuple(keys)
+
+
+#: settings that only a graft uses, from their fields' ``graft_only`` flag (dotted keys; a
+#: key that names a table covers all of it): the normal valve of a study takes them at their
+#: defaults (:meth:`CaseConfig.normal_valve`), so normal valves that differ in graft settings
+#: alone are one case
+GRAFT_ONLY_SETTINGS = _graft_only_settings()
 
 
 def _settings_of(section: Any) -> dict:
@@ -239,97 +267,63 @@ def case_name(geometry: ValveParameters) -> str:
 
 
 # --- meaning and unit of every setting ------------------------------------------------------
-#: ``key: (unit, meaning)`` of every setting, by table ("" = the top level; both materials
-#: share the "material" entries); `valve-dolfinx config` writes them as comments
-DESCRIPTIONS: dict[str, dict[str, tuple[str, str]]] = {
-    "": {
-        "pressure_mmhg": ("mmHg", "transvalvular diastolic pressure on the aortic side"),
-        "solver": ("", "path to the loaded equilibrium: 'ptc' (pseudo-transient "
-                   "continuation, the default) or 'bdf2' (damped BDF2 dynamics, the "
-                   "cross-check)"),
-        "coaptation_threshold_mm": ("mm", "leaflets closer than this to a neighbour coapt"),
-        "nodulus_length_mm": ("mm", "free-edge length at the triple point treated as the "
-                              "nodulus of Arantius by the coaptation heights (0: none)"),
-        "symmetric_reference": ("", "true: one leaflet against the two ±60° symmetry "
-                                "planes (the normal valve's cheap reference)"),
-        "bending_modulus_kpa": ("kPa", "flexural modulus E_b of the native leaflets, "
-                                "D = E_b·t³/12 with their thickness (0: pure membrane)"),
-        "graft_bending_modulus_kpa": ("kPa", "flexural modulus E_b of the graft (fixed "
-                                      "pericardium), D = E_b·t³/12 with the graft's "
-                                      "thickness (0: pure membrane)"),
-        "graft_tension_field": ("", "how the graft carries compression: true, the "
-                                "tension-field relaxed energy (it wrinkles); false, the plain "
-                                "Fung law (it resists compression in-plane)"),
-    },
-    "geometry": {
-        "root_diameter": ("mm", "root diameter the flat leaflets are sized on"),
-        "gamma_deg": ("deg", "angle γ of the attachment curve y = sin²x / tan γ"),
-        "commissure_height": ("mm", "height of the straight commissure segments"),
-        "mesh_size": ("mm", "target triangle edge length"),
-        "graft_width_pct": ("%", "graft width enlargement over the native leaflet "
-                            "(unset: the normal valve)"),
-        "graft_height_pct": ("%", "graft height enlargement over the native leaflet "
-                             "(unset: the normal valve)"),
-        "graft_fibre_angle_deg": ("deg", "fibre direction of the graft from the "
-                                  "circumferential direction"),
-        "graft_placement": ("", "initial 3-D placement of the slack graft: 'conformal' "
-                            "or 'billowed'"),
-        "billow_mm": ("mm", "bulge of a 'billowed' graft towards the valve axis "
-                      "(negative: towards the sinus)"),
-    },
-    "material": {
-        "c": ("kPa", "Fung stress scale"),
-        "A1": ("", "Fung coefficient of E11² (fibre)"),
-        "A2": ("", "Fung coefficient of E22² (cross-fibre)"),
-        "A3": ("", "Fung coefficient of 2·E11·E22"),
-        "A4": ("", "Fung coefficient of E12²"),
-        "A5": ("", "Fung coefficient of 2·E11·E12"),
-        "A6": ("", "Fung coefficient of 2·E22·E12"),
-        "thickness": ("mm", "tissue thickness (tension = thickness × stress)"),
-    },
-    "root": {
-        "free_edge_excess": ("", "free edges' length over the unpressurised root's "
-                             "circumference, minus 1"),
-        "youngs_modulus": ("kPa", "secant Young's modulus of the root wall over 0-80 mmHg"),
-        "wall_thickness": ("mm", "root wall thickness"),
-        "loaded_diameter": ("mm", "prescribed root diameter at the loading pressure, a "
-                            "patient's measured root (unset: the wall law distends it)"),
-    },
-    "contact": {
-        "stiffness": ("mN/mm", "penalty stiffness k of the contact law"),
-        "cutoff": ("mm", "distance h beyond which a surface exerts no force"),
-        "thickness": ("mm", "contact thickness: sheets rest this far apart"),
-        "crossing_stiffness": ("mN/mm", "barrier against the mid-surfaces crossing "
-                               "(0: the SPEC law alone)"),
-        "guard_distance": ("mm", "reach of the barrier that keeps every surface from "
-                           "passing through another or itself (shorter than thickness)"),
-        "guard_stiffness": ("mN/mm³", "stiffness κ of that barrier: energy κ·b(d) per unit "
-                            "area, b(d) = -(d - reach)² ln(d/reach)"),
-    },
-    "pseudo_transient": {
-        "residual_tolerance": ("mN", "convergence: max-norm of the static residual"),
-        "mass_length_mm": ("mm", "L in the nodal pseudo-mass p·A/L"),
-        "coarse_mesh_mm": ("mm", "a valve without a graft on a finer mesh first comes to rest "
-                           "on a mesh of this size and starts from there (0: from the "
-                           "unloaded valve)"),
-        "max_steps": ("", "limit on pseudo-time steps (accepted + rejected)"),
-        "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
-        "petsc_options": ("", "extra PETSc options for the TS/SNES/KSP (no prefix), e.g. "
-                          "{ snes_rtol = 1e-8 }"),
-    },
-    "dynamics": {
-        "relaxation_time": ("s", "τ: damping per unit stiffness, c = k·τ/L², and the mass "
-                            "time scale"),
-        "stop_increment_mm": ("mm", "convergence: displacement increment per step"),
-        "wall_time_limit_s": ("s", "wall-clock limit of the solve"),
-    },
-}
-
-
 def describe(section: str, key: str) -> tuple[str, str]:
-    """``(unit, meaning)`` of ``section.key`` (``section`` "" for a top-level key)."""
-    table = "material" if section in ("native_material", "graft_material") else section
-    return DESCRIPTIONS[table][key]
+    """``(unit, meaning)`` of ``section.key`` (``section`` "" for a top-level key), from the
+    field's metadata; KeyError for a key that is not a setting."""
+    if section and section not in _SECTIONS:
+        raise KeyError(f"{section!r} is not a table of the configuration")
+    metadata = setting_field(_SECTIONS[section] if section else CaseConfig, key).metadata
+    return metadata["unit"], metadata["meaning"]
+
+
+#: the comments that enclose the generated settings table in docs/outputs.md
+SETTINGS_TABLE_MARKERS = ("<!-- settings table: generated by "
+                          "valve_dolfinx.config.write_settings_table -->",
+                          "<!-- end of the settings table -->")
+
+
+def settings_table_markdown() -> str:
+    """Every setting, its default, unit and meaning as a Markdown table (the one in
+    docs/outputs.md): the top-level keys, then each table's row and its keys as
+    ``table.key``; a setting only a graft uses (:data:`GRAFT_ONLY_SETTINGS`) says so."""
+    data = CaseConfig().to_dict()
+
+    def row(section: str, key: str, default: str) -> str:
+        unit, meaning = describe(section, key)
+        name = f"{section}.{key}" if section else key
+        if name in GRAFT_ONLY_SETTINGS:
+            meaning += "; *graft only*"
+        shown = f"`[{name}]`" if name in _SECTIONS else f"`{name}`"
+        cells = (cell.replace("|", "\\|") for cell in (shown, default, unit, meaning))
+        return "| " + " | ".join(cells) + " |"
+
+    def default(value: Any) -> str:
+        return "unset" if value is None else f"`{_toml_value(value)}`"
+
+    rows = ["| key | default | unit | meaning |", "|---|---|---|---|"]
+    rows += [row("", k, default(v)) for k, v in data.items() if k not in _SECTIONS]
+    for name in _SECTIONS:
+        rows.append(row("", name, ""))
+        rows += [row(name, k, default(v)) for k, v in data[name].items()]
+    return "\n".join(rows) + "\n"
+
+
+def write_settings_table(path: str | Path) -> bool:
+    """Write :func:`settings_table_markdown` between :data:`SETTINGS_TABLE_MARKERS` in the
+    Markdown file at ``path``; True if the file changed."""
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    begin, end = SETTINGS_TABLE_MARKERS
+    head, sep, rest = text.partition(begin + "\n")
+    _, sep2, tail = rest.partition(end)
+    if not sep or not sep2:
+        raise ConfigurationError(f"{path}: the settings table's markers {begin!r} and "
+                                 f"{end!r} are missing; put them where the table belongs")
+    new = head + begin + "\n" + settings_table_markdown() + end + tail
+    if new == text:
+        return False
+    atomic_write(path, lambda tmp: tmp.write_text(new, encoding="utf-8"))
+    return True
 
 
 # --- loading --------------------------------------------------------------------------------

@@ -10,12 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from valve_dolfinx.exceptions import check_range
+from valve_dolfinx.setting_fields import NOT_A_SETTING, check_setting, setting
 
 __all__ = ["ContactParameters"]
-
-#: ``metadata`` of a field that is a fixed number of the law, not a setting
-#: (:data:`valve_dolfinx.config.NOT_A_SETTING`)
-_FIXED = {"setting": False}
 
 
 @dataclass(frozen=True, slots=True)
@@ -24,7 +21,7 @@ class ContactParameters:
 
     ``stiffness``, ``cutoff``, ``thickness``, ``crossing_stiffness``, ``guard_distance`` and
     ``guard_stiffness`` are settings (the configuration's ``[contact]`` table).  The other
-    fields are fixed numbers of the law (:data:`~valve_dolfinx.config.NOT_A_SETTING`):
+    fields are fixed numbers of the law (:data:`~valve_dolfinx.setting_fields.NOT_A_SETTING`):
     every case uses their defaults; the tests of the literal SPEC law set others.
 
     Attributes
@@ -91,32 +88,34 @@ class ContactParameters:
         Width (mm) of the crossing barrier's quadratic onset.
     """
 
-    stiffness: float = 10.0
-    cutoff: float = 0.1
-    thickness: float = 0.25
-    crossing_stiffness: float = 1000.0
-    guard_distance: float = 0.1
-    guard_stiffness: float = 1000.0
-    penetration_depth: float = field(default=0.3, metadata=_FIXED)
-    blend_distance: float = field(default=0.05, metadata=_FIXED)
-    taper: float = field(default=0.5, metadata=_FIXED)
-    min_driving_force: float = field(default=1e-9, metadata=_FIXED)
-    crossing_width: float = field(default=0.02, metadata=_FIXED)
+    stiffness: float = setting(10.0, "mN/mm", "penalty stiffness k of the contact law")
+    cutoff: float = setting(0.1, "mm", "distance h beyond which a surface exerts no force")
+    thickness: float = setting(0.25, "mm", "contact thickness: sheets rest this far apart")
+    crossing_stiffness: float = setting(1000.0, "mN/mm", "barrier against the mid-surfaces "
+                                        "crossing (0: the SPEC law alone)")
+    guard_distance: float = setting(0.1, "mm", "reach of the barrier that keeps every surface "
+                                    "from passing through another or itself (shorter than "
+                                    "thickness)")
+    guard_stiffness: float = setting(1000.0, "mN/mm³", "stiffness κ of that barrier: energy "
+                                     "κ·b(d) per unit area, b(d) = -(d - reach)² ln(d/reach)")
+    penetration_depth: float = field(default=0.3, metadata=NOT_A_SETTING)
+    blend_distance: float = field(default=0.05, metadata=NOT_A_SETTING)
+    taper: float = field(default=0.5, metadata=NOT_A_SETTING)
+    min_driving_force: float = field(default=1e-9, metadata=NOT_A_SETTING)
+    crossing_width: float = field(default=0.02, metadata=NOT_A_SETTING)
 
     def __post_init__(self) -> None:
-        check_range("crossing_stiffness", self.crossing_stiffness, 0.0, 1e6, unit="mN/mm",
-                    hint="0 is the SPEC law alone")
-        check_range("guard_distance", self.guard_distance, 0.0, 1.0, low_open=True, unit="mm",
-                    hint="the guard's reach should be shorter than the contact thickness")
-        check_range("guard_stiffness", self.guard_stiffness, 0.0, 1e7, low_open=True,
-                    unit="mN/mm³")
+        check_setting(self, "crossing_stiffness", 0.0, 1e6, hint="0 is the SPEC law alone")
+        check_setting(self, "guard_distance", 0.0, 1.0, low_open=True,
+                      hint="the guard's reach should be shorter than the contact thickness")
+        check_setting(self, "guard_stiffness", 0.0, 1e7, low_open=True)
         check_range("crossing_width", self.crossing_width, 0.0, 1.0, low_open=True, unit="mm")
         check_range("blend_distance", self.blend_distance, 0.0, 1.0, low_open=True, unit="mm")
-        check_range("thickness", self.thickness, 0.0, 2.0, unit="mm")
+        check_setting(self, "thickness", 0.0, 2.0)
         check_range("taper", self.taper, 0.0, 1.0,
                     hint="0 keeps the force jump at d = h, 1 fades it over the whole band")
-        check_range("stiffness", self.stiffness, 0.0, low_open=True, unit="mN/mm")
-        check_range("cutoff", self.cutoff, 0.0, low_open=True, unit="mm")
+        check_setting(self, "stiffness", 0.0, low_open=True)
+        check_setting(self, "cutoff", 0.0, low_open=True)
         check_range("penetration_depth", self.penetration_depth, 0.0, low_open=True, unit="mm",
                     hint="it is the depth behind a triangle that still counts as penetration")
         check_range("min_driving_force", self.min_driving_force, 0.0, low_open=True, unit="mN",

@@ -51,7 +51,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import ufl
 
-from valve_dolfinx.exceptions import ParameterError, check_range
+from valve_dolfinx.exceptions import ParameterError
+from valve_dolfinx.setting_fields import NOT_A_SETTING, check_setting, setting
 
 __all__ = [
     "FungMaterial",
@@ -76,38 +77,29 @@ _ISOTROPIC_R = 1e-9
 
 @dataclass(frozen=True, slots=True)
 class FungMaterial:
-    """Fung-type planar tissue (SPEC §3).
+    """Fung-type planar tissue (SPEC §3): each setting's unit and meaning is on its field.
 
-    Parameters
-    ----------
-    c
-        Stress scale (kPa).
-    A1..A6
-        Dimensionless coefficients of Q (1 = fibre, 2 = cross-fibre).
-    thickness
-        Tissue thickness (mm); tension = thickness × stress.
-    name, reference
-        Label and literature source of a preset: not settings of a case configuration
-        (their ``metadata`` is :data:`valve_dolfinx.config.NOT_A_SETTING`'s).
+    ``name`` and ``reference``, the label and literature source of a preset, are not
+    settings of a case configuration (:data:`~valve_dolfinx.setting_fields.NOT_A_SETTING`).
     """
 
-    c: float
-    A1: float
-    A2: float
-    A3: float
-    A4: float
-    A5: float = 0.0
-    A6: float = 0.0
-    thickness: float = 0.5
-    name: str = field(default="fung", metadata={"setting": False})
-    reference: str = field(default="", metadata={"setting": False})
+    c: float = setting(unit="kPa", meaning="Fung stress scale")
+    A1: float = setting(meaning="Fung coefficient of E11² (fibre)")
+    A2: float = setting(meaning="Fung coefficient of E22² (cross-fibre)")
+    A3: float = setting(meaning="Fung coefficient of 2·E11·E22")
+    A4: float = setting(meaning="Fung coefficient of E12²")
+    A5: float = setting(0.0, "", "Fung coefficient of 2·E11·E12")
+    A6: float = setting(0.0, "", "Fung coefficient of 2·E22·E12")
+    thickness: float = setting(0.5, "mm", "tissue thickness (tension = thickness × stress)")
+    name: str = field(default="fung", metadata=NOT_A_SETTING)
+    reference: str = field(default="", metadata=NOT_A_SETTING)
 
     def __post_init__(self) -> None:
-        check_range(f"{self.name}.c", self.c, 0.0, 1e6, low_open=True, unit="kPa")
-        check_range(f"{self.name}.thickness", self.thickness, 0.0, 5.0, low_open=True, unit="mm",
-                    hint="leaflets are about 0.5 mm thick")
+        check_setting(self, "c", 0.0, 1e6, low_open=True, label=f"{self.name}.c")
+        check_setting(self, "thickness", 0.0, 5.0, low_open=True, label=f"{self.name}.thickness",
+                      hint="leaflets are about 0.5 mm thick")
         for k in ("A1", "A2", "A3", "A4", "A5", "A6"):
-            check_range(f"{self.name}.{k}", getattr(self, k), -1e4, 1e4)
+            check_setting(self, k, -1e4, 1e4, label=f"{self.name}.{k}")
         eig = np.linalg.eigvalsh(self.matrix)
         if eig.min() <= 0:
             raise ParameterError(

@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from valve_dolfinx.exceptions import MeshError, ParameterError, check_range
+from valve_dolfinx.exceptions import MeshError, ParameterError
 from valve_dolfinx.geometry.flat_mesh import FlatLeafletMesh, mesh_flat_leaflet
 from valve_dolfinx.geometry.outline import (
     GRAFT_TOO_LARGE,
@@ -42,6 +42,7 @@ from valve_dolfinx.geometry.outline import (
     LeafletShape,
 )
 from valve_dolfinx.io import atomic_write
+from valve_dolfinx.setting_fields import check_setting, setting
 
 __all__ = [
     "LEAFLET_NAMES",
@@ -78,26 +79,32 @@ DEFAULT_MESH_SIZE = 0.8
 
 @dataclass(frozen=True)
 class ValveParameters:
-    """Everything that defines the valve geometry (mm, degrees, per cent).
+    """Everything that defines the valve geometry: each setting's unit and meaning is on its
+    field.
 
-    ``graft_width_pct``/``graft_height_pct`` are ``None`` for the normal valve;
-    a graft of 0 %/0 % is a pericardial leaflet of native size.
-    ``graft_placement`` chooses the slack initial 3-D placement of the graft:
-    ``"conformal"`` lays it onto the native leaflet's wrapped surface,
-    ``"billowed"`` additionally bulges it by ``billow_mm`` towards the valve axis
-    (the ventricular side of the leaflet) or, if negative, away from it (towards
-    the aortic sinus); the loaded result must not depend on this choice.
+    A graft of 0 %/0 % is a pericardial leaflet of native size.  ``graft_placement``
+    chooses the slack initial 3-D placement of the graft: ``"conformal"`` lays it onto the
+    native leaflet's wrapped surface, ``"billowed"`` additionally bulges it by
+    ``billow_mm`` towards the valve axis (the ventricular side of the leaflet) or, if
+    negative, away from it (towards the aortic sinus); the loaded result must not depend on
+    this choice.
     """
 
-    root_diameter: float = 20.0
-    gamma_deg: float = 34.0
-    commissure_height: float = 5.0
-    mesh_size: float = DEFAULT_MESH_SIZE
-    graft_width_pct: float | None = None
-    graft_height_pct: float | None = None
-    graft_fibre_angle_deg: float = 0.0
-    graft_placement: str = "conformal"
-    billow_mm: float = 2.0
+    root_diameter: float = setting(20.0, "mm", "root diameter the flat leaflets are sized on")
+    gamma_deg: float = setting(34.0, "deg", "angle γ of the attachment curve "
+                               "y = sin²x / tan γ")
+    commissure_height: float = setting(5.0, "mm", "height of the straight commissure segments")
+    mesh_size: float = setting(DEFAULT_MESH_SIZE, "mm", "target triangle edge length")
+    graft_width_pct: float | None = setting(None, "%", "graft width enlargement over the "
+                                            "native leaflet (unset: the normal valve)")
+    graft_height_pct: float | None = setting(None, "%", "graft height enlargement over the "
+                                             "native leaflet (unset: the normal valve)")
+    graft_fibre_angle_deg: float = setting(0.0, "deg", "fibre direction of the graft from the "
+                                           "circumferential direction", graft_only=True)
+    graft_placement: str = setting("conformal", "", "initial 3-D placement of the slack "
+                                   "graft: 'conformal' or 'billowed'", graft_only=True)
+    billow_mm: float = setting(2.0, "mm", "bulge of a 'billowed' graft towards the valve "
+                               "axis (negative: towards the sinus)", graft_only=True)
 
     def __post_init__(self) -> None:
         if (self.graft_width_pct is None) != (self.graft_height_pct is None):
@@ -105,17 +112,15 @@ class ValveParameters:
                                  "(per cent, >= 0) or both be None for the normal valve")
         if self.has_graft:
             for name in ("graft_width_pct", "graft_height_pct"):
-                check_range(name, getattr(self, name), 0.0, MAX_GRAFT_PCT, unit="%",
-                            low_hint=GRAFT_TOO_SMALL, high_hint=GRAFT_TOO_LARGE)
-        check_range("graft_fibre_angle_deg", self.graft_fibre_angle_deg, -90.0, 90.0,
-                    unit="deg")
+                check_setting(self, name, 0.0, MAX_GRAFT_PCT, low_hint=GRAFT_TOO_SMALL,
+                              high_hint=GRAFT_TOO_LARGE)
+        check_setting(self, "graft_fibre_angle_deg", -90.0, 90.0)
         if self.graft_placement not in GRAFT_PLACEMENTS:
             raise ParameterError(f"graft_placement = {self.graft_placement!r}; "
                                  f"choose one of {GRAFT_PLACEMENTS}")
         shape = self.native_shape()  # validates the outline parameters first
-        check_range("billow_mm", self.billow_mm, -0.4 * self.root_diameter,
-                    0.4 * self.root_diameter, unit="mm",
-                    hint="positive bulges the graft towards the valve axis, negative away")
+        check_setting(self, "billow_mm", -0.4 * self.root_diameter, 0.4 * self.root_diameter,
+                      hint="positive bulges the graft towards the valve axis, negative away")
         shape.check_mesh_size(self.mesh_size)
 
     @property

@@ -79,7 +79,8 @@ from dataclasses import asdict, dataclass
 
 from scipy.optimize import brentq
 
-from valve_dolfinx.exceptions import SolverError, check_range
+from valve_dolfinx.exceptions import SolverError
+from valve_dolfinx.setting_fields import check_setting, setting
 
 __all__ = ["RootParameters", "RootState", "distend_root", "ASCENDING_AORTA_WALL_THICKNESS_MM"]
 
@@ -94,30 +95,32 @@ LOADED_DIAMETER_RANGE_MM = (10.0, 40.0)
 
 @dataclass(frozen=True)
 class RootParameters:
-    """Aortic root wall (mm, kPa).
+    """Aortic root wall: each setting's unit and meaning is on its field.
 
-    ``free_edge_excess`` fixes the unpressurised root: d₀ = d/(1 + excess).
-    ``youngs_modulus`` is the wall's secant modulus over 0-80 mmHg and
-    ``wall_thickness`` its thickness (defaults and sources: module docstring).
-    ``loaded_diameter`` (mm), when set, is the
-    root diameter at the loading pressure (a patient's measured root): the wall law
-    is then not used.
+    ``free_edge_excess`` fixes the unpressurised root: d₀ = d/(1 + excess).  When
+    ``loaded_diameter`` is set the wall law is not used.  Defaults and sources: module
+    docstring.
     """
 
-    free_edge_excess: float = 0.15
-    youngs_modulus: float = 458.0
-    wall_thickness: float = ASCENDING_AORTA_WALL_THICKNESS_MM
-    loaded_diameter: float | None = None
+    free_edge_excess: float = setting(0.15, "", "free edges' length over the unpressurised "
+                                      "root's circumference, minus 1")
+    youngs_modulus: float = setting(458.0, "kPa", "secant Young's modulus of the root wall "
+                                    "over 0-80 mmHg")
+    wall_thickness: float = setting(ASCENDING_AORTA_WALL_THICKNESS_MM, "mm",
+                                    "root wall thickness")
+    loaded_diameter: float | None = setting(None, "mm", "prescribed root diameter at the "
+                                            "loading pressure, a patient's measured root "
+                                            "(unset: the wall law distends it)")
 
     def __post_init__(self) -> None:
-        check_range("root.free_edge_excess", self.free_edge_excess, -0.2, 1.0)
-        check_range("root.youngs_modulus", self.youngs_modulus, 1.0, 1e6, unit="kPa",
-                    hint="aortic wall moduli are 0.1-10 MPa (100-10000 kPa)")
-        check_range("root.wall_thickness", self.wall_thickness, 0.05, 10.0, unit="mm")
+        check_setting(self, "free_edge_excess", -0.2, 1.0, label="root.free_edge_excess")
+        check_setting(self, "youngs_modulus", 1.0, 1e6, label="root.youngs_modulus",
+                      hint="aortic wall moduli are 0.1-10 MPa (100-10000 kPa)")
+        check_setting(self, "wall_thickness", 0.05, 10.0, label="root.wall_thickness")
         if self.loaded_diameter is not None:
-            check_range("root.loaded_diameter", self.loaded_diameter, *LOADED_DIAMETER_RANGE_MM,
-                        unit="mm", hint="the measured diameter of the pressurised root base; "
-                        "None distends the root with the wall law")
+            check_setting(self, "loaded_diameter", *LOADED_DIAMETER_RANGE_MM,
+                          label="root.loaded_diameter", hint="the measured diameter of the "
+                          "pressurised root base; None distends the root with the wall law")
 
 
 @dataclass(frozen=True)
