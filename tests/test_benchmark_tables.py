@@ -49,6 +49,7 @@ def committed_tables() -> dict:
     """The tables of benchmarks/results/, by name."""
     return {"membrane": bench("membrane").TABLE,
             "contact_comparison": bench("contact_comparison").TABLE,
+            "adaptive_plan": bench("adaptive_plan").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 

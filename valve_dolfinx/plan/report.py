@@ -63,6 +63,8 @@ class RunInfo:
     cases: int = 0
     converged: int = 0
     wall_time_s: float | None = None
+    #: how the study chose its cases and why it stopped (an adaptive design's state)
+    design: str = ""
 
     def lines(self) -> list[str]:
         if not self.cases:
@@ -73,6 +75,8 @@ class RunInfo:
                     if self.wall_time_s is not None else "")
             out = [f"{self.cases} finite element cases ({self.converged} converged) on "
                    f"{mesh}{wall}."]
+            if self.design:
+                out.append(self.design)
         versions = ", ".join(f"{k} {self.versions[k]}" for k in _VERSIONS if k in self.versions)
         if versions:
             out.append(f"Versions: {versions}.")
@@ -102,8 +106,13 @@ def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
          f"height {patient.leaflet_height_mm:.1f} mm"),
         ("model leaflets wrapped on", f"a {shape.root_diameter:.2f} mm cylinder (3L/π)"),
         ("diastolic pressure", f"{patient.pressure_mmhg:g} mmHg"),
-        ("graft grid", f"W {', '.join(f'{w:g}' for w in patient.graft_widths_pct)} %; "
-         f"H {', '.join(f'{h:g}' for h in patient.graft_heights_pct)} %"),
+        (("graft grid", f"W {', '.join(f'{w:g}' for w in patient.graft_widths_pct)} %; "
+          f"H {', '.join(f'{h:g}' for h in patient.graft_heights_pct)} %")
+         if patient.design == "grid" else
+         ("graft sizes studied", f"W {patient.graft_widths_pct[0]:g}–"
+          f"{patient.graft_widths_pct[-1]:g} %, H {patient.graft_heights_pct[0]:g}–"
+          f"{patient.graft_heights_pct[-1]:g} % (adaptive design, at most {patient.budget} "
+          "graft cases)")),
         ("graft fibres", f"{patient.graft_fibre_angle_deg:g}° from the free edge"),
         ("numerical paths", ", ".join(p.label for p in study_paths(patient.paths))),
         ("target coaptation", target),

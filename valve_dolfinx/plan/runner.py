@@ -247,7 +247,8 @@ def plan_study_answer(patient: PatientInput, report: StudyReport) -> PlanStudy:
     run = RunInfo(versions=first.get("versions") or {},
                   mesh_size_mm=next(iter(layout.configs.values())).geometry.mesh_size,
                   cases=len(rows), converged=sum(bool(r.get("converged")) for r in rows),
-                  wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows))
+                  wall_time_s=sum(float(r.get("wall_time_s") or 0.0) for r in rows),
+                  design=report.next_round.text if report.next_round else "")
     return PlanStudy(answers, figures, run, out)
 
 

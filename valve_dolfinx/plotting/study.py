@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import matplotlib
 import numpy as np
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from valve_dolfinx.plotting.style import OKABE_ITO, new_figure, save_figure
 from valve_dolfinx.result import margin_text
@@ -213,8 +214,12 @@ def _solved_cells(ax, rec: Recommendation, pt) -> list:
     labels = []
     for c in rec.cells:
         value = _worst(c)
-        marker = dict(marker="o", mfc="black", mec="white") if c.sound else dict(
-            marker="X", mfc=_LEAK_COLOUR, mec="black")
+        if c.sound:
+            marker = dict(marker="o", mfc="black", mec="white")
+        elif c.unconverged or c.incompetent:
+            marker = dict(marker="X", mfc=_LEAK_COLOUR, mec="black")
+        else:  # sound where solved, not solved in every member (an adaptive design's)
+            marker = dict(marker="o", mfc="white", mec="black")
         ax.plot(c.width_pct, c.height_pct, ms=pt(8), mew=1.0, ls="none", zorder=4, **marker)
         if math.isfinite(value):
             labels.append(_label(ax, f"{value:.2f}", (c.width_pct, c.height_pct),
@@ -241,8 +246,11 @@ def sizing_map_key(rec: Recommendation, *, names: bool = False) -> str:
                      f"dash-dotted: probability of sealing {answer.seal_threshold:g} in every "
                      "member, grey hatched below it; green: the band of sizes that qualify; "
                      "star: the answer; triangle: the highest predicted coaptation.")
-    lines.append("Solved cells: dot sound in every member, cross not; number: worst-case "
-                 "minimum coaptation height (mm).")
+    partial = any(c.missing and not (c.unconverged or c.incompetent) for c in rec.cells)
+    lines.append("Solved cells: dot sound in every member, "
+                 + ("ring sound in the members solved (not all), " if partial else "")
+                 + "cross not sealed or not converged in some member; number: worst-case "
+                 "minimum coaptation height (mm) over the members solved.")
     return " ".join(lines)
 
 
@@ -317,12 +325,17 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
                                  bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4")))
     marks += [((c.width_pct, c.height_pct), pt(8)) for c in rec.cells]
     labels += _solved_cells(ax, rec, pt)
-    grid = [c for c in rec.cells if not c.confirmation]  # ticks at the grid's sizes
+    grid = [c for c in rec.cells if not c.confirmation]
     widths = sorted({c.width_pct for c in grid})
     heights = sorted({c.height_pct for c in grid})
-    if widths:
+    if widths and all(not c.missing for c in grid):  # ticks at the grid's sizes
         ax.set_xticks(widths, [f"+{x:g}" for x in widths])
         ax.set_yticks(heights, [f"+{y:g}" for y in heights])
+    elif widths:  # an adaptive design's sizes: plain ticks over the range
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MaxNLocator(6, integer=True))
+            axis.set_major_formatter(FuncFormatter(lambda v, _: f"+{v:g}"))
+    if widths:
         pad_w = 0.04 * ((widths[-1] - widths[0]) or 10)
         pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
         ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)

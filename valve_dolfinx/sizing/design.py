@@ -16,15 +16,20 @@ decision.  An adaptive study solves instead:
 
    * the answer's size in every member where it is not solved yet (its confirmation), and
    * up to :data:`EXPLORE_PER_ROUND` sizes that could still move the answer: sizes of
-     smaller flat area than the answer (any size, when there is none) that lie more than
-     :data:`SAME_SIZE_PCT` from it and whose chance of qualifying (:func:`qualify_chance`)
-     is at least :data:`SETTLE_PROBABILITY`; the most likely first, each in the member
-     that decides it, none within :data:`SPREAD` of another (scaled width and height).
-3. **A stop** (:func:`design_state`): *settled* when the answer's size is solved in
-   every member, its confirmation holds, and no size that could move it by more than
-   :data:`SAME_SIZE_PCT` has a chance of at least :data:`SETTLE_PROBABILITY` to qualify
-   (for "no graft": no size has); *budget* when the next round would exceed the study's
-   case budget, saying what is not settled.
+     smaller flat area than the answer that lie more than :data:`SAME_SIZE_PCT` from it,
+     whose chance of qualifying (:func:`qualify_chance`) is at least
+     :data:`SETTLE_PROBABILITY` and whose *expected saving* (that chance times the share
+     of flat area the size saves over the answer) is at least :data:`EXPECTED_SAVING`
+     (without an answer: any size whose chance is at least :data:`SETTLE_PROBABILITY`);
+     the largest expected saving (the likeliest) first, each in the
+     uncertainty member that decides it (along its first path where the size is not
+     solved yet: a size solved along every path there is as settled as solves make it),
+     none within :data:`SPREAD` of another (scaled width and height).
+3. **A stop** (``valve_dolfinx.study.rounds``): *settled* when the answer's size is
+   solved in every member, its confirmation holds, and no size is left that could move
+   it (item 2; for "no graft": no size has a chance of at least
+   :data:`SETTLE_PROBABILITY`); *budget* when the next round's confirmation would exceed
+   the study's case budget, saying what is not settled.
 
 The chance that a size qualifies is an upper bound: the least, over the members, of the
 probability that the member's margin reaches ``−tolerance`` (normal predictive
@@ -58,7 +63,7 @@ from valve_dolfinx.sizing.answer import (
 )
 from valve_dolfinx.sizing.surface import SurfacePoint
 
-__all__ = ["INITIAL_LEVELS", "EXPLORE_PER_ROUND", "SETTLE_PROBABILITY",
+__all__ = ["INITIAL_LEVELS", "EXPLORE_PER_ROUND", "SETTLE_PROBABILITY", "EXPECTED_SAVING",
            "SPREAD", "Candidate", "initial_design", "qualify_chance", "open_sizes",
            "next_points"]
 
@@ -68,6 +73,11 @@ INITIAL_LEVELS = 3
 EXPLORE_PER_ROUND = 4
 #: a size whose chance of qualifying is below this cannot move the answer
 SETTLE_PROBABILITY = 0.05
+#: nor can a size whose expected saving of flat area over the answer (its chance of
+#: qualifying times the share of flat area it saves) is below this share: 1 % of the
+#: default leaflet's flat area is about 2 mm², a tenth of a millimetre's trim along its
+#: free edge
+EXPECTED_SAVING = 0.01
 #: the least distance between two sizes of one round, in the width and height scaled to
 #: the studied range
 SPREAD = 0.2
@@ -103,11 +113,14 @@ def initial_design(widths: tuple[float, float], heights: tuple[float, float],
 
 @dataclass(frozen=True)
 class Candidate:
-    """A size that could still move the answer, its chance of qualifying, and the
-    uncertainty member (its label and index among the answer's members) that decides it."""
+    """A size that could still move the answer: its chance of qualifying, its expected
+    saving (chance × the share of flat area it saves over the answer; the chance itself
+    without an answer), and the uncertainty member (its label and index among the
+    answer's members) that decides it."""
 
     size: GraftSize
     chance: float
+    saving: float
     member: str
     member_index: int
 
@@ -147,10 +160,15 @@ def open_sizes(fit: StudyFit, answer: SizingAnswer, tables: Sequence[MemberTable
     if not sizes:
         return []
     chance, deciding = qualify_chance(fit, answer, tables, sizes)
-    order = np.argsort(-chance, kind="stable")
-    return [Candidate(sizes[i], float(chance[i]), answer.members[deciding[i]],
+    if answer.size is None:
+        saving, least = chance, SETTLE_PROBABILITY
+    else:
+        share = np.array([1.0 - s.area_ratio / answer.size.area_ratio for s in sizes])
+        saving, least = chance * share, EXPECTED_SAVING
+    order = np.argsort(-saving, kind="stable")
+    return [Candidate(sizes[i], float(chance[i]), float(saving[i]), answer.members[deciding[i]],
                       int(deciding[i]))
-            for i in order if chance[i] >= SETTLE_PROBABILITY]
+            for i in order if saving[i] >= least and chance[i] >= SETTLE_PROBABILITY]
 
 
 def next_points(candidates: Sequence[Candidate], ranges: tuple[tuple[float, float],

@@ -36,6 +36,7 @@ from valve_dolfinx.sizing.cells import (
     summarise_cells,
 )
 from valve_dolfinx.sizing.resolution import MESH_LADDER, Resolution
+from valve_dolfinx.sizing.surface import CV_FOLDS
 
 __all__ = ["Recommendation", "recommend", "recommend_all", "headline", "confirmation_holds",
            "miss_limit_mm", "CONFIRM_ROUNDS"]
@@ -218,8 +219,8 @@ def _incompetent_text(rec: Recommendation) -> list[str]:
 
 def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | None = None,
                   *, n_paths: int = 1, ladder: Path | None = MESH_LADDER,
-                  confirmed: Mapping[int, Sequence[GraftSize]] | None = None
-                  ) -> list[Recommendation]:
+                  confirmed: Mapping[int, Sequence[GraftSize]] | None = None,
+                  cv_folds: int = CV_FOLDS) -> list[Recommendation]:
     """One :class:`Recommendation` per comparison value, from one fit over all of them.
 
     Parameters
@@ -238,9 +239,12 @@ def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | No
     confirmed
         Per comparison index, the sizes solved to confirm its answer, in the order they
         were proposed (their cases are among the tables' rows, and in the fit).
+    cv_folds
+        Folds of the surface's cross-validation (0: none; the answer does not depend on
+        it, only the error it reports).
     """
     confirmed = confirmed or {}
-    fit = fit_study([t for tables in groups for t in tables], ladder=ladder)
+    fit = fit_study([t for tables in groups for t in tables], ladder=ladder, cv_folds=cv_folds)
     recs = []
     for c, tables in enumerate(groups):
         comparison = dict(tables[0].comparison) if tables else {}

@@ -102,9 +102,12 @@ def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],
                           for a in layout.axes if not a.is_comparison)
     source = recommendations[0].target_source if recommendations else ""
     n = len(layout.sizes)
-    parts = [f"Per diameter: the normal valve and {n} graft{'s' if n != 1 else ''} (W "
-             f"{', '.join(f'{w:g}' for w in widths)} %; H {', '.join(f'{h:g}' for h in heights)}"
-             f" % of the native leaflet) along {len(layout.paths)} numerical path(s) ({paths})"
+    design = (f"Per diameter: the normal valve and {n} graft{'s' if n != 1 else ''} (W "
+              f"{', '.join(f'{w:g}' for w in widths)} %; H "
+              f"{', '.join(f'{h:g}' for h in heights)} % of the native leaflet)" if n else
+              f"The normal valve per diameter and an adaptive design of {layout.graft_cases} "
+              f"graft cases in {len(layout.rounds)} rounds")
+    parts = [f"{design} along {len(layout.paths)} numerical path(s) ({paths})"
              + (f"; {uncertain}" if uncertain else "") + ".",
              f"Read from one response surface over W, H and the diameter: the smallest flat area "
              f"whose predicted worst case reaches the target ({source}) within the tolerance and "

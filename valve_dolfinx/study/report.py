@@ -27,6 +27,7 @@ from valve_dolfinx.plotting.study import (
 )
 from valve_dolfinx.result import competence_text, margin_text
 from valve_dolfinx.sizing.recommendation import Recommendation, recommend_all
+from valve_dolfinx.sizing.surface import CV_FOLDS
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import (
@@ -321,8 +322,12 @@ def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None,
 
 
 def build_report(out: str | Path, settings: StudySettings | None = None,
-                 target_mm: float | None = None) -> StudyReport:
+                 target_mm: float | None = None, *, draft: bool = False) -> StudyReport:
     """Rebuild every study-level file of ``out`` from its case folders (serial; rank 0).
+
+    ``draft``: the answers and the next round only, as a sweep decides its rounds (no
+    cross-validation of the surface, no figures, ``report.md`` and ``summary.json`` not
+    rewritten); the answers are those of the full report.
 
     Parameters
     ----------
@@ -366,9 +371,12 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
         if report.complete:
             report.recommendations = recommend_all(
                 [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
-                target_mm, n_paths=len(layout.paths), confirmed=layout.confirm)
+                target_mm, n_paths=len(layout.paths), confirmed=layout.confirm,
+                cv_folds=0 if draft else CV_FOLDS)
             report.next_round = plan_round(report.recommendations, layout, inferred.design,
                                            inferred.budget)
+    if draft:
+        return report
     files = list(write_tables(out, rows))
     files.append(write_json(out / "summary.json", {
         "settings": settings.to_dict() if settings else None, "complete": report.complete,

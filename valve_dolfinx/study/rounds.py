@@ -25,6 +25,7 @@ from pathlib import Path
 from valve_dolfinx.io import write_json
 from valve_dolfinx.sizing.answer import SAME_SIZE_PCT, member_label
 from valve_dolfinx.sizing.design import (
+    EXPECTED_SAVING,
     SETTLE_PROBABILITY,
     Candidate,
     next_points,
@@ -64,11 +65,14 @@ class RoundPlan:
                 "open": {str(c): why for c, why in self.open.items()}, "text": self.text}
 
 
-def _member_index(layout: StudyLayout, label: str) -> int:
-    """The index of the uncertainty member ``label`` along the first path."""
-    first = layout.paths[0]
-    return next(m for m, member in enumerate(layout.members)
-                if member.path == first and member_label(member.values) == label)
+def _unsolved_member(layout: StudyLayout, c: int, candidate: Candidate) -> int | None:
+    """The index of the first member of ``candidate``'s uncertainty member (its paths in
+    order) where its size is not solved yet; None when it is solved along every path."""
+    for m, member in enumerate(layout.members):
+        if (member_label(member.values) == candidate.member
+                and (c, m, tuple(candidate.size)) not in layout.slots):
+            return m
+    return None
 
 
 def _new_slots(layout: StudyLayout, point: Point) -> int:
@@ -86,10 +90,15 @@ def _open_text(rec: Recommendation, candidates: Sequence[Candidate]) -> str:
                      f"{len(rec.members)} members")
     if candidates:
         best = candidates[0]
-        smaller = "smaller " if answer.size is not None else ""
-        parts.append(f"{len(candidates)} {smaller}sizes could still qualify (chance "
-                     f">= {SETTLE_PROBABILITY:g}; the likeliest {best.size.label}, "
-                     f"{best.chance:.2f}, in `{best.member}`)")
+        if answer.size is not None:
+            parts.append(f"{len(candidates)} smaller sizes could still replace it (expected "
+                         f"saving of flat area >= {EXPECTED_SAVING:.0%}; the largest "
+                         f"{best.size.label}, chance {best.chance:.2f} in `{best.member}`, "
+                         f"saving {best.saving:.1%})")
+        else:
+            parts.append(f"{len(candidates)} sizes could still qualify (chance >= "
+                         f"{SETTLE_PROBABILITY:g}; the likeliest {best.size.label}, "
+                         f"{best.chance:.2f}, in `{best.member}`)")
     if answer.size is not None and not rec.confirm:
         missed = [e for e in rec.confirmations if e["graft"] == answer.size.label
                   and not e["holds"]]
@@ -107,16 +116,16 @@ def _adaptive_points(layout: StudyLayout, c: int, rec: Recommendation
     answer = rec.answer
     if rec.fit is None or rec.fit.surface is None or answer.lattice is None:
         return [], _open_text(rec, [])
-    candidates = open_sizes(rec.fit, answer, rec.tables)
-    why = _open_text(rec, candidates)
+    # a size solved along every path of the member that decides it is as settled as
+    # solves can make it
+    where = {k: _unsolved_member(layout, c, k) for k in open_sizes(rec.fit, answer, rec.tables)}
+    candidates = [k for k, m in where.items() if m is not None]
     points = []
     if answer.size is not None and rec.confirm:
         points.append(Point(c, None, tuple(answer.size)))
-    fresh = [k for k in candidates
-             if (c, _member_index(layout, k.member), tuple(k.size)) not in layout.slots]
-    for k in next_points(fresh, (rec.fit.widths_pct, rec.fit.heights_pct)):
-        points.append(Point(c, _member_index(layout, k.member), tuple(k.size)))
-    return points, why
+    for k in next_points(candidates, (rec.fit.widths_pct, rec.fit.heights_pct)):
+        points.append(Point(c, where[k], tuple(k.size)))
+    return points, _open_text(rec, candidates)
 
 
 def plan_round(recommendations: Sequence[Recommendation], layout: StudyLayout,
@@ -138,11 +147,14 @@ def plan_round(recommendations: Sequence[Recommendation], layout: StudyLayout,
         points += [p for p in mine if _new_slots(layout, p)]
     if plan.budget is not None:
         kept, total = [], layout.graft_cases
-        for point in points:  # confirmations first within each comparison value
+        for point in points:
             extra = _new_slots(layout, point)
             if total + extra <= plan.budget:
                 kept.append(point)
                 total += extra
+            elif point.confirms:  # an answer that cannot be confirmed: no more rounds
+                kept = []
+                break
         if points and not kept:
             plan.stop = BUDGET
         points = kept
@@ -173,8 +185,9 @@ def _plan_text(plan: RoundPlan, recommendations: Sequence[Recommendation],
         sizes = [rec.answer.size.label if rec.answer.size is not None else "no graft"
                  for rec in recommendations]
         return (f"{head}; settled: the answer ({', '.join(sizes)}) is solved in every "
-                f"member, and no size more than {SAME_SIZE_PCT:g} points from it that could "
-                f"replace it has a chance of {SETTLE_PROBABILITY:g} or more to qualify.")
+                f"member, and no size more than {SAME_SIZE_PCT:g} points from it could "
+                f"replace it with a chance of {SETTLE_PROBABILITY:g} or more and an "
+                f"expected saving of flat area of {EXPECTED_SAVING:.0%} or more.")
     if plan.stop == BUDGET:
         return f"{head}; stopped at the case budget, not settled: {open_}."
     return f"{head}; stopped with nothing left to solve that would settle it: {open_}."

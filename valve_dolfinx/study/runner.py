@@ -581,8 +581,7 @@ def _run_rounds(settings: StudySettings, out: Path, comm: MPI.Comm, *, layout: S
     while True:
         points = None
         if comm.rank == 0:
-            report = build_report(out, settings)
-            plan = report.next_round
+            plan = build_report(out, settings, draft=True).next_round
             if plan is not None and plan.points:
                 append_round(out, plan)
                 points = plan.points

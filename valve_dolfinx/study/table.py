@@ -107,9 +107,11 @@ def case_rows(out: Path, layout: StudyLayout | None = None, *, identity: bool = 
     if layout is not None:
         place = {case.name: i for i, case in enumerate(layout.cases)}
         rows.sort(key=lambda row: place.get(row["case"], len(place)))
-        confirmations = {case.name for case in layout.cases if case.confirmation}
+        by_name = {case.name: case for case in layout.cases}
         for row in rows:
-            row["confirmation"] = row["case"] in confirmations
+            case = by_name.get(row["case"])
+            row["confirmation"] = case is not None and case.confirmation
+            row["round"] = None if case is None else case.round
     return rows
 
 

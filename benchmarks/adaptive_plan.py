@@ -1,0 +1,156 @@
+"""A patient's plan by the adaptive design against the full grid: cases, time, answer.
+
+For each patient below, plans the repair twice with ``mpirun -n 2 valve-dolfinx plan``:
+with ``--full-grid`` (every graft of the 5 × 4 grid in every member: 3 root diameters ×
+2 paths) and with the adaptive design (the default), each into its own folder under
+``--root`` (a folder that already holds a finished plan is read, not rerun: give the
+full-grid plans computed before, they take 20-50 min each).  Prints and writes one row per
+patient and design: graft cases, rounds, why the design stopped, the case time, the wall
+time of the plan (measured only when this script ran it), the answer, and the agreement
+of the two answers, read from the full grid's surfaces: the adaptive answer's predicted
+worst-case margin there within the tolerance of the full grid's own answer's, and its
+probability of sealing there at least the threshold::
+
+    .venv/bin/python benchmarks/adaptive_plan.py --root /scratch/plans
+
+The table goes to ``benchmarks/results/adaptive_plan.{csv,md}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from result_tables import Column, Table, add_table_options, markdown_table
+
+import valve_dolfinx  # noqa: F401  (dolfinx_solver before anything else)
+
+BIN = Path(sys.executable).parent
+#: the patients: the README's plan and two others (the issue's)
+PATIENTS = {
+    "readme 21±1": ["--root-diameter", "21", "--root-uncertainty", "1"],
+    "19±1, free edge +10 %": ["--root-diameter", "19", "--root-uncertainty", "1",
+                              "--leaflet-free-edge", "23.03", "--leaflet-height", "12.41"],
+    "23±1": ["--root-diameter", "23", "--root-uncertainty", "1"],
+}
+FIELDS = ("patient", "design", "graft_cases", "rounds", "stop", "case_time_s", "wall_time_s",
+          "answer", "margin_mm", "tolerance_mm", "margin_on_grid_mm", "seals_on_grid",
+          "grid_answer_margin_mm", "grid_tolerance_mm", "area_ratio", "agrees")
+
+
+def folder_name(patient: str, design: str) -> str:
+    stem = patient.split(",")[0].replace(" ", "_").replace("±", "pm")
+    return f"{stem}_{design}"
+
+
+def run_plan(args: list[str], out: Path, design: str) -> float | None:
+    """Run the plan unless ``out`` holds a finished one; its wall time (s) if run."""
+    if (out / "summary.json").is_file():
+        return None
+    cmd = [str(BIN / "mpirun"), "-n", "2", str(BIN / "valve-dolfinx"), "plan", *args,
+           "--out", str(out), "--no-progress", "-q"]
+    if design == "grid":
+        cmd.append("--full-grid")
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True)
+    return time.perf_counter() - t0
+
+
+def study_answer(plan: Path):
+    """The plan's study report (its answers and layout), rebuilt in memory, writing
+    nothing."""
+    from valve_dolfinx.study.report import build_report, read_settings
+
+    study = plan / "study"
+    return build_report(study, read_settings(study), draft=True)
+
+
+def at(answer, size) -> tuple[float | None, bool]:
+    """The predicted worst-case margin of ``size`` on ``answer``'s lattice, and whether it
+    seals there."""
+    lattice = answer.lattice
+    if lattice is None or size is None:
+        return None, False
+    i = list(lattice.heights_pct).index(size.height_pct)
+    j = list(lattice.widths_pct).index(size.width_pct)
+    return (float(lattice.worst_margin_mm[i, j]),
+            bool(lattice.seal_probability[i, j] >= answer.seal_threshold))
+
+
+def row_of(patient: str, design: str, report, wall: float | None, grid) -> dict:
+    rec = report.recommendations[0]
+    answer = rec.answer
+    size = answer.size
+    rows = report.rows
+    plan = report.next_round
+    row = {"patient": patient, "design": design, "graft_cases": report.layout.graft_cases,
+           "rounds": len(report.layout.rounds), "stop": plan.stop if plan else None,
+           "case_time_s": sum(float(r.get("wall_time_s") or 0.0) for r in rows),
+           "wall_time_s": wall, "answer": size.label if size else f"none ({answer.why})",
+           "margin_mm": answer.margin_mm, "tolerance_mm": answer.tolerance_mm,
+           "area_ratio": size.area_ratio if size else None}
+    reference = grid.recommendations[0].answer
+    row["grid_answer_margin_mm"] = reference.margin_mm
+    row["grid_tolerance_mm"] = reference.tolerance_mm
+    if size is None or reference.size is None:
+        row["agrees"] = size is None and reference.size is None
+        return row
+    margin, seals = at(reference, size)
+    row["margin_on_grid_mm"], row["seals_on_grid"] = margin, seals
+    row["agrees"] = (seals and margin is not None
+                     and abs(margin - reference.margin_mm) <= reference.tolerance_mm)
+    return row
+
+
+def draw(rows: list[dict]) -> str:
+    columns = [Column("patient", "patient", text=True), Column("design", "design", text=True),
+               Column("graft cases", "graft_cases", "d"), Column("rounds", "rounds", "d"),
+               Column("stop", "stop", text=True), Column("case time (s)", "case_time_s", ".0f"),
+               Column("plan wall time (s)", "wall_time_s", ".0f"),
+               Column("answer", "answer", text=True), Column("margin (mm)", "margin_mm", "+.2f"),
+               Column("tolerance (mm)", "tolerance_mm", ".2f"),
+               Column("margin on the grid's surface (mm)", "margin_on_grid_mm", "+.2f"),
+               Column("seals on the grid's surface", "seals_on_grid"),
+               Column("grid answer's margin (mm)", "grid_answer_margin_mm", "+.2f"),
+               Column("flat area ×", "area_ratio", ".3f"),
+               Column("agrees with the grid", "agrees")]
+    return markdown_table(columns, rows)
+
+
+TABLE = Table("adaptive_plan", "benchmarks/adaptive_plan.py --root DIR", FIELDS, draw)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--root", type=Path, default=Path("results/adaptive_plan"),
+                        help="folder of the plans (default %(default)s)")
+    parser.add_argument("--patients", nargs="*", default=list(PATIENTS),
+                        choices=list(PATIENTS), metavar="NAME",
+                        help=f"which patients (default all: {', '.join(PATIENTS)})")
+    add_table_options(parser)
+    args = parser.parse_args(argv)
+    table = TABLE.at(args.results)
+    if args.tables_only:
+        print(table.redraw())
+        return 0
+    rows = []
+    for patient in args.patients:
+        reports, walls = {}, {}
+        for design in ("grid", "adaptive"):
+            out = args.root / folder_name(patient, design)
+            walls[design] = run_plan(PATIENTS[patient], out, design)
+            reports[design] = study_answer(out)
+        for design in ("grid", "adaptive"):
+            row = row_of(patient, design, reports[design], walls[design], reports["grid"])
+            rows.append(row)
+            print(json.dumps(row))
+    print(table.write(rows).read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
