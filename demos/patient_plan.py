@@ -27,8 +27,8 @@
 # measured 22 mm.  A graft W/H is that leaflet enlarged by W across and H in height.
 #
 # Run: `python demos/patient_plan.py [--out results/patient_plan] [--mesh-size 0.8]
-# [--paths 2]`, or `mpirun -n 2 python demos/patient_plan.py`.  The same plan from the
-# command line: `valve-dolfinx plan PATIENT.toml --out DIR`.
+# [--paths 2] [--full-grid]`, or `mpirun -n 2 python demos/patient_plan.py`.  The same plan
+# from the command line: `valve-dolfinx plan PATIENT.toml --out DIR`.
 
 # %%
 from __future__ import annotations
@@ -58,6 +58,9 @@ def main(argv: list[str] | None = None):
                         help="triangle edge length in mm (default: the case default, 0.8)")
     parser.add_argument("--widths", type=float, nargs="+", default=list(STUDY_WIDTHS_PCT))
     parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
+    parser.add_argument("--full-grid", action="store_const", const="grid", default="adaptive",
+                        dest="design", help="every graft of the grid instead of the adaptive "
+                        "design (a grid of one size, as the test runs it, needs it)")
     parser.add_argument("--paths", type=int, default=2,
                         help="numerical paths every graft is solved along (default 2)")
     args = parser.parse_args(argv)
@@ -77,7 +80,7 @@ def main(argv: list[str] | None = None):
                            leaflet_free_edge_mm=22.0, leaflet_height_mm=13.0,
                            graft_widths_pct=tuple(args.widths),
                            graft_heights_pct=tuple(args.heights), paths=args.paths,
-                           label="worked patient")
+                           design=args.design, label="worked patient")
     if comm.rank == 0:
         path = write_patient(args.out / "worked_patient.toml", patient)
         print(patient_toml(patient))

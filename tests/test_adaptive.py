@@ -170,9 +170,10 @@ def test_the_adaptive_design_reaches_the_full_grid_answer_with_under_half_the_ca
     answer is the full grid's within the resolution: each one's predicted worst case on the
     other's surface is within twice the tolerance of the target, and both lie on the
     truth's boundary: their noise-free worst-case margin reaches the target within the
-    tolerance, with a flat area within 2 % of the true smallest adequate size's (the
-    boundary is nearly a line of equal area, so W and H alone may differ)."""
-    from valve_dolfinx.sizing.design import INITIAL_LEVELS
+    tolerance, with a flat area within 3 % of the true smallest adequate size's, and the
+    two answers' within 2 % of each other (the boundary is nearly a line of equal area, so
+    W and H alone may differ)."""
+    from valve_dolfinx.sizing.design import EXPECTED_SAVING, INITIAL_LEVELS
     from valve_dolfinx.study.runner import run_study
 
     out, outcome = reference
@@ -195,7 +196,11 @@ def test_the_adaptive_design_reaches_the_full_grid_answer_with_under_half_the_ca
         tolerance = mine.tolerance_mm
         assert 0.05 < tolerance < 0.1  # the scatter: uniform ±0.1 mm, sd 0.058 mm
         assert true_margin(*mine.size) >= -tolerance - 0.02
-        assert area(mine.size) == pytest.approx(area(smallest_adequate(tolerance)), abs=0.02)
+        # the design stops when no smaller size's expected saving reaches EXPECTED_SAVING
+        # (1 %): it may leave a few per cent of flat area on a boundary it is unsure of
+        assert area(mine.size) == pytest.approx(area(smallest_adequate(tolerance)),
+                                                rel=3 * EXPECTED_SAVING)
+    assert area(answers[0].size) == pytest.approx(area(answers[1].size), rel=0.02)
     # the answer is solved in every member, and its confirmation held
     rec = adaptive.recommendations[0]
     assert rec.confirm == [] and rec.confirmations[-1]["holds"]

@@ -46,7 +46,7 @@ def test_patient_plan_demo(tmp_path):
     grid, two paths: six members, the report is written, and rebuilding it from the case
     folders gives the same answer."""
     proc = _run("patient_plan.py", "--out", str(tmp_path), "--mesh-size", "2.5",
-                "--widths", "14", "--heights", "13", cwd=tmp_path)
+                "--widths", "14", "--heights", "13", "--full-grid", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "read back gives the same inputs: True" in proc.stdout
     assert "root 23.0 mm: reach" in proc.stdout and "-> can seal" in proc.stdout

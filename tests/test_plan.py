@@ -487,7 +487,9 @@ def no_case(*args, **kwargs):
 
 def _patient(**changes) -> PatientInput:
     data = dict(root_diameter_mm=22.0, leaflet_free_edge_mm=22.0, leaflet_height_mm=13.0,
-                graft_widths_pct=(7.0, 14.0), graft_heights_pct=(13.0, 27.0), label="stand-in")
+                graft_widths_pct=(7.0, 14.0), graft_heights_pct=(13.0, 27.0), label="stand-in",
+                design="grid")  # these tests count the grid's cases; tests/test_adaptive.py
+    # tests the adaptive design
     return PatientInput(**{**data, **changes})
 
 

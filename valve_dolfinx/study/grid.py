@@ -237,6 +237,12 @@ class StudySettings:
             raise ParameterError(f"design = {self.design!r} is not one of "
                                  f"{', '.join(DESIGNS)}: 'grid' solves every graft of the "
                                  "grid, 'adaptive' (--adaptive) a design chosen in rounds")
+        if self.adaptive and (len(self.widths_pct) < 2 or len(self.heights_pct) < 2):
+            raise ParameterError(f"design = 'adaptive' needs a range of widths and of heights "
+                                 f"to choose sizes in (widths {list(self.widths_pct)}, "
+                                 f"heights {list(self.heights_pct)}): give at least two of "
+                                 "each, or solve the sizes given with the full grid "
+                                 "(--full-grid, design = 'grid')")
         budget = self.budget
         if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
             raise ParameterError(f"budget = {budget!r} must be a whole number >= 1: the most "
