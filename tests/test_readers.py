@@ -357,7 +357,7 @@ def test_the_documented_rerun_recomputes_nothing(tmp_path, capsys, caplog, quiet
     out = tmp_path / "plan"
     assert cli_with(plan_case, ["plan", "--root-diameter", "22", "--leaflet-free-edge", "22",
                                 "--leaflet-height", "13", "--widths", "7", "14", "--heights",
-                                "13", "--mesh-size", "2", "--out", str(out),
+                                "13", "--mesh-size", "2", "--full-grid", "--out", str(out),
                                 "--no-progress"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert "mesh_size_mm = 2.0" in (out / "patient.toml").read_text()
