@@ -385,6 +385,8 @@ def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySet
         vary = {bending_modulus_kpa = [0, 200]}                # comparison axes
         uncertain = {"root.loaded_diameter" = [20, 21, 22]}    # uncertainty axes
         paths = 2                       # numerical paths (uncertainty)
+        design = "adaptive"             # or "grid" (the default): rounds chosen by the
+        budget = 40                     # surface, at most this many graft cases
 
         [dynamics]                      # the case settings of every case
         max_steps = 30000
