@@ -218,10 +218,8 @@ class StudyLayout:
     sizes
         The graft sizes ``(W, H)`` of the grid, width by width (none in an adaptive study).
     rounds
-        The points of every round, round 0 first (the grid's cases are not listed).
-    confirm
-        Per comparison index, the sizes solved in every member to confirm its answer, in
-        the order they were proposed.
+        The points of every round, round 0 first (the grid's cases are not listed);
+        :attr:`confirm` gives those solved in every member.
     cases
         Every case in the fixed order of ``--case-index``.
     configs, digests
@@ -240,7 +238,17 @@ class StudyLayout:
     digests: Mapping[str, str] = field(repr=False)
     slots: Mapping[Slot, str] = field(repr=False)
     rounds: tuple[tuple[Point, ...], ...] = ()
-    confirm: Mapping[int, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+
+    @property
+    def confirm(self) -> dict[int, tuple[tuple[float, float], ...]]:
+        """Per comparison index, the sizes its rounds solved in every member (the
+        confirmations of its answer), in the order they were proposed."""
+        out: dict[int, tuple[tuple[float, float], ...]] = {}
+        for points in self.rounds:
+            for p in points:
+                if p.confirms and p.size not in out.get(p.comparison, ()):
+                    out[p.comparison] = (*out.get(p.comparison, ()), p.size)
+        return out
 
     @property
     def graft_cases(self) -> int:
@@ -383,11 +391,6 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
     sizes = tuple((w, h) for w in widths_pct for h in heights_pct)
     rounds = tuple(tuple(p for p in points if p.comparison < len(comparisons))
                    for points in rounds)
-    confirm: dict[int, tuple[tuple[float, float], ...]] = {}
-    for points in rounds:
-        for p in points:
-            if p.confirms and p.size not in confirm.get(p.comparison, ()):
-                confirm[p.comparison] = (*confirm.get(p.comparison, ()), p.size)
     configs, added = _slot_configs(base_case, include_normal, comparisons, members, sizes,
                                    rounds)
     digests: dict[Slot, str] = {}
@@ -426,8 +429,7 @@ def study_layout(base_case: Mapping, axes: Sequence[StudyAxis], paths: int,
         cases=tuple(cases),
         configs={names[d]: configs[slots[0]] for d, slots in groups.items()},
         digests={names[d]: d for d in groups},
-        slots={slot: names[digests[slot]] for slot in digests}, rounds=rounds,
-        confirm=confirm)
+        slots={slot: names[digests[slot]] for slot in digests}, rounds=rounds)
 
 
 def layout_tables(layout: StudyLayout, comparison: int, rows: Sequence[Mapping]
