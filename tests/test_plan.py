@@ -355,7 +355,7 @@ def _pdf_text(path: Path) -> str:
 
 
 def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
-           target=2.31, source="given", members=("",)) -> PlanRecommendation:
+           target=2.31, source="given", members=("",), trim=None) -> PlanRecommendation:
     """A plan's answer made by hand: the recommendation of a study over ``members`` (the
     members named by themselves), its answer ``graft`` with ``margin``, or ``closest`` with
     ``shortfall``."""
@@ -365,7 +365,7 @@ def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
     sizing = SizingAnswer({}, list(members), targets, source, resolution, size=size,
                           margin_mm=margin, limiting_member=limiting,
                           highest=GraftSize(*closest) if closest else size,
-                          shortfall_mm=shortfall, why="" if size else "short")
+                          shortfall_mm=shortfall, why="" if size else "short", trim=trim)
     study = Recommendation({}, list(members), targets, target, source, sizing)
     return PlanRecommendation(study, {}, source)
 
@@ -381,6 +381,17 @@ ANSWERS = {
                            source="the normal valve's", members=("root 22.0 mm", "root 23.0 mm")),
                     ["Recommended graft W27/H27", "smallest margin is 0.0023 mm, in root 23.0",
                      "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
+    # the answer cut half a millimetre off: the page says it is not robust to it
+    "cut": (answer((10, 19), -0.14, limiting="root 20.0 mm", members=("root 20.0 mm",),
+                   trim={"mm": 0.5, "width_pct": 2.0, "height_pct": 4.0,
+                         "sizes": ["W8/H15", "W8/H19", "W8/H23", "W10/H15", "W10/H23",
+                                   "W12/H15", "W12/H19", "W12/H23"],
+                         "worst_margin_mm": -0.54, "worst_margin_size": "W8/H15",
+                         "seal_probability": 0.77, "seal_size": "W8/H15",
+                         "failing": ["W8/H15", "W8/H19"], "robust": False}),
+            ["Cut 0.5 mm off its template", "2 do not qualify (W8/H15, W8/H19)",
+             "the least predicted margin is -0.54 mm (W8/H15)",
+             "not robust to a 0.5 mm error of the cut"]),
     "closest": (answer(closest=(27, 40), shortfall=0.4, target=2.3, members=("a", "b")),
                 ["No graft in the studied range is robust", "The closest is W27/H40",
                  "0.40 mm short"]),

@@ -124,6 +124,13 @@ def test_recommended_size_is_within_two_points_of_the_true_smallest_adequate_siz
     # the graft in mm: the default outline's free edge 20π/3 mm and height 12.41 mm, scaled
     assert answer.free_edge_mm == pytest.approx(20 * math.pi / 3 * (1 + answer.size[0] / 100))
     assert answer.height_mm == pytest.approx(12.41 * (1 + answer.size[1] / 100), abs=0.01)
+    # cut 0.5 mm off: 2 % of the 20.9 mm free edge, 4 % of the 12.41 mm height; the size cut
+    # short in both has a smaller flat area than the smallest qualifying one, so fails
+    trim = answer.trim
+    assert (trim["width_pct"], trim["height_pct"]) == (
+        round(0.5 / (20 * math.pi / 300)), round(0.5 / 0.1241))
+    w, h = answer.size
+    assert GraftSize(w - 2, h - 4).label in trim["failing"] and not trim["robust"]
     band = answer.band
     assert band["sizes"] > 1 and band["area_ratio"][0] == pytest.approx(answer.size.area_ratio)
     assert answer.highest.width_pct >= 21 and answer.highest.height_pct >= 27
@@ -328,3 +335,65 @@ def test_a_confirmation_misses_beyond_the_tolerance_and_twice_a_solves_scatter()
     assert miss_limit_mm(Resolution(None, 0, 0.08, 0.28, "ladder")) == pytest.approx(0.44)
     assert miss_limit_mm(Resolution(0.12, 6, 0.08, 0.28, "ladder")) == pytest.approx(0.52)
     assert miss_limit_mm(Resolution(None, 0, None, None, "none")) == 0.0
+
+
+def _lattice_answer(size: GraftSize, qualifies, margin=lambda w, h: 0.1,
+                    seal=lambda w, h: 1.0):
+    """A SizingAnswer holding ``size`` on a hand-made 1 % lattice over W 0–27, H 0–40."""
+    from valve_dolfinx.sizing.answer import Lattice, SizingAnswer
+    from valve_dolfinx.sizing.resolution import Resolution
+
+    widths, heights = np.arange(0.0, 28.0), np.arange(0.0, 41.0)
+    ww, hh = np.meshgrid(widths, heights)
+    answer = SizingAnswer({}, [""], {"": TARGET_MM}, "given",
+                          Resolution(0.2, 2, None, None, "not measured"))
+    answer.size = size
+    answer.lattice = Lattice(widths, heights, np.vectorize(margin)(ww, hh),
+                             np.vectorize(seal)(ww, hh), np.vectorize(qualifies)(ww, hh))
+    return answer
+
+
+def test_a_cut_half_a_millimetre_off_is_read_at_the_sizes_it_makes():
+    """The trim check reads the eight sizes whose free edge and height are each 0.5 mm
+    shorter, as cut, or longer (the default leaflet's own dimensions give the offsets),
+    names the least margin and sealing among them, and is robust only when all qualify."""
+    from valve_dolfinx.geometry.outline import LeafletShape
+    from valve_dolfinx.sizing.answer import trim_check, trim_text
+
+    leaflet, size = LeafletShape(), GraftSize(14.0, 26.0)
+    trim = trim_check(_lattice_answer(size, lambda w, h: True), leaflet, 0.5)
+    dw, dh = trim["width_pct"], trim["height_pct"]
+    free_edge = LeafletShape(width_pct=14.0, height_pct=26.0).free_edge_length
+    wider = LeafletShape(width_pct=14.0 + dw, height_pct=26.0).free_edge_length
+    taller = LeafletShape(width_pct=14.0, height_pct=26.0 + dh).height
+    height = LeafletShape(width_pct=14.0, height_pct=26.0).height
+    step_w = wider - LeafletShape(width_pct=13.0 + dw, height_pct=26.0).free_edge_length
+    step_h = taller - LeafletShape(width_pct=14.0, height_pct=25.0 + dh).height
+    assert abs(wider - free_edge - 0.5) <= step_w / 2 + 1e-9
+    assert abs(taller - height - 0.5) <= step_h / 2 + 1e-9
+    assert len(trim["sizes"]) == 8 and trim["robust"]
+    sound = _lattice_answer(size, lambda w, h: True)
+    sound.trim = trim
+    assert "every size still qualifies" in trim_text(sound)
+
+    def leaky(w, h):
+        return not (w == 14 - dw and h == 26 - dh)
+
+    answer = _lattice_answer(size, leaky, margin=lambda w, h: 0.01 * (w + h) - 0.5,
+                             seal=lambda w, h: 0.3 if not leaky(w, h) else 1.0)
+    trim = answer.trim = trim_check(answer, leaflet, 0.5)
+    corner = GraftSize(14 - dw, 26 - dh).label
+    assert not trim["robust"] and trim["failing"] == [corner]
+    assert trim["seal_size"] == corner and trim["seal_probability"] == pytest.approx(0.3)
+    assert trim["worst_margin_size"] == corner
+    assert trim["worst_margin_mm"] == pytest.approx(0.01 * (40 - dw - dh) - 0.5)
+    assert "not robust" in trim_text(answer)
+
+
+def test_the_trim_check_keeps_to_the_studied_range():
+    """At the corner of the range only the three sizes inside it are read."""
+    from valve_dolfinx.geometry.outline import LeafletShape
+    from valve_dolfinx.sizing.answer import trim_check
+
+    trim = trim_check(_lattice_answer(GraftSize(0.0, 0.0), lambda w, h: True), LeafletShape())
+    assert len(trim["sizes"]) == 3

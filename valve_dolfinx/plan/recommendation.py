@@ -137,6 +137,7 @@ class PlanRecommendation:
                 "grafts": grafts, "unsealable_roots_mm": list(self.unsealable_roots_mm),
                 "unsealable_reason": self.unsealable_reason, "cannot_seal": self.cannot_seal,
                 "tolerance_mm": None if answer is None else answer.tolerance_mm,
+                "trim": None if answer is None else answer.trim,
                 "headline": self.headline()}
 
 

@@ -29,6 +29,7 @@ from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
 from valve_dolfinx.plotting.plan import PlanPage, draw_plan_page
 from valve_dolfinx.plotting.study import plot_sizing_map, sizing_map_key
 from valve_dolfinx.result import margin_text
+from valve_dolfinx.sizing.answer import trim_text
 from valve_dolfinx.sizing.cells import cell_state
 from valve_dolfinx.study.axes import value_text
 from valve_dolfinx.study.paths import study_paths
@@ -155,6 +156,8 @@ def _details(rec: PlanRecommendation) -> list[str]:
     if answer.size is not None and answer.limiting_member:
         out.append(f"Smallest margin over the target: {margin_text(answer.margin_mm)} mm, in "
                    f"{rec.name(answer.limiting_member)}.")
+    if trim_text(answer):
+        out.append(trim_text(answer))
     if rec.unsealable_roots_mm:
         roots = " and ".join(f"{d:.1f}" for d in rec.unsealable_roots_mm)
         out.append(f"Not computed: the {roots} mm root, beyond what the native free edges "

@@ -62,7 +62,8 @@ from valve_dolfinx.sizing.surface import (
 __all__ = ["MemberTable", "StudyFit", "SizingAnswer", "Lattice", "fit_study", "read_answer",
            "common_size", "sizes_to_confirm", "solved_worst_case", "resample_paths",
            "bootstrap_stability", "same_size", "SAME_SIZE_PCT", "member_label",
-           "member_values", "SEAL_PROBABILITY", "MIN_CELLS"]
+           "member_values", "SEAL_PROBABILITY", "MIN_CELLS", "TRIM_MM", "trim_check",
+           "trim_text"]
 
 #: the least probability of sealing, in every member, of a size that qualifies
 SEAL_PROBABILITY = 0.9
@@ -74,6 +75,10 @@ STEP_PCT = 1.0
 #: 0.6 mm of the native free edge and 0.4 mm of its height, below the millimetre a graft is
 #: trimmed to
 SAME_SIZE_PCT = 3.0
+#: how far a cut graft may miss its template along the free edge and along the height
+#: (mm): a graft is trimmed to the millimetre, so the answer is also read at the sizes a
+#: cut this far off makes (:func:`trim_check`)
+TRIM_MM = 0.5
 
 
 def same_size(a: GraftSize | None, b: GraftSize | None) -> bool:
@@ -161,6 +166,8 @@ class SizingAnswer:
     free_edge_mm: float | None = None
     height_mm: float | None = None
     band: dict | None = None
+    #: the sizes a cut :data:`TRIM_MM` off the template makes (:func:`trim_check`)
+    trim: dict | None = None
     highest: GraftSize | None = None
     highest_margin_mm: float | None = None
     shortfall_mm: float | None = None
@@ -395,8 +402,71 @@ def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float |
                    "height_pct": [min(s.height_pct for s in band),
                                   max(s.height_pct for s in band)],
                    "area_ratio": [min(areas), max(areas)]}
+    answer.trim = trim_check(answer, fit.leaflet)
     answer.text = _chosen_text(answer, fit)
     return answer
+
+
+def _pct_per_mm(leaflet: LeafletShape, size: GraftSize) -> tuple[float, float]:
+    """Per cents of width and of height that lengthen ``size``'s free edge and its height
+    by one millimetre each (a per cent's difference at ``size``)."""
+    free_edge, height = _dims(leaflet, size)
+    wider = _dims(leaflet, GraftSize(size.width_pct + 1.0, size.height_pct))[0]
+    taller = _dims(leaflet, GraftSize(size.width_pct, size.height_pct + 1.0))[1]
+    return 1.0 / (wider - free_edge), 1.0 / (taller - height)
+
+
+def trim_check(answer: SizingAnswer, leaflet: LeafletShape, trim_mm: float = TRIM_MM
+               ) -> dict | None:
+    """The answer read at the sizes a cut ``trim_mm`` off its template makes: its free edge
+    and its height each shorter, as cut, or longer by ``trim_mm`` (the eight sizes around it
+    on the lattice, those inside the studied range).  Returns the offsets (per cent), the
+    sizes read, the least predicted worst-case margin and the least probability of sealing
+    over them with where each is, the sizes that do not qualify, and ``robust``: every one
+    of them qualifies.  None without an answer or a lattice."""
+    lattice, size = answer.lattice, answer.size
+    if size is None or lattice is None:
+        return None
+    per_w, per_h = _pct_per_mm(leaflet, size)
+    dw = max(STEP_PCT, round(trim_mm * per_w / STEP_PCT) * STEP_PCT)
+    dh = max(STEP_PCT, round(trim_mm * per_h / STEP_PCT) * STEP_PCT)
+    column = {float(w): j for j, w in enumerate(lattice.widths_pct)}
+    row = {float(h): i for i, h in enumerate(lattice.heights_pct)}
+    read = []
+    for a in (-1, 0, 1):
+        for b in (-1, 0, 1):
+            w, h = size.width_pct + a * dw, size.height_pct + b * dh
+            if (a or b) and w in column and h in row:
+                read.append((GraftSize(w, h), row[h], column[w]))
+    if not read:
+        return None
+    margins = [float(lattice.worst_margin_mm[i, j]) for _, i, j in read]
+    seals = [float(lattice.seal_probability[i, j]) for _, i, j in read]
+    failing = [s.label for s, i, j in read if not lattice.qualifies[i, j]]
+    low, weak = int(np.argmin(margins)), int(np.argmin(seals))
+    return {"mm": trim_mm, "width_pct": dw, "height_pct": dh,
+            "sizes": [s.label for s, _, _ in read],
+            "worst_margin_mm": margins[low], "worst_margin_size": read[low][0].label,
+            "seal_probability": seals[weak], "seal_size": read[weak][0].label,
+            "failing": failing, "robust": not failing}
+
+
+def trim_text(answer: SizingAnswer) -> str:
+    """One sentence on the answer cut :data:`TRIM_MM` off its template ("" without)."""
+    trim = answer.trim
+    if not trim:
+        return ""
+    cut = (f"Cut {trim['mm']:g} mm off its template along the free edge or the height "
+           f"(±{trim['width_pct']:g} % width, ±{trim['height_pct']:g} % height: "
+           f"{len(trim['sizes'])} sizes in the studied range)")
+    worst = (f"the least predicted margin is {margin_text(trim['worst_margin_mm'], signed=True)}"
+             f" mm ({trim['worst_margin_size']}) and the least probability of sealing "
+             f"{trim['seal_probability']:.2f} ({trim['seal_size']})")
+    if trim["robust"]:
+        return f"{cut}, every size still qualifies: {worst}."
+    shown = ", ".join(trim["failing"][:4]) + (", …" if len(trim["failing"]) > 4 else "")
+    return (f"{cut}, {len(trim['failing'])} do not qualify ({shown}): {worst}. The answer is "
+            f"not robust to a {trim['mm']:g} mm error of the cut.")
 
 
 def _range(fit: StudyFit) -> str:
@@ -455,7 +525,7 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
             f"{band['area_ratio'][1]:.3f} ×); the highest predicted coaptation is at "
             f"{answer.highest.label} (margin {margin_text(answer.highest_margin_mm, signed=True)}"
             f" mm).")
-    return " ".join((head, margin, also, _resolution(answer)))
+    return " ".join((head, margin, also, trim_text(answer), _resolution(answer)))
 
 
 def _short_text(answer: SizingAnswer, fit: StudyFit) -> str:
