@@ -25,11 +25,19 @@ decision.  An adaptive study solves instead:
      uncertainty member that decides it (along its first path where the size is not
      solved yet: a size solved along every path there is as settled as solves make it),
      none within :data:`SPREAD` of another (scaled width and height).
-3. **A stop** (``valve_dolfinx.study.rounds``): *settled* when the answer's size is
-   solved in every member, its confirmation holds, and no size is left that could move
-   it (item 2; for "no graft": no size has a chance of at least
-   :data:`SETTLE_PROBABILITY`); *budget* when the next round's confirmation would exceed
-   the study's case budget, saying what is not settled.
+3. **The cut round** (:func:`cut_points`).  Once the answer is solved in every member and
+   no size could move it, the sizes a cut half a millimetre off its template makes
+   (:func:`~valve_dolfinx.sizing.answer.trim_check`) whose probability of sealing is below
+   the answer's threshold in some member are solved in the member where it is least
+   (along its first path where the size is not solved yet): between solved cells the
+   sealing is an interpolation, and this is where it decides whether the answer survives
+   a cut of the millimetre a graft is trimmed to.  It informs the report; the answer's
+   rule does not change.
+4. **A stop** (``valve_dolfinx.study.rounds``): *settled* when the answer's size is
+   solved in every member, its confirmation holds, no size is left that could move it
+   (item 2; for "no graft": no size has a chance of at least :data:`SETTLE_PROBABILITY`)
+   and no cut size's sealing is left open (item 3); *budget* when the next round's
+   confirmation would exceed the study's case budget, saying what is not settled.
 
 The chance that a size qualifies is an upper bound: the least, over the members, of the
 probability that the member's margin reaches ``−tolerance`` (normal predictive
@@ -60,12 +68,13 @@ from valve_dolfinx.sizing.answer import (
     StudyFit,
     member_values,
     same_size,
+    trim_check,
 )
 from valve_dolfinx.sizing.surface import SurfacePoint
 
 __all__ = ["INITIAL_LEVELS", "EXPLORE_PER_ROUND", "SETTLE_PROBABILITY", "EXPECTED_SAVING",
            "SPREAD", "Candidate", "initial_design", "qualify_chance", "open_sizes",
-           "next_points"]
+           "next_points", "cut_points"]
 
 #: width and height levels of the initial lattice
 INITIAL_LEVELS = 3
@@ -188,3 +197,26 @@ def next_points(candidates: Sequence[Candidate], ranges: tuple[tuple[float, floa
             chosen.append(candidate)
     return chosen
 
+
+
+def cut_points(fit: StudyFit, answer: SizingAnswer, tables: Sequence[MemberTable]
+               ) -> list[Candidate]:
+    """The sizes a cut half a millimetre off the answer's template makes whose least
+    probability of sealing over the members is below the answer's threshold (module
+    docstring, item 3), each with that probability as its ``chance`` (``saving`` 0) and
+    the member where it is least; the least likely to seal first."""
+    if answer.size is None or fit.sealing is None:
+        return []
+    trim = trim_check(answer, fit.leaflet)
+    if not trim:
+        return []
+    sizes = [GraftSize.parse(label) for label in trim["sizes"]]
+    values = member_values(tables)
+    seals = np.array([fit.sealing.probability(
+        [SurfacePoint(s.width_pct, s.height_pct, values[label]) for s in sizes])
+        for label in answer.members])
+    deciding, least = seals.argmin(axis=0), seals.min(axis=0)
+    order = np.argsort(least, kind="stable")
+    return [Candidate(sizes[i], float(least[i]), 0.0, answer.members[deciding[i]],
+                      int(deciding[i]))
+            for i in order if least[i] < answer.seal_threshold]

@@ -23,11 +23,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from valve_dolfinx.io import write_json
-from valve_dolfinx.sizing.answer import SAME_SIZE_PCT, member_label
+from valve_dolfinx.sizing.answer import SAME_SIZE_PCT, TRIM_MM, member_label
 from valve_dolfinx.sizing.design import (
     EXPECTED_SAVING,
     SETTLE_PROBABILITY,
     Candidate,
+    cut_points,
     next_points,
     open_sizes,
 )
@@ -81,10 +82,16 @@ def _new_slots(layout: StudyLayout, point: Point) -> int:
     return sum((point.comparison, m, point.size) not in layout.slots for m in members)
 
 
-def _open_text(rec: Recommendation, candidates: Sequence[Candidate]) -> str:
+def _open_text(rec: Recommendation, candidates: Sequence[Candidate],
+               cuts: Sequence[Candidate] = ()) -> str:
     """What keeps one answer from being settled, in words (empty when settled)."""
     answer = rec.answer
     parts = []
+    if cuts:
+        worst = cuts[0]
+        parts.append(f"{len(cuts)} sizes a {TRIM_MM:g} mm cut makes are not solved where "
+                     f"their sealing is uncertain (the least, {worst.size.label}, "
+                     f"{worst.chance:.2f} in `{worst.member}`)")
     if answer.size is not None and rec.confirm:
         parts.append(f"{answer.size.label} is not solved in {len(rec.confirm)} of its "
                      f"{len(rec.members)} members")
@@ -125,7 +132,13 @@ def _adaptive_points(layout: StudyLayout, c: int, rec: Recommendation
         points.append(Point(c, None, tuple(answer.size)))
     for k in next_points(candidates, (rec.fit.widths_pct, rec.fit.heights_pct)):
         points.append(Point(c, where[k], tuple(k.size)))
-    return points, _open_text(rec, candidates)
+    cuts = []
+    if not points and not candidates:  # otherwise settled: the cut round
+        where = {k: _unsolved_member(layout, c, k)
+                 for k in cut_points(rec.fit, answer, rec.tables)}
+        cuts = [k for k, m in where.items() if m is not None]
+        points = [Point(c, where[k], tuple(k.size)) for k in cuts]
+    return points, _open_text(rec, candidates, cuts)
 
 
 def plan_round(recommendations: Sequence[Recommendation], layout: StudyLayout,
@@ -185,9 +198,10 @@ def _plan_text(plan: RoundPlan, recommendations: Sequence[Recommendation],
         sizes = [rec.answer.size.label if rec.answer.size is not None else "no graft"
                  for rec in recommendations]
         return (f"{head}; settled: the answer ({', '.join(sizes)}) is solved in every "
-                f"member, and no size more than {SAME_SIZE_PCT:g} points from it could "
+                f"member, no size more than {SAME_SIZE_PCT:g} points from it could "
                 f"replace it with a chance of {SETTLE_PROBABILITY:g} or more and an "
-                f"expected saving of flat area of {EXPECTED_SAVING:.0%} or more.")
+                f"expected saving of flat area of {EXPECTED_SAVING:.0%} or more, and every "
+                f"size a {TRIM_MM:g} mm cut makes is solved where its sealing was uncertain.")
     if plan.stop == BUDGET:
         return f"{head}; stopped at the case budget, not settled: {open_}."
     return f"{head}; stopped with nothing left to solve that would settle it: {open_}."
