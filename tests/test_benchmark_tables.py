@@ -50,6 +50,7 @@ def committed_tables() -> dict:
     return {"membrane": bench("membrane").TABLE,
             "contact_comparison": bench("contact_comparison").TABLE,
             "adaptive_plan": bench("adaptive_plan").TABLE,
+            "sensitivity": bench("sensitivity").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 
@@ -183,6 +184,28 @@ def test_the_sensitivity_table_has_a_column_per_value(tmp_path):
         ["W21/H0"] + ["0.80, leaks 16 mm² in 1/2, intersects (30 edge–triangle pairs) in 2/2"]
         * 2, ["**recommended** (margin mm)", "W7/H13 (+0.34)", "W7/H40 (+0.02)"]]
     assert "Wall time of its study: 355 s." in text
+
+
+def test_every_choice_of_the_sensitivity_table_holds_the_same_defaults_study():
+    """Each choice's column at the package default is the one study at the defaults: the
+    same 21 cells with the same heights, leaks and answer in every choice."""
+    from valve_dolfinx.study.axes import value_text
+
+    sensitivity = bench("sensitivity")
+    rows = sensitivity.TABLE.read()
+    columns = {}
+    for choice in sensitivity.CHOICES:
+        default = value_text(sensitivity._values(choice, 0.8)[1])
+        at = [r for r in rows if r["choice"] == choice.name and r["kind"] != "wall"
+              and sensitivity._value_text(r["value"]) == default]
+        columns[choice.name] = {(r["cell"], r["kind"]): (r["worst_height_mm"], r["leaking"],
+                                                         r["target_low_mm"], r["answer"])
+                                for r in at}
+    assert set(columns) == {c.name for c in sensitivity.CHOICES}
+    first = columns["root"]
+    assert len(first) == 1 + 20 + 1  # the normal valve, the grid's grafts, the answer
+    for name, column in columns.items():
+        assert column == first, name
 
 
 def test_the_closure_table_takes_the_median_warm_run(tmp_path):
