@@ -51,6 +51,7 @@ def committed_tables() -> dict:
             "contact_comparison": bench("contact_comparison").TABLE,
             "adaptive_plan": bench("adaptive_plan").TABLE,
             "sensitivity": bench("sensitivity").TABLE,
+            "bdf2": bench("bdf2").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 
