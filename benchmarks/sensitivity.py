@@ -132,7 +132,8 @@ def _entry(row: dict) -> str:
     if row["leaking"]:
         text += f", leaks {row['largest_orifice_mm2']:.2g} mm²" + members(row["leaking"])
     if row["intersecting"]:
-        text += (f", intersects ({row['most_intersecting_pairs']} edge–triangle pairs)"
+        pairs = row["most_intersecting_pairs"]
+        text += (", intersects" + (f" ({pairs} edge–triangle pairs)" if pairs else "")
                  + members(row["intersecting"]))
     if row["not_converged"]:
         text += ", not converged" + members(row["not_converged"])
@@ -175,7 +176,8 @@ def draw(rows: list[dict]) -> str:
         lines.append("| **recommended** (margin mm) | "
                      + " | ".join(at["answer", None, v]["answer"] for v in values) + " |")
         wall = next((r["wall_s"] for r in mine if r["kind"] == "wall"), None)
-        lines.append(f"\nWall time of its study: {cell(wall, '.0f')} s.\n")
+        lines.append("\nWall time of its study: "
+                     + (f"{wall:.0f} s.\n" if wall is not None else "not recorded.\n"))
         parts.append("\n".join(lines))
     return "\n".join(parts)
 

@@ -57,13 +57,18 @@ def draw(rows: list[dict]) -> str:
     total = sum(float(r["wall_time_s"] or 0.0) for r in cases)
     elapsed = sweep["elapsed_s"]
     mesh = cases[0]["mesh_size_mm"] if cases else None
+    accepted = sum(r["newton_iterations"] or 0 for r in cases)
+    failed = sum(r["rejected_newton_iterations"] or 0 for r in cases)
+    timing = (f"Sweep wall time {elapsed:.0f} s; sum of case wall times {total:.0f} s "
+              f"(×{total / max(elapsed, 1e-9):.2f} from the rank groups)" if elapsed is not None
+              else f"Sum of case wall times {total:.0f} s (the sweep's own not recorded)")
     return (markdown_table(columns, cases) + "\n"
             f"{len(cases)} cases ({sweep['computed']} computed in this run), "
-            f"{sum(bool(r['converged']) for r in cases)} converged; mesh {mesh} mm; "
-            f"{sweep['ranks']} MPI ranks, {sweep['ranks_per_case']} per case.  Sweep wall "
-            f"time {elapsed:.0f} s; sum of case wall times {total:.0f} s "
-            f"(×{total / max(elapsed, 1e-9):.2f} from the rank groups).  Newton: iterations "
-            "in accepted steps + in failed solves.\n")
+            f"{sum(bool(r['converged']) for r in cases)} converged, "
+            f"{sum(bool(r['competent']) for r in cases)} competent; mesh {mesh} mm; "
+            f"{sweep['ranks']} MPI ranks, {sweep['ranks_per_case']} per case.  {timing}.  "
+            f"Newton: iterations in accepted steps + in failed solves, {accepted} + {failed} "
+            "in all.\n")
 
 
 TABLE = Table("sweep", ".venv/bin/mpirun -n 2 .venv/bin/python benchmarks/sweep.py", FIELDS,

@@ -50,6 +50,10 @@ def committed_tables() -> dict:
     return {"membrane": bench("membrane").TABLE,
             "contact_comparison": bench("contact_comparison").TABLE,
             "adaptive_plan": bench("adaptive_plan").TABLE,
+            "sensitivity": bench("sensitivity").TABLE,
+            "bdf2": bench("bdf2").TABLE,
+            "sweep": bench("sweep").TABLE,
+            "mesh_convergence": bench("mesh_convergence").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 
@@ -144,6 +148,23 @@ def test_the_bdf2_table_pairs_the_paths_of_each_case(tmp_path):
                                     "yes", "2.928", "238", "51.9", "0.001"]]
 
 
+def test_the_mesh_convergence_table_judges_the_change_of_spec_cells_only(tmp_path):
+    """SPEC §8 bounds the change of the normal valve and W21/H27 by 0.1 mm; W0/H40 is shown
+    beside them; the change is between the coarsest and the finest mesh."""
+    module = bench("mesh_convergence")
+    heights = {("normal", 0.8): (2.91, 1.87), ("normal", 0.6): (2.83, 1.95),
+               ("W21/H27", 0.8): (2.57, 2.57), ("W21/H27", 0.6): (2.44, 2.40),
+               ("W0/H40", 0.8): (2.29, 2.11), ("W0/H40", 0.6): (2.14, 1.67)}
+    rows = [{"case": c, "mesh_size_mm": m, "converged": True, "competent": c != "W0/H40",
+             "min_coaptation_height_mm": y, "min_coaptation_height_raw_mm": raw}
+            for (c, m), (y, raw) in heights.items()]
+    assert markdown_rows(_drawn(module.TABLE, rows, tmp_path)) == [
+        ["normal", "2.91 (1.87)", "2.83 (1.95)", "0.08", "met"],
+        ["W21/H27", "2.57 (2.57)", "2.44 (2.40)", "0.13", "not met"],
+        ["W0/H40", "2.29 (2.11), not competent", "2.14 (1.67), not competent", "0.15",
+         "beside the acceptance"]]
+
+
 def test_the_independence_table_names_each_check(tmp_path):
     independence = bench("independence")
     heights = {("W27/H0", "mass x1"): 0.8390, ("W27/H0", "mass x4"): 0.8389,
@@ -183,6 +204,28 @@ def test_the_sensitivity_table_has_a_column_per_value(tmp_path):
         ["W21/H0"] + ["0.80, leaks 16 mm² in 1/2, intersects (30 edge–triangle pairs) in 2/2"]
         * 2, ["**recommended** (margin mm)", "W7/H13 (+0.34)", "W7/H40 (+0.02)"]]
     assert "Wall time of its study: 355 s." in text
+
+
+def test_every_choice_of_the_sensitivity_table_holds_the_same_defaults_study():
+    """Each choice's column at the package default is the one study at the defaults: the
+    same 21 cells with the same heights, leaks and answer in every choice."""
+    from valve_dolfinx.study.axes import value_text
+
+    sensitivity = bench("sensitivity")
+    rows = sensitivity.TABLE.read()
+    columns = {}
+    for choice in sensitivity.CHOICES:
+        default = value_text(sensitivity._values(choice, 0.8)[1])
+        at = [r for r in rows if r["choice"] == choice.name and r["kind"] != "wall"
+              and sensitivity._value_text(r["value"]) == default]
+        columns[choice.name] = {(r["cell"], r["kind"]): (r["worst_height_mm"], r["leaking"],
+                                                         r["target_low_mm"], r["answer"])
+                                for r in at}
+    assert set(columns) == {c.name for c in sensitivity.CHOICES}
+    first = columns["root"]
+    assert len(first) == 1 + 20 + 1  # the normal valve, the grid's grafts, the answer
+    for name, column in columns.items():
+        assert column == first, name
 
 
 def test_the_closure_table_takes_the_median_warm_run(tmp_path):
@@ -253,6 +296,12 @@ def test_the_grid_and_sweep_tables_count_what_converged(tmp_path):
     assert markdown_rows(text)[1][:3] == ["W0_H0", "yes", "no"]
     assert markdown_rows(text)[1][7] == "135 + 36"
     assert "sum of case wall times 20 s (×2.00 from the rank groups)" in text
+    # 28 + 135 accepted, 0 + 36 failed; one of the two competent
+    assert "2 converged, 1 competent" in text and "163 + 36 in all" in text
+    rows = sweep.TABLE.at(tmp_path).read()
+    rows[-1]["elapsed_s"] = None  # a sweep whose own wall time was not kept
+    text = _drawn(sweep.TABLE, rows, tmp_path)
+    assert "Sum of case wall times 20 s (the sweep's own not recorded)" in text
 
 
 def test_the_contact_comparison_pairs_two_studies_case_by_case(tmp_path):

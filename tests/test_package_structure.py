@@ -1,15 +1,23 @@
-"""The package's structure: no module imports itself back through others, and the settings
-of a case and of a study load, validate and lay out a study without DOLFINx."""
+"""The package's structure: no module imports itself back through others, no function
+outside the tests runs over 80 lines of code without a reason written beside it, and the
+settings of a case and of a study load, validate and lay out a study without DOLFINx."""
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[1] / "valve_dolfinx"
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "valve_dolfinx"
+#: the folders whose functions are held to :data:`MAX_CODE_LINES`
+SOURCES = ("valve_dolfinx", "benchmarks", "demos")
+#: the most lines of code a function may have without a ``# long: <reason>`` on its signature
+MAX_CODE_LINES = 80
+_LONG = re.compile(r"#\s*long:\s*\S")
 
 
 def _module_name(path: Path) -> str:
@@ -65,6 +73,59 @@ def test_no_module_of_the_package_imports_itself_back():
     assert {"valve_dolfinx.study.grid", "valve_dolfinx.study.layout"} <= set(graph)
     assert "valve_dolfinx.study.layout" in graph["valve_dolfinx.study.grid"]
     assert cycles(graph) == []
+
+
+def _docstring_lines(tree: ast.AST) -> set[int]:
+    """The lines of every docstring in ``tree`` (modules, classes, functions)."""
+    lines = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            first = node.body[0] if node.body else None
+            if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
+                    and isinstance(first.value.value, str)):
+                lines |= set(range(first.lineno, first.end_lineno + 1))
+    return lines
+
+
+def long_functions(source: str, limit: int = MAX_CODE_LINES) -> list[tuple[str, int]]:
+    """The functions (nested ones included, each counted with what it contains) of more
+    than ``limit`` lines of code -- blank lines, comments and docstrings not counted --
+    whose signature carries no ``# long: <reason>``, as (name, lines of code)."""
+    tree = ast.parse(source)
+    text = source.splitlines()
+    docs = _docstring_lines(tree)
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        code = sum(1 for n in range(node.lineno, node.end_lineno + 1)
+                   if n not in docs and text[n - 1].strip()
+                   and not text[n - 1].lstrip().startswith("#"))
+        signature = text[node.lineno - 1:node.body[0].lineno - 1]
+        if code > limit and not any(_LONG.search(line) for line in signature):
+            found.append((node.name, code))
+    return found
+
+
+def test_the_length_count_skips_docstrings_comments_and_blank_lines():
+    body = "".join(f"    x{k} = {k}\n" for k in range(4))
+    source = (f'def short():\n    """A docstring\n\n    of four lines."""\n{body}'
+              "    # a comment\n\n    return x0\n")
+    assert long_functions(source, limit=6) == []  # the def, four lines and the return
+    assert long_functions(source, limit=5) == [("short", 6)]
+    marked = source.replace("def short():", "def short():  # long: one table, read in order")
+    assert long_functions(marked, limit=5) == []
+    nested = "def outer():\n" + textwrap.indent(source, "    ") + "    return short\n"
+    assert long_functions(nested, limit=7) == [("outer", 8)]
+
+
+def test_no_function_outside_the_tests_is_long_without_a_reason():
+    """A function of more than 80 lines of code is split, or says why not on its signature
+    (``# long: <reason>``)."""
+    long = [f"{path.relative_to(ROOT)}:{name} ({lines} lines of code)"
+            for folder in SOURCES for path in sorted((ROOT / folder).rglob("*.py"))
+            for name, lines in long_functions(path.read_text())]
+    assert long == []
 
 
 def test_case_and_study_settings_need_no_dolfinx():

@@ -244,7 +244,9 @@ def _path_points(element) -> np.ndarray:
 @pytest.fixture(scope="module")
 def template(tmp_path_factory):
     """The W21/H27 template of a 22 mm × 13 mm leaflet, its files and the expected sizes."""
-    from valve_dolfinx.plan.template import GraftTemplate, template_drawing, write_template
+    from valve_dolfinx.geometry.template import GraftTemplate
+    from valve_dolfinx.plan.template import write_template
+    from valve_dolfinx.plotting.template import template_drawing
 
     patient = PatientInput(root_diameter_mm=22.0, leaflet_free_edge_mm=22.0,
                            leaflet_height_mm=13.0, label="test")
@@ -320,7 +322,7 @@ def _ink_extent(gray: np.ndarray, box: tuple[float, float, float, float], dpi: i
 
 def test_template_pdf_printed_at_100_percent_measures_what_it_says(template):
     """Rasterised at 300 dpi, the cut piece and the calibration bar have their size in mm."""
-    from valve_dolfinx.plan.template import CUT_WIDTH_MM, FREE_EDGE_WIDTH_MM
+    from valve_dolfinx.plotting.template import CUT_WIDTH_MM, FREE_EDGE_WIDTH_MM
 
     gray = _raster(template["files"].pdf)
     page = template["page"]

@@ -112,6 +112,40 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
     ``alpha``, ``beta`` ``(A,)``.  Returns the :class:`NodeBlocks`, by group, then row
     node, then column node.
     """
+    entry, entry_key = _group_entries(group, ids, num_nodes)
+    P, P2, Q, Q2 = _entry_sums(entry, len(entry_key), alpha, beta, Bn, U, V)
+    first, last = _group_spans(entry_key, num_nodes)
+    entries = len(entry_key)
+    pushed = np.empty(entries, dtype=np.bool_)
+    total = 0
+    for e in range(entries):
+        pushed[e] = False
+        for s in range(3):
+            pushed[e] = pushed[e] or P[e, s] != 0.0 or P2[e, s] != 0.0
+        if pushed[e]:
+            total += last[e] - first[e]
+    rows = np.empty(total, dtype=np.int64)
+    cols = np.empty(total, dtype=np.int64)
+    blocks = np.empty((total, 3, 3))
+    k = 0
+    for a in range(entries):
+        if not pushed[a]:
+            continue
+        for b in range(first[a], last[a]):
+            rows[k] = entry_key[a] % num_nodes
+            cols[k] = entry_key[b] % num_nodes
+            for s in range(3):
+                for t in range(3):
+                    blocks[k, s, t] = P[a, s] * Q[b, t] + P2[a, s] * Q2[b, t]
+            k += 1
+    return NodeBlocks(rows, cols, blocks)
+
+
+@numba.njit(cache=True)
+def _group_entries(group, ids, num_nodes):  # pragma: no cover
+    """The distinct (group, node) pairs of :func:`group_blocks`' rows: ``entry`` ``(A·m,)``
+    numbers each row node's pair, ``entry_key`` ``(E,)`` holds each pair's key
+    ``group·num_nodes + node``, in increasing order (so a group's pairs are contiguous)."""
     count, m = ids.shape
     flat = count * m
     key = np.empty(flat, dtype=np.int64)
@@ -142,7 +176,6 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
                 order[b + 1] = order[b]
                 b -= 1
             order[b + 1] = moved
-    # the distinct (group, node) entries, in increasing key order
     entry = np.empty(flat, dtype=np.int64)
     entry_key = np.empty(flat, dtype=np.int64)
     entries = 0
@@ -152,6 +185,15 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
             entry_key[entries] = k
             entries += 1
         entry[order[j]] = entries - 1
+    return entry, entry_key[:entries].copy()
+
+
+@numba.njit(cache=True)
+def _entry_sums(entry, entries, alpha, beta, Bn, U, V):  # pragma: no cover
+    """The factors of :func:`group_blocks` per (group, node) pair ``entry``: ``P`` (``α Bn``),
+    ``P2`` (``β Bn``), ``Q`` (``U``) and ``Q2`` (``V``), each ``(entries, 3)``, summed in
+    row order."""
+    count, m = Bn.shape[0], Bn.shape[1]
     P = np.zeros((entries, 3))
     P2 = np.zeros((entries, 3))
     Q = np.zeros((entries, 3))
@@ -164,7 +206,14 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
                 P2[e, s] += beta[i] * Bn[i, r, s]
                 Q[e, s] += U[i, r, s]
                 Q2[e, s] += V[i, r, s]
-    # the entries of one group are contiguous: [first[e], last[e])
+    return P, P2, Q, Q2
+
+
+@numba.njit(cache=True)
+def _group_spans(entry_key, num_nodes):  # pragma: no cover
+    """For each (group, node) pair of ``entry_key`` (sorted), the pairs of its group:
+    ``[first[e], last[e])``."""
+    entries = len(entry_key)
     first = np.empty(entries, dtype=np.int64)
     last = np.empty(entries, dtype=np.int64)
     start = 0
@@ -173,29 +222,7 @@ def group_blocks(group, ids, Bn, alpha, beta, U, V, num_nodes):  # pragma: no co
             for g in range(start, e):
                 first[g], last[g] = start, e
             start = e
-    pushed = np.empty(entries, dtype=np.bool_)
-    total = 0
-    for e in range(entries):
-        pushed[e] = False
-        for s in range(3):
-            pushed[e] = pushed[e] or P[e, s] != 0.0 or P2[e, s] != 0.0
-        if pushed[e]:
-            total += last[e] - first[e]
-    rows = np.empty(total, dtype=np.int64)
-    cols = np.empty(total, dtype=np.int64)
-    blocks = np.empty((total, 3, 3))
-    k = 0
-    for a in range(entries):
-        if not pushed[a]:
-            continue
-        for b in range(first[a], last[a]):
-            rows[k] = entry_key[a] % num_nodes
-            cols[k] = entry_key[b] % num_nodes
-            for s in range(3):
-                for t in range(3):
-                    blocks[k, s, t] = P[a, s] * Q[b, t] + P2[a, s] * Q2[b, t]
-            k += 1
-    return NodeBlocks(rows, cols, blocks)
+    return first, last
 
 
 @numba.njit(cache=True)

@@ -50,12 +50,13 @@ from valve_dolfinx.exceptions import (
     StudyIncompleteError,
 )
 from valve_dolfinx.geometry.outline import GraftSize
+from valve_dolfinx.geometry.template import GraftTemplate
 from valve_dolfinx.io import check_output_folder, write_json
 from valve_dolfinx.plan.patient import PATIENT_FILE, PatientInput, read_patient, write_patient
 from valve_dolfinx.plan.reach import FreeEdgeReach, free_edge_reach
 from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
 from valve_dolfinx.plan.report import PlanFigures, RunInfo, write_plan_report
-from valve_dolfinx.plan.template import GraftTemplate, TemplateFiles, write_template
+from valve_dolfinx.plan.template import TemplateFiles, write_template
 from valve_dolfinx.sizing.cells import NORMAL_TARGET
 from valve_dolfinx.study.axes import axis_label
 from valve_dolfinx.study.grid import StudySettings

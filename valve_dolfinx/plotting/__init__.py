@@ -11,7 +11,8 @@ the plan's page and templates.
 * :mod:`~valve_dolfinx.plotting.case`: every figure of a case folder.
 * :mod:`~valve_dolfinx.plotting.study`: the sizing study's figures.
 * :mod:`~valve_dolfinx.plotting.page`: a page described in millimetres, as SVG and as an A4
-  figure at true size (the graft templates).
+  figure at true size.
+* :mod:`~valve_dolfinx.plotting.template`: the graft template's page, at true size.
 * :mod:`~valve_dolfinx.plotting.plan`: the plan's one-page report.
 
 Matplotlib figures are returned as :class:`matplotlib.figure.Figure` objects,

@@ -4,8 +4,9 @@
 from the lower left corner), in drawing order.  :func:`drawing_svg` writes it as SVG in
 millimetre units (``width="210mm"``, a viewBox in mm); :func:`page_figure` draws it on a
 matplotlib figure of exactly A4 whose single axes maps one data unit onto one millimetre
-of paper.  Printed at 100 % either measures what it says (the graft templates of
-:mod:`valve_dolfinx.plan.template` are such pages).
+of paper; :func:`region_inches` is one of its named rectangles, to save that part alone.
+Printed at 100 % either measures what it says (the graft templates of
+:mod:`valve_dolfinx.plotting.template` are such pages).
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-__all__ = ["A4_MM", "PT_MM", "Drawing", "PathItem", "TextItem", "drawing_svg", "page_figure"]
+__all__ = ["A4_MM", "PT_MM", "Drawing", "PathItem", "TextItem", "drawing_svg", "page_figure",
+           "region_inches"]
 
 #: A4 portrait (mm)
 A4_MM = (210.0, 297.0)
@@ -133,3 +135,11 @@ def page_figure(page: Drawing):
                 va="baseline", color=t.colour, fontweight="bold" if t.bold else "normal",
                 parse_math=False)  # a label is plain text: a $ is a dollar sign
     return fig
+
+
+def region_inches(page: Drawing, name: str):
+    """The page's rectangle ``name`` (:attr:`Drawing.regions`) as a matplotlib box in
+    inches, for ``savefig(bbox_inches=...)`` of :func:`page_figure`'s figure."""
+    from matplotlib.transforms import Bbox
+
+    return Bbox.from_extents(*(v / 25.4 for v in page.regions[name]))

@@ -229,6 +229,87 @@ def _solved_cells(ax, rec: Recommendation, pt) -> list:
     return labels
 
 
+def _margin_contours(fig, ax, answer, pt, scale: float, caption: bool) -> None:
+    """The answer's lattice on a sizing map: filled contours of the predicted worst-case
+    margin with their colour bar, its 0 line solid and the tolerance's dashed, the sealing
+    boundary dash-dotted with the side that does not seal hatched, and the band of
+    qualifying sizes outlined in green."""
+    lattice = answer.lattice
+    w, h = np.meshgrid(lattice.widths_pct, lattice.heights_pct)
+    margin = lattice.worst_margin_mm
+    reach = max(float(np.abs(margin).max()), 0.05)
+    levels = np.linspace(-reach, reach, 21)
+    filled = ax.contourf(w, h, margin, levels=levels, cmap=_MARGIN_CMAP, extend="both")
+    # a map printed small keeps its width for the plane: the colour bar goes below it
+    bar = fig.colorbar(filled, ax=ax, shrink=0.9, aspect=20 if scale >= 1 else 40,
+                       location="right" if scale >= 1 else "bottom")
+    if caption:  # else the key says it
+        bar.set_label(_COLOURS, fontsize=pt(10))
+    bar.set_ticks(levels[::4], labels=[f"{v:+.2f}" for v in levels[::4]])
+    bar.ax.tick_params(labelsize=pt(10))
+    steps = ax.contour(w, h, margin, levels=levels[::4], colors="0.3", linewidths=0.6)
+    ax.clabel(steps, fmt="%.2f", fontsize=pt(8))
+    tol = answer.tolerance_mm
+    ax.contour(w, h, margin, levels=[0.0], colors="black", linewidths=2.0)
+    ax.contour(w, h, margin, levels=[-tol], colors="black", linewidths=1.5,
+               linestyles="--")
+    threshold = answer.seal_threshold
+    if lattice.seal_probability.min() < threshold <= lattice.seal_probability.max():
+        ax.contour(w, h, lattice.seal_probability, levels=[threshold], colors="black",
+                   linewidths=1.8, linestyles="-.")
+    with matplotlib.rc_context({"hatch.color": "0.25", "hatch.linewidth": 0.6}):
+        ax.contourf(w, h, lattice.seal_probability, levels=[0.0, threshold],
+                    colors=["0.5"], alpha=0.3, hatches=["//"])
+    if lattice.qualifies.any():
+        ax.contour(w, h, lattice.qualifies.astype(float), levels=[0.5],
+                   colors=OKABE_ITO["bluish_green"], linewidths=3.0)
+
+
+def _answer_marks(ax, answer, pt) -> tuple[list, list]:
+    """The answer (star) and the highest size (triangle) on a sizing map; returns their
+    labels, to be placed, and their marks (data point, size in points)."""
+    labels, marks = [], []
+    if answer.size is not None:
+        ax.plot(*answer.size, marker="*", ms=pt(20), mfc="white", mec="black", mew=1.5,
+                ls="none", zorder=5)
+        marks.append((tuple(answer.size), pt(20)))
+        labels.append(_label(ax, f"answer {answer.size.label}", answer.size,
+                             pt(20) / 2 + 2, fontsize=pt(10), fontweight="bold",
+                             bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black")))
+    if answer.highest is not None:
+        ax.plot(*answer.highest, marker="^", ms=pt(11), mfc="white", mec="black", mew=1.2,
+                ls="none", zorder=5)
+        marks.append((tuple(answer.highest), pt(11)))
+        labels.append(_label(ax, f"highest {answer.highest.label}", answer.highest,
+                             pt(11) / 2 + 2, fontsize=pt(9),
+                             bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4")))
+    return labels, marks
+
+
+def _size_axes(ax, rec: Recommendation, pt, caption: bool) -> None:
+    """A sizing map's axes: ticks at the grid's sizes (plain ticks over the range for an
+    adaptive design's), limits about the solved cells, the axes' names (short on a map
+    drawn for a page, whose key has the long ones)."""
+    grid = [c for c in rec.cells if not c.confirmation]
+    widths = sorted({c.width_pct for c in grid})
+    heights = sorted({c.height_pct for c in grid})
+    if widths and all(not c.missing for c in grid):  # ticks at the grid's sizes
+        ax.set_xticks(widths, [f"+{x:g}" for x in widths])
+        ax.set_yticks(heights, [f"+{y:g}" for y in heights])
+    elif widths:  # an adaptive design's sizes: plain ticks over the range
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MaxNLocator(6, integer=True))
+            axis.set_major_formatter(FuncFormatter(lambda v, _: f"+{v:g}"))
+    if widths:
+        pad_w = 0.04 * ((widths[-1] - widths[0]) or 10)
+        pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
+        ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)
+        ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + 2 * pad_h)
+    ax.tick_params(labelsize=pt(10))
+    ax.set_xlabel("graft width enlargement W (%)" if caption else "W (%)", fontsize=pt(11))
+    ax.set_ylabel("graft height enlargement H (%)" if caption else "H (%)", fontsize=pt(11))
+
+
 #: what the sizing map's colours show
 _COLOURS = "predicted worst-case margin over the target (mm)"
 
@@ -281,69 +362,11 @@ def plot_sizing_map(rec: Recommendation, path: Path | None = None, *, title: str
     labels = []  # (annotation, gap in points), placed once the layout is settled
     marks = []  # (data point, size in points): what a label may not cover
     if lattice is not None:
-        w, h = np.meshgrid(lattice.widths_pct, lattice.heights_pct)
-        margin = lattice.worst_margin_mm
-        reach = max(float(np.abs(margin).max()), 0.05)
-        levels = np.linspace(-reach, reach, 21)
-        filled = ax.contourf(w, h, margin, levels=levels, cmap=_MARGIN_CMAP, extend="both")
-        # a map printed small keeps its width for the plane: the colour bar goes below it
-        bar = fig.colorbar(filled, ax=ax, shrink=0.9, aspect=20 if scale >= 1 else 40,
-                           location="right" if scale >= 1 else "bottom")
-        if caption:  # else the key says it
-            bar.set_label(_COLOURS, fontsize=pt(10))
-        bar.set_ticks(levels[::4], labels=[f"{v:+.2f}" for v in levels[::4]])
-        bar.ax.tick_params(labelsize=pt(10))
-        steps = ax.contour(w, h, margin, levels=levels[::4], colors="0.3", linewidths=0.6)
-        ax.clabel(steps, fmt="%.2f", fontsize=pt(8))
-        tol = answer.tolerance_mm
-        ax.contour(w, h, margin, levels=[0.0], colors="black", linewidths=2.0)
-        ax.contour(w, h, margin, levels=[-tol], colors="black", linewidths=1.5,
-                   linestyles="--")
-        threshold = answer.seal_threshold
-        if lattice.seal_probability.min() < threshold <= lattice.seal_probability.max():
-            ax.contour(w, h, lattice.seal_probability, levels=[threshold], colors="black",
-                       linewidths=1.8, linestyles="-.")
-        with matplotlib.rc_context({"hatch.color": "0.25", "hatch.linewidth": 0.6}):
-            ax.contourf(w, h, lattice.seal_probability, levels=[0.0, threshold],
-                        colors=["0.5"], alpha=0.3, hatches=["//"])
-        if lattice.qualifies.any():
-            ax.contour(w, h, lattice.qualifies.astype(float), levels=[0.5],
-                       colors=OKABE_ITO["bluish_green"], linewidths=3.0)
-        if answer.size is not None:
-            ax.plot(*answer.size, marker="*", ms=pt(20), mfc="white", mec="black", mew=1.5,
-                    ls="none", zorder=5)
-            marks.append((tuple(answer.size), pt(20)))
-            labels.append(_label(ax, f"answer {answer.size.label}", answer.size,
-                                 pt(20) / 2 + 2, fontsize=pt(10), fontweight="bold",
-                                 bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="black")))
-        if answer.highest is not None:
-            ax.plot(*answer.highest, marker="^", ms=pt(11), mfc="white", mec="black", mew=1.2,
-                    ls="none", zorder=5)
-            marks.append((tuple(answer.highest), pt(11)))
-            labels.append(_label(ax, f"highest {answer.highest.label}", answer.highest,
-                                 pt(11) / 2 + 2, fontsize=pt(9),
-                                 bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.4")))
+        _margin_contours(fig, ax, answer, pt, scale, caption)
+        labels, marks = _answer_marks(ax, answer, pt)
     marks += [((c.width_pct, c.height_pct), pt(8)) for c in rec.cells]
     labels += _solved_cells(ax, rec, pt)
-    grid = [c for c in rec.cells if not c.confirmation]
-    widths = sorted({c.width_pct for c in grid})
-    heights = sorted({c.height_pct for c in grid})
-    if widths and all(not c.missing for c in grid):  # ticks at the grid's sizes
-        ax.set_xticks(widths, [f"+{x:g}" for x in widths])
-        ax.set_yticks(heights, [f"+{y:g}" for y in heights])
-    elif widths:  # an adaptive design's sizes: plain ticks over the range
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_locator(MaxNLocator(6, integer=True))
-            axis.set_major_formatter(FuncFormatter(lambda v, _: f"+{v:g}"))
-    if widths:
-        pad_w = 0.04 * ((widths[-1] - widths[0]) or 10)
-        pad_h = 0.04 * ((heights[-1] - heights[0]) or 10)
-        ax.set_xlim(widths[0] - pad_w, widths[-1] + pad_w)
-        ax.set_ylim(heights[0] - 3 * pad_h, heights[-1] + 2 * pad_h)
-    ax.tick_params(labelsize=pt(10))
-    # a map drawn for a page has the short names, the key the long ones
-    ax.set_xlabel("graft width enlargement W (%)" if caption else "W (%)", fontsize=pt(11))
-    ax.set_ylabel("graft height enlargement H (%)" if caption else "H (%)", fontsize=pt(11))
+    _size_axes(ax, rec, pt, caption)
     if caption:
         key = answer.text.split(". ")[0] + ". " if lattice is None else ""
         chars = int(100 * scale * 9 / pt(9))
@@ -380,10 +403,6 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     is competent."""
     d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
     ok = np.array([bool(r["recommended"]) for r in rows], dtype=bool)
-
-    def column(key: str) -> np.ndarray:
-        return np.array([np.nan if r[key] is None else r[key] for r in rows], dtype=float)
-
     fig = new_figure(7.5, 8.0)
     top, low, notes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [3, 2, 0.55]})
     low.sharex(top)
@@ -392,17 +411,37 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
         for x in d[~ok]:
             ax.axvspan(x - step / 2, x + step / 2, color="0.88", lw=0)
         ax.grid(alpha=0.3)
+    _nomogram_sizes(top, rows, d, ok, step)
+    _nomogram_margins(low, rows, d, ok, step)
+    notes.set_axis_off()
+    notes.text(0.0, 1.0, footnote, fontsize=7, va="top", ha="left", wrap=True,
+               transform=notes.transAxes)
+    fig.suptitle(title, fontsize=11)
+    return save_figure(fig, path, dpi=130)
+
+
+def _column(rows: Sequence[dict], key: str) -> np.ndarray:
+    """A nomogram column as floats (None: NaN)."""
+    return np.array([np.nan if r[key] is None else r[key] for r in rows], dtype=float)
+
+
+def _nomogram_sizes(top, rows: Sequence[dict], d: np.ndarray, ok: np.ndarray,
+                    step: float) -> None:
+    """The nomogram's upper panel: the recommended W and H per diameter ``d`` with the
+    band that also qualifies, the closest size's hollow where no graft qualifies (``ok``
+    false), and each diameter's graft named at the bottom."""
     series = (("graft_width_pct", "best_width_pct", "width W", "o", OKABE_ITO["blue"], -1),
               ("graft_height_pct", "best_height_pct", "height H", "s", OKABE_ITO["orange"], 1))
     highest = 0.0
     for key, best_key, label, marker, colour, side in series:
-        y, best = column(key), column(best_key)
+        y, best = _column(rows, key), _column(rows, best_key)
         x = d + side * 0.04 * step  # W and H side by side where they are equal
         if ok.any():
             top.plot(x[ok], y[ok], "-", marker=marker, color=colour, ms=8, lw=1.5,
                      label=f"recommended {label}")
             what = key.split("_")[1]
-            low_end, high_end = column(f"band_{what}_min_pct"), column(f"band_{what}_max_pct")
+            low_end = _column(rows, f"band_{what}_min_pct")
+            high_end = _column(rows, f"band_{what}_max_pct")
             top.errorbar(x[ok], y[ok], yerr=[y[ok] - low_end[ok], high_end[ok] - y[ok]],
                          fmt="none", ecolor=colour, elinewidth=5, alpha=0.35,
                          label=f"band of {label} that also qualify")
@@ -420,7 +459,14 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     top.set_ylim(-0.3 * highest - 3, 1.45 * highest + 3)  # room for the names and legend
     top.legend(fontsize=8, loc="upper left", ncol=2)
     top.tick_params(labelbottom=False)
-    margin = np.where(ok, column("margin_mm"), -column("shortfall_mm"))
+
+
+def _nomogram_margins(low, rows: Sequence[dict], d: np.ndarray, ok: np.ndarray,
+                      step: float) -> None:
+    """The nomogram's lower panel: the answer's margin per diameter ``d`` (where no graft
+    qualifies, the closest size's shortfall, negative), the tolerance, and under each
+    diameter the normal valve's minimum coaptation height."""
+    margin = np.where(ok, _column(rows, "margin_mm"), -_column(rows, "shortfall_mm"))
     for where, colour, label in (
             (ok, OKABE_ITO["bluish_green"], "the answer's predicted worst-case margin"),
             (~ok, OKABE_ITO["vermillion"], "no graft: the closest size's margin "
@@ -433,7 +479,7 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
                          xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
                          ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)
-    tolerance = column("tolerance_mm")
+    tolerance = _column(rows, "tolerance_mm")
     if np.isfinite(tolerance).any():
         tol = float(np.nanmax(tolerance))
         low.axhline(-tol, color="k", lw=1.0, ls="--", label=f"the tolerance, −{tol:.2f} mm")
@@ -450,11 +496,6 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
     for label in low.get_xticklabels():
         label.set_fontsize(8)
     low.legend(fontsize=8, loc="upper left")
-    notes.set_axis_off()
-    notes.text(0.0, 1.0, footnote, fontsize=7, va="top", ha="left", wrap=True,
-               transform=notes.transAxes)
-    fig.suptitle(title, fontsize=11)
-    return save_figure(fig, path, dpi=130)
 
 
 def plot_case_panel(case_folder: Path, path: Path | None = None, *, title: str = ""):
