@@ -384,16 +384,21 @@ ANSWERS = {
                     ["Recommended graft W27/H27", "smallest margin is 0.0023 mm, in root 23.0",
                      "Smallest margin over the target: 0.0023 mm, in root 23.0 mm."]),
     # the answer cut half a millimetre off: the page says it is not robust to it
-    "cut": (answer((10, 19), -0.14, limiting="root 20.0 mm", members=("root 20.0 mm",),
+    # ... and names its members, every root along every path, in one line
+    "cut": (answer((10, 19), -0.14, limiting="root 20.0 mm",
+                   members=tuple(f"root {d} mm, path {p} (from the {how} valve)"
+                                 for d in ("20.0", "21.0") for p, how in ((1, "closed"),
+                                                                          (2, "open"))),
                    trim={"mm": 0.5, "width_pct": 2.0, "height_pct": 4.0,
                          "sizes": ["W8/H15", "W8/H19", "W8/H23", "W10/H15", "W10/H23",
                                    "W12/H15", "W12/H19", "W12/H23"],
                          "worst_margin_mm": -0.54, "worst_margin_size": "W8/H15",
                          "seal_probability": 0.77, "seal_size": "W8/H15",
                          "failing": ["W8/H15", "W8/H19"], "robust": False}),
-            ["Cut 0.5 mm off its template", "2 do not qualify (W8/H15, W8/H19)",
-             "the least predicted margin is -0.54 mm (W8/H15)",
-             "not robust to a 0.5 mm error of the cut"]),
+            ["Cut 0.5 mm off its template", "2 of the 8 such sizes do not qualify (W8/H15, "
+             "W8/H19)", "least margin -0.54 mm (W8/H15), least sealing 0.77 (W8/H15)",
+             "not robust to the cut",
+             "Members (each solved on its own): roots 20.0, 21.0 mm × paths 1, 2 (4)."]),
     "closest": (answer(closest=(27, 40), shortfall=0.4, target=2.3, members=("a", "b")),
                 ["No graft in the studied range is robust", "The closest is W27/H40",
                  "0.40 mm short"]),

@@ -17,6 +17,7 @@ millimetres).
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -112,8 +113,7 @@ def input_lines(patient: PatientInput) -> list[tuple[str, str]]:
          if patient.design == "grid" else
          ("graft sizes studied", f"W {patient.graft_widths_pct[0]:g}–"
           f"{patient.graft_widths_pct[-1]:g} %, H {patient.graft_heights_pct[0]:g}–"
-          f"{patient.graft_heights_pct[-1]:g} % (adaptive design, at most {patient.budget} "
-          "graft cases)")),
+          f"{patient.graft_heights_pct[-1]:g} % (adaptive, ≤ {patient.budget} cases)")),
         ("graft fibres", f"{patient.graft_fibre_angle_deg:g}° from the free edge"),
         ("numerical paths", ", ".join(p.label for p in study_paths(patient.paths))),
         ("target coaptation", target),
@@ -142,6 +142,19 @@ def _targets(rec: PlanRecommendation) -> str:
             "members.")
 
 
+def _members(rec: PlanRecommendation) -> str:
+    """The members in words: ``roots 20.0, 21.0, 22.0 mm × paths 1, 2 (6)`` when they are
+    every diameter along every path (the paths are named in the inputs), else each one."""
+    names = [rec.name(m) for m in rec.recommendation.members]
+    parts = [re.fullmatch(r"root (.+) mm, path (\d+)(?: \(.*\))?", n) for n in names]
+    roots = list(dict.fromkeys(p.group(1) for p in parts if p))
+    paths = list(dict.fromkeys(p.group(2) for p in parts if p))
+    if all(parts) and len(names) == len(roots) * len(paths) > 1:
+        return (f"{'roots' if len(roots) > 1 else 'root'} {', '.join(roots)} mm × "
+                f"{'paths' if len(paths) > 1 else 'path'} {', '.join(paths)} ({len(names)})")
+    return "; ".join(names)
+
+
 def _details(rec: PlanRecommendation) -> list[str]:
     """What stands behind the headline: members, targets, margin, what was not computed."""
     if rec.recommendation is None:
@@ -149,8 +162,7 @@ def _details(rec: PlanRecommendation) -> list[str]:
     study, answer = rec.recommendation, rec.recommendation.answer
     out = []
     if study.members:
-        out.append(f"Members (each solved on its own): "
-                   f"{'; '.join(rec.name(m) for m in study.members)}.")
+        out.append(f"Members (each solved on its own): {_members(rec)}.")
     if _targets(rec):
         out.append(_targets(rec))
     if answer.size is not None and answer.limiting_member:

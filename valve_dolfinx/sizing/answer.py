@@ -456,17 +456,17 @@ def trim_text(answer: SizingAnswer) -> str:
     trim = answer.trim
     if not trim:
         return ""
-    cut = (f"Cut {trim['mm']:g} mm off its template along the free edge or the height "
-           f"(±{trim['width_pct']:g} % width, ±{trim['height_pct']:g} % height: "
-           f"{len(trim['sizes'])} sizes in the studied range)")
-    worst = (f"the least predicted margin is {margin_text(trim['worst_margin_mm'], signed=True)}"
-             f" mm ({trim['worst_margin_size']}) and the least probability of sealing "
-             f"{trim['seal_probability']:.2f} ({trim['seal_size']})")
+    n, failing = len(trim["sizes"]), trim["failing"]
+    head = (f"Cut {trim['mm']:g} mm off its template (±{trim['width_pct']:g} % width, "
+            f"±{trim['height_pct']:g} % height): ")
+    least = (f"least margin {margin_text(trim['worst_margin_mm'], signed=True)} mm "
+             f"({trim['worst_margin_size']}), least sealing {trim['seal_probability']:.2f} "
+             f"({trim['seal_size']})")
     if trim["robust"]:
-        return f"{cut}, every size still qualifies: {worst}."
-    shown = ", ".join(trim["failing"][:4]) + (", …" if len(trim["failing"]) > 4 else "")
-    return (f"{cut}, {len(trim['failing'])} do not qualify ({shown}): {worst}. The answer is "
-            f"not robust to a {trim['mm']:g} mm error of the cut.")
+        return f"{head}all {n} such sizes still qualify; {least}."
+    shown = ", ".join(failing[:4]) + (", …" if len(failing) > 4 else "")
+    return (f"{head}{len(failing)} of the {n} such sizes do not qualify ({shown}); {least}: "
+            "not robust to the cut.")
 
 
 def _range(fit: StudyFit) -> str:
