@@ -36,6 +36,8 @@ MapDrawer = Callable[[int, float, float], "Path | None"]
 _VALUES_X_MM, _VALUES_CHARS = 64.0, 58
 #: the page's printed area across (mm from the left edge) and the gap between pictures
 _LEFT_MM, _RIGHT_MM, _GAP_MM = 12.0, 198.0, 4.0
+#: where the two closed views stand beside the sizing map, side by side (x, width in mm)
+_VIEWS_X_MM, _VIEWS_MM = 134.0, 64.0
 
 
 def sizing_map_mm(n: int) -> tuple[float, float]:
@@ -151,21 +153,20 @@ def _inputs(fig, rows: list[tuple[str, str]], top: float) -> float:
     return y
 
 
-def _captions(page: PlanPage) -> tuple[list[str], str]:
-    """The maps' captions wrapped to their width, and the closed valve's caption tail."""
+def _captions(page: PlanPage) -> list[str]:
+    """The maps' captions wrapped to their width."""
     captions = page.sizing_captions or ["Sizing map"]
     width = sizing_map_mm(len(captions))[0]
-    which = f"\n{page.shown}" if page.shown else ""
-    return [textwrap.fill(c, int(width / 1.9)) for c in captions], which
+    return [textwrap.fill(c, int(width / 1.9)) for c in captions]
 
 
 def _pictures(fig, page: PlanPage, top: float, height: float,
               draw_map: MapDrawer | None) -> None:
     """In a row ``height`` mm high below ``top``: the sizing map on the left, the closed
-    valve from the aorta and from the ventricle stacked on the right; or, with several
+    valve from the aorta and from the ventricle side by side on the right; or, with several
     comparison values, their sizing maps side by side.  ``draw_map`` draws each map at
     the size of its box."""
-    captions, which = _captions(page)
+    captions = _captions(page)
     width = sizing_map_mm(len(captions))[0]
     for k, caption in enumerate(captions):
         path = draw_map(k, width, height) if draw_map is not None else None
@@ -173,11 +174,16 @@ def _pictures(fig, page: PlanPage, top: float, height: float,
                  caption, "not made")
     if len(captions) > 1:
         return
-    half = 0.5 * (height - 10.0)
-    _picture(fig, (134, top - half, 64, half), page.closed_aortic,
-             f"Closed valve from the aorta{which}", "not made")
-    _picture(fig, (134, top - height, 64, half), page.closed_ventricular,
-             f"Closed valve from the ventricle{which}", "not made")
+    half = 0.5 * (_VIEWS_MM - _GAP_MM)
+    _picture(fig, (_VIEWS_X_MM, top - height, half, height), page.closed_aortic,
+             _views_caption(page), "not made")
+    _picture(fig, (_VIEWS_X_MM + half + _GAP_MM, top - height, half, height),
+             page.closed_ventricular, "", "not made")
+
+
+def _views_caption(page: PlanPage) -> str:
+    """The caption of the two closed views, side by side."""
+    return "Closed valve (aorta | ventricle)" + (f"\n{page.shown}" if page.shown else "")
 
 
 def draw_plan_page(page: PlanPage, draw_map: MapDrawer | None = None):
@@ -203,9 +209,8 @@ def draw_plan_page(page: PlanPage, draw_map: MapDrawer | None = None):
         thumb = 44.0
         _picture(fig, (136, top - 4.0 - thumb, 62, thumb), page.template,
                  page.template_caption, page.template_missing)
-        captions, which = _captions(page)
-        heads = [*captions, *([f"Closed valve from the aorta{which}"]
-                              if len(captions) == 1 else [])]
+        captions = _captions(page)
+        heads = [*captions, *([_views_caption(page)] if len(captions) == 1 else [])]
         above = max(_height(c, 8) for c in heads) + 1.0
         row = min(y, top - 4.0 - thumb) - 4.0 - above
         key = textwrap.fill(page.sizing_key, 140)
