@@ -50,6 +50,7 @@ def committed_tables() -> dict:
     return {"membrane": bench("membrane").TABLE,
             "contact_comparison": bench("contact_comparison").TABLE,
             "adaptive_plan": bench("adaptive_plan").TABLE,
+            "answer_stability": bench("answer_stability").TABLE,
             "sensitivity": bench("sensitivity").TABLE,
             "bdf2": bench("bdf2").TABLE,
             "sweep": bench("sweep").TABLE,
@@ -327,3 +328,15 @@ def test_the_contact_comparison_pairs_two_studies_case_by_case(tmp_path):
     assert rows[2]["newton_iterations_after"] == 322
     assert rows[2]["competent_before"] == 1 and rows[2]["competent_after"] == 2
     assert rows[2]["wall_time_s_after"] == pytest.approx(3.0)
+
+
+def test_the_answer_stability_table_gives_the_share_and_leaves_one_path_blank(tmp_path):
+    """A share of 0.82 reads 82 %; a study of one path has no resamples: its cells are –."""
+    text = _drawn(bench("answer_stability").TABLE, [
+        {"study": "two paths", "members": 3, "paths": 2, "graft_cases": 37,
+         "answer": "W10/H19", "tolerance_mm": 0.28, "resamples": 50, "within_3_points": 0.82,
+         "no_graft": 8, "resample_answers": "W11/H20 ×22, none ×8"},
+        {"study": "one path", "members": 1, "paths": 1, "graft_cases": 21,
+         "answer": "W10/H13", "tolerance_mm": 0.28}], tmp_path)
+    two, one = markdown_rows(text)
+    assert two[8:10] == ["82%", "8"] and one[7:10] == ["–", "–", "–"]
