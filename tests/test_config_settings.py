@@ -215,7 +215,7 @@ def test_an_old_key_in_a_file_names_its_new_key(tmp_path, old):
 @pytest.mark.parametrize("old", sorted(RENAMED))
 def test_an_old_key_on_the_command_line_names_its_new_key(old):
     text = _toml_value(_old_value(old))
-    with pytest.raises(ParameterError, match=f"{old} was renamed {RENAMED[old]}"):
+    with pytest.raises(ParameterError, match=f"--set: {old} was renamed {RENAMED[old]}"):
         load_config(overrides=[f"{old}={text}"])
 
 

@@ -523,6 +523,8 @@ def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:
         if not sep or not key:
             raise ParameterError(f"--set {text!r}: give table.key=value, e.g. --set "
                                  "loading.pressure_mmhg=100 or --set geometry.mesh_size_mm=1.6")
+        if key in RENAMED:
+            check_key(key, source="--set")
         set_dotted(data, key, parse_value(raw))
     return data
 
