@@ -68,8 +68,7 @@ def worker(case, mesh_size: float, limit: float | None, out: str) -> dict:
 
     config = case_config(case, mesh_size)
     if limit is not None:
-        config = replace(config, pseudo_transient=replace(config.pseudo_transient,
-                                                          wall_time_limit_s=limit))
+        config = replace(config, wall_time_limit_s=limit)
     result = run_case(config, out).to_dict()
     return {key: result[key] for key in FIELDS}
 

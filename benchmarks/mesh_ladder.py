@@ -3,7 +3,7 @@ default mesh's discretisation error of the minimum coaptation height (docs/study
 resolution, measured").
 
 Runs one study (``--out``, default ``results/mesh_ladder``) whose comparison axis is the mesh
-size (``geometry.mesh_size``), along the first ``--paths`` numerical paths, then writes the
+size (``geometry.mesh_size_mm``), along the first ``--paths`` numerical paths, then writes the
 table that the sizing answer reads (``--table``, default
 ``benchmarks/results/mesh_ladder.csv``: one row per case, its graft size, mesh size, path,
 convergence, competence and minimum coaptation height) and prints, per cell, the height at
@@ -43,7 +43,7 @@ MESHES_MM = (0.8, 0.6, 0.45)
 COLUMNS = ("case", "graft_width_pct", "graft_height_pct", "mesh_size_mm", "path", "converged",
            "competent", "min_coaptation_height_mm", "regurgitant_orifice_area_mm2",
            "wall_time_s")
-MESH_KEY = "geometry.mesh_size"
+MESH_KEY = "geometry.mesh_size_mm"
 
 
 def ladder_rows(rows: list[dict]) -> list[dict]:

@@ -58,27 +58,27 @@ class Choice:
 #: The choices of docs/sensitivity.md, in its order
 CHOICES = (
     Choice("root", "loaded root diameter (mm; none: the wall law, 20.09 mm)",
-           "root.loaded_diameter", lambda d, mesh: (19.0, None, 21.0, 22.0)),
+           "root.loaded_diameter_mm", lambda d, mesh: (19.0, None, 21.0, 22.0)),
     Choice("native_bending", "the native leaflets' bending modulus (kPa)",
-           "bending_modulus_kpa", lambda d, mesh: (0.0, 200.0, 800.0)),
+           "native.bending_modulus_kpa", lambda d, mesh: (0.0, 200.0, 800.0)),
     Choice("graft_bending", "the graft's bending modulus (kPa): a decade either side",
-           "graft_bending_modulus_kpa", lambda d, mesh: (d / 10, d, d * 10)),
+           "graft.bending_modulus_kpa", lambda d, mesh: (d / 10, d, d * 10)),
     Choice("graft_compression", "the graft's compressive response (true: tension field; "
-           "false: the plain Fung law)", "graft_tension_field", lambda d, mesh: (True, False)),
-    Choice("graft_thickness", "graft thickness (mm)", "graft_material.thickness",
+           "false: the plain Fung law)", "graft.tension_field", lambda d, mesh: (True, False)),
+    Choice("graft_thickness", "graft thickness (mm)", "graft.material.thickness_mm",
            lambda d, mesh: (0.3, 0.5)),
     Choice("nodulus", "nodulus length left out of the coaptation heights (mm)",
-           "nodulus_length_mm", lambda d, mesh: (0.0, 1.0)),
+           "analysis.nodulus_length_mm", lambda d, mesh: (0.0, 1.0)),
     Choice("contact_thickness", "contact thickness (mm): half and double",
-           "contact.thickness", lambda d, mesh: (d / 2, d, d * 2)),
-    Choice("mesh", "mesh size (mm)", "geometry.mesh_size",
+           "contact.thickness_mm", lambda d, mesh: (d / 2, d, d * 2)),
+    Choice("mesh", "mesh size (mm)", "geometry.mesh_size_mm",
            lambda d, mesh: (mesh, round(0.75 * mesh, 3))),
 )
 
 
 def _values(choice: Choice, mesh: float) -> tuple[tuple, Any]:
     """The choice's values (checked) and its default."""
-    if choice.key == "geometry.mesh_size":
+    if choice.key == "geometry.mesh_size_mm":
         default = mesh
     else:
         default = get_dotted(CaseConfig().to_dict(), choice.key)
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
     for choice in (c for c in CHOICES if c.name in args.choices):
         values, default = _values(choice, args.mesh_size)
         others = [v for v in values if v != default]
-        mesh = None if choice.key == "geometry.mesh_size" else args.mesh_size
+        mesh = None if choice.key == "geometry.mesh_size_mm" else args.mesh_size
         settings = StudySettings(mesh_size_mm=mesh, vary={choice.key: others}, **grid)
         report, walls[choice.name] = _run(settings, args.out / choice.name, comm)
         if comm.rank == 0:

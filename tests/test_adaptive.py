@@ -73,8 +73,8 @@ def two_paths(monkeypatch):
 
     defined = (paths.StudyPath(1, "conformal", "the graft conformal", {}),
                paths.StudyPath(2, "billowed", "the graft billowed",
-                               {"geometry.graft_placement": "billowed",
-                                "geometry.billow_mm": 2.0}))
+                               {"graft.placement": "billowed",
+                                "graft.billow_mm": 2.0}))
     monkeypatch.setattr(paths, "PATHS", defined)
     return defined
 
@@ -84,7 +84,7 @@ def settings(**kw):
 
     kw.setdefault("mesh_size_mm", 2.0)
     kw.setdefault("panel_cases", ())
-    kw.setdefault("uncertain", {"root.loaded_diameter": DIAMETERS})
+    kw.setdefault("uncertain", {"root.loaded_diameter_mm": DIAMETERS})
     kw.setdefault("paths", 2)
     return StudySettings(**kw)
 
@@ -145,7 +145,7 @@ def reference(tmp_path_factory):
         mp.setattr(paths, "PATHS", (
             paths.StudyPath(1, "conformal", "the graft conformal", {}),
             paths.StudyPath(2, "billowed", "the graft billowed",
-                            {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0})))
+                            {"graft.placement": "billowed", "graft.billow_mm": 2.0})))
         out = tmp_path_factory.mktemp("adaptive") / "serial"
         outcome = adaptive_sweep(out)
     return out, outcome
@@ -218,7 +218,7 @@ def test_job_array_rounds_equal_one_sweep(tmp_path, reference, capsys, quiet_cli
     rounds and results as one serial sweep."""
     serial, _ = reference
     out = tmp_path / "array"
-    args = ["--adaptive", "--uncertain", "root.loaded_diameter=20,21,22", "--paths", "2",
+    args = ["--adaptive", "--uncertain", "root.loaded_diameter_mm=20,21,22", "--paths", "2",
             "--mesh-size", "2", "--no-progress", "--out", str(out)]
     main = lambda argv: cli_with(truth_case, argv)  # noqa: E731
     for _ in range(10):

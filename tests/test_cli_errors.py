@@ -130,12 +130,12 @@ def test_run_closes_a_mesh_file_with_its_geometry(tmp_path):
     mesh = save_valve_mesh(build_valve(ValveParameters(
         mesh_size=1.6, graft_width_pct=21, graft_height_pct=27)), tmp_path / "graft.npz")
     out = tmp_path / "case"
-    proc = _cli("run", "--mesh", str(mesh), "--set", "pseudo_transient.max_steps=1",
+    proc = _cli("run", "--mesh", str(mesh), "--set", "solver.pseudo_transient.max_steps=1",
                 "--out", str(out))
     assert proc.returncode == ExitCode.NOT_CONVERGED, proc.stderr[-2000:]
-    geometry = json.loads((out / "result.json").read_text())["parameters"]["geometry"]
-    assert (geometry["mesh_size"], geometry["graft_width_pct"],
-            geometry["graft_height_pct"]) == (1.6, 21, 27)
+    parameters = json.loads((out / "result.json").read_text())["parameters"]
+    assert (parameters["geometry"]["mesh_size_mm"], parameters["graft"]["width_pct"],
+            parameters["graft"]["height_pct"]) == (1.6, 21, 27)
     proc = _cli("run", "--mesh", str(mesh), "--mesh-size", "1.2", "--out", str(out))
     assert proc.returncode == ExitCode.USAGE and "--mesh" in proc.stderr
 
@@ -149,7 +149,7 @@ def test_range_error_gives_the_reason_of_the_crossed_bound(tmp_path, caplog, wid
                  "--graft-height", "0"])
     assert code == ExitCode.USAGE
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
-    assert len(errors) == 1 and "graft_width_pct" in errors[0] and reason in errors[0]
+    assert len(errors) == 1 and "graft.width_pct" in errors[0] and reason in errors[0]
     other = "cannot be sewn" if reason == "typing error" else "typing error"
     assert other not in errors[0]
     assert not (tmp_path / "case").exists()
@@ -166,8 +166,8 @@ def _report_raising(monkeypatch, err: BaseException) -> None:
 
 
 @pytest.mark.parametrize("err,code,expected", [
-    (SolverError("the root wall cannot hold 10.7 kPa: increase root.youngs_modulus"),
-     ExitCode.SOLVER, "increase root.youngs_modulus"),
+    (SolverError("the root wall cannot hold 10.7 kPa: increase root.youngs_modulus_kpa"),
+     ExitCode.SOLVER, "increase root.youngs_modulus_kpa"),
     (ZeroDivisionError("float division by zero"), ExitCode.INTERNAL,
      "rerun with -v for the traceback"),
     (KeyboardInterrupt(), ExitCode.INTERRUPTED, "interrupted"),

@@ -90,7 +90,7 @@ def test_reference_writes_every_output(reference):
     for key in RESULT_FIELDS:
         assert key in data, key
     assert data["converged"] is True
-    assert data["parameters"]["symmetric_reference"] is True
+    assert data["parameters"]["geometry"]["symmetric_reference"] is True
     assert load_config(out / "config.toml") == _reference_config()
     assert data["settings_hash"] == _reference_config().settings_hash()
     for name in ("closed_valve_ventricular.png", "closed_valve.png", "cut_planes.png",
@@ -218,7 +218,7 @@ def test_bad_configuration_names_the_parameter():
         CaseConfig(symmetric_reference=True).with_graft(21.0, 27.0)
     with pytest.raises(ParameterError, match="bending_modulus_kpa"):
         CaseConfig(bending_modulus_kpa=-1.0)
-    with pytest.raises(ParameterError, match="graft_bending_modulus_kpa.*tens of MPa"):
+    with pytest.raises(ParameterError, match="graft.bending_modulus_kpa = .*tens of MPa"):
         CaseConfig(graft_bending_modulus_kpa=2e5)
     with pytest.raises(ParameterError, match="solver"):
         CaseConfig(solver="relaxation")

@@ -11,12 +11,13 @@ import json
 import logging
 import subprocess
 import sys
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from valve_dolfinx.config import (
+    TABLES,
     CaseConfig,
     config_toml,
     load_config,
@@ -29,7 +30,7 @@ from valve_dolfinx.mechanics.root import RootParameters
 from valve_dolfinx.solvers.parameters import PseudoTransientParameters
 
 #: the case the real run computes: cheap, and every file of a case is written
-CASE_TOML = "symmetric_reference = true\n\n[geometry]\nmesh_size = 1.6\n"
+CASE_TOML = "[geometry]\nsymmetric_reference = true\nmesh_size_mm = 1.6\n"
 
 
 def _errors(caplog) -> list[str]:
@@ -63,7 +64,7 @@ def test_printed_defaults_load_as_the_defaults(tmp_path, capsys):
     # every setting written once (the unset ones as comments), with its unit and meaning
     assert len(settings) + len(unset) == len(setting_keys(CaseConfig().to_dict()))
     assert all("  # " in line for line in settings + unset)
-    assert "pressure_mmhg = 80.0  # mmHg; " in text and "mesh_size = 0.8  # mm; " in text
+    assert "pressure_mmhg = 80.0  # mmHg; " in text and "mesh_size_mm = 0.8  # mm; " in text
 
 
 def test_a_changed_configuration_round_trips(tmp_path):
@@ -82,10 +83,11 @@ def test_a_changed_configuration_round_trips(tmp_path):
 
 
 def test_overrides_and_flags_apply_in_order(tmp_path):
-    (tmp_path / "c.toml").write_text("pressure_mmhg = 90\n[geometry]\nmesh_size = 1.2\n")
-    config = load_config(tmp_path / "c.toml", ["pressure_mmhg=100", "solver=bdf2",
-                                               "root.loaded_diameter=none"],
-                         {"geometry.mesh_size": 1.6})
+    (tmp_path / "c.toml").write_text("[loading]\npressure_mmhg = 90\n[geometry]\n"
+                                     "mesh_size_mm = 1.2\n")
+    config = load_config(tmp_path / "c.toml", ["loading.pressure_mmhg=100", "solver.method=bdf2",
+                                               "root.loaded_diameter_mm=none"],
+                         {"geometry.mesh_size_mm": 1.6})
     assert config.pressure_mmhg == 100.0 and config.solver == "bdf2"
     assert config.geometry.mesh_size == 1.6 and config.root.loaded_diameter is None
     assert config.native_material == CaseConfig().native_material  # the rest: defaults
@@ -95,15 +97,19 @@ def test_overrides_and_flags_apply_in_order(tmp_path):
     ("pressure = 80\n", "unknown key 'pressure'"),
     ("[geometry]\nmesh_sise = 1.0\n", "unknown key 'geometry.mesh_sise'"),
     ("[study]\n[contact]\nstifness = 3\n", "unknown key 'contact.stifness'"),
-    ("pressure_mmhg = 900\n", "pressure_mmhg = 900"),
-    ("[geometry]\nmesh_size = 40\n", "geometry.mesh_size = 40"),
-    ("[graft_material]\nc = -1\n", "graft_material.c = -1"),
-    ("[root]\nloaded_diameter = 5\n", "root.loaded_diameter = 5"),
-    ("[pseudo_transient]\nresidual_tolerance = 0\n", "pseudo_transient.residual_tolerance = 0"),
-    ("[pseudo_transient]\nmax_steps = \"many\"\n",
-     "pseudo_transient.max_steps = 'many' must be a int"),
+    ("[loading]\npressure_mmhg = 900\n", "loading.pressure_mmhg = 900"),
+    ("[geometry]\nmesh_size_mm = 40\n", "geometry.mesh_size_mm = 40"),
+    ("[graft.material]\nc_kpa = -1\n", "graft.material.c_kpa = -1"),
+    ("[graft]\nbending_modulus_kpa = -1\n", "graft.bending_modulus_kpa = -1"),
+    ("[root]\nloaded_diameter_mm = 5\n", "root.loaded_diameter_mm = 5"),
+    ("[solver.pseudo_transient]\nresidual_tolerance_mn = 0\n",
+     "solver.pseudo_transient.residual_tolerance_mn = 0"),
+    ("[solver.pseudo_transient]\nmax_steps = \"many\"\n",
+     "solver.pseudo_transient.max_steps = 'many' must be a int"),
+    ("[solver]\nmethod = \"newton\"\n", "solver.method = 'newton' is not one of"),
+    ("[solver]\nwall_time_limit_s = 0\n", "solver.wall_time_limit_s = 0"),
     ("geometry = 3\n", "geometry must be a table"),
-    ("pressure_mmhg = \n", "is not valid TOML"),
+    ("[loading]\npressure_mmhg = \n", "is not valid TOML"),
 ])
 def test_bad_file_names_the_key(tmp_path, text, named):
     path = tmp_path / "bad.toml"
@@ -115,8 +121,9 @@ def test_bad_file_names_the_key(tmp_path, text, named):
 
 @pytest.mark.parametrize("text,named", [
     ("[contact]\ntaper = 0.5\n", "unknown key 'contact.taper' (every case takes 0.5)"),
-    ("[native_material]\nname = \"native_leaflet\"\n", "unknown key 'native_material.name'"),
-    ("[pseudo_transient]\ndt_initial = 0.05\n", "unknown key 'pseudo_transient.dt_initial'"),
+    ("[native.material]\nname = \"native_leaflet\"\n", "unknown key 'native.material.name'"),
+    ("[solver.pseudo_transient]\ndt_initial = 0.05\n",
+     "unknown key 'solver.pseudo_transient.dt_initial'"),
     ("quadrature_degree = 1\n", "unknown key 'quadrature_degree'"),
 ])
 def test_a_key_an_earlier_version_wrote_is_refused_with_the_fix(tmp_path, text, named):
@@ -135,7 +142,8 @@ def test_a_key_an_earlier_version_wrote_is_refused_with_the_fix(tmp_path, text, 
 def test_every_key_an_earlier_version_wrote_is_named_at_once(tmp_path):
     """The whole configuration an earlier version wrote: one error names every key that is
     not a setting now, so that one edit fixes the file."""
-    text = config_toml().replace("[contact]\n", "[contact]\ntaper = 0.5\npairing = \"two_pass\"\n")
+    text = config_toml().replace("\nstiffness_mn_per_mm",
+                                 "\ntaper = 0.5\npairing = \"two_pass\"\nstiffness_mn_per_mm")
     path = tmp_path / "old.toml"
     path.write_text("quadrature_degree = 1\n" + text)
     with pytest.raises(ParameterError) as err:
@@ -150,20 +158,20 @@ def test_cli_bad_configuration_stops_before_computing(tmp_path, caplog, monkeypa
 
     _must_not_run(monkeypatch)
     path = tmp_path / "bad.toml"
-    path.write_text("[geometry]\ngraft_width_pct = 500\ngraft_height_pct = 0\n")
+    path.write_text("[graft]\nwidth_pct = 500\nheight_pct = 0\n")
     assert main(["run", "--config", str(path), "--out", str(tmp_path / "out")]) == 2
     (err,) = _errors(caplog)
-    assert "geometry.graft_width_pct = 500" in err and "\n" not in err
+    assert "graft.width_pct = 500" in err and "\n" not in err
     assert main(["run", "--set", "nosuch.key=1", "--out", str(tmp_path / "out")]) == 2
     assert "unknown key 'nosuch'" in _errors(caplog)[-1]
-    assert main(["run", "--set", "pressure_mmhg", "--out", str(tmp_path / "out")]) == 2
-    assert "section.key=value" in _errors(caplog)[-1]
+    assert main(["run", "--set", "loading.pressure_mmhg", "--out", str(tmp_path / "out")]) == 2
+    assert "table.key=value" in _errors(caplog)[-1]
     assert not (tmp_path / "out").exists()
 
 
 def test_settings_hash_is_the_physics_and_numerics():
     base = CaseConfig()
-    timed = replace(base, pseudo_transient=replace(base.pseudo_transient, wall_time_limit_s=5.0))
+    timed = replace(base, wall_time_limit_s=5.0)
     assert timed.settings_hash() == base.settings_hash()  # a wall-clock limit is not physics
     assert replace(base, pressure_mmhg=81.0).settings_hash() != base.settings_hash()
     mesh = replace(base, geometry=replace(base.geometry, mesh_size=1.6))
@@ -225,7 +233,7 @@ def test_cli_version(capsys):
 def test_config_needs_no_dolfinx():
     code = ("import sys\n"
             "from valve_dolfinx.config import load_config, config_toml\n"
-            "config_toml(load_config(overrides=['pressure_mmhg=90']))\n"
+            "config_toml(load_config(overrides=['loading.pressure_mmhg=90']))\n"
             "assert not {'dolfinx', 'petsc4py', 'gmsh'} & set(sys.modules)\n")
     _python(code)
 
@@ -259,9 +267,11 @@ def test_run_writes_the_resolved_configuration(case_run):
     assert data["version"] == valve_dolfinx.__version__
     assert data["git_commit"] is None or len(data["git_commit"]) == 40
     # every setting is written, not only those the file gave
-    assert "[dynamics]" in (out / "config.toml").read_text()
-    names = {f.name for f in fields(CaseConfig)}
-    assert names <= set(data["parameters"])
+    assert "[solver.dynamics]" in (out / "config.toml").read_text()
+    assert set(TABLES) - {"native.material", "graft.material", "solver.pseudo_transient",
+                          "solver.dynamics"} <= set(data["parameters"])
+    assert setting_keys(CaseConfig().to_dict()) == [
+        k for k in setting_keys(data["parameters"]) if k.split(".")[0] in TABLES]
 
 
 def test_the_written_configuration_is_this_case(case_run, capsys):
@@ -282,7 +292,7 @@ def test_another_case_never_overwrites_a_result(case_run, caplog, monkeypatch):
     _must_not_run(monkeypatch)
     _, _, out = case_run
     before = _tree(out)
-    for argv in (["--set", "pressure_mmhg=100"], ["--config", str(out / "config.toml"),
+    for argv in (["--set", "loading.pressure_mmhg=100"], ["--config", str(out / "config.toml"),
                                                   "--mesh-size", "2.0"]):
         caplog.clear()
         assert main(["run", *argv, "--out", str(out)]) == ExitCode.OUTPUT_CONFLICT
@@ -317,7 +327,7 @@ def test_changed_pressure_in_the_file_changes_the_result(case_run, tmp_path):
     assert main(["run", "--config", str(path), "--out", str(tmp_path / "higher")]) == 3
     low = json.loads((out / "result.json").read_text())
     high = json.loads((tmp_path / "higher" / "result.json").read_text())
-    assert high["parameters"]["pressure_mmhg"] == 100.0
+    assert high["parameters"]["loading"]["pressure_mmhg"] == 100.0
     assert high["root_diameter_mm"] > low["root_diameter_mm"] + 0.01
     assert high["settings_hash"] != low["settings_hash"]
 

@@ -28,7 +28,7 @@ from valve_dolfinx.exceptions import ExitCode, Interrupted, SolverError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: a short run: 20 pseudo-time steps of the normal valve on a 2 mm mesh
-RUN = ["run", "--mesh-size", "2.0", "--set", "pseudo_transient.max_steps=20"]
+RUN = ["run", "--mesh-size", "2.0", "--set", "solver.pseudo_transient.max_steps=20"]
 #: fields of result.json that differ between two computations of the same case
 VOLATILE = ("wall_time_s",)
 
@@ -228,7 +228,7 @@ def test_interrupted_sweep_records_nothing_and_resumes(tmp_path):
     status 130; the second case is neither finished nor claimed; the rerun computes only it."""
     out = tmp_path / "study"
     sweep = ["sweep", "--widths", "0", "--heights", "0", "--mesh-size", "2.0", "--set",
-             "pseudo_transient.max_steps=20", "--no-progress", "--out", str(out)]
+             "solver.pseudo_transient.max_steps=20", "--no-progress", "--out", str(out)]
     code, log = _interrupt(sweep, r"\[1/2\] normal:", signal.SIGINT)
     assert code == ExitCode.INTERRUPTED, log[-3000:]
     assert sorted(p.name for p in (out / "cases").iterdir()) == [".claims", ".staging",

@@ -145,13 +145,14 @@ def test_case_and_study_settings_need_no_dolfinx():
         from valve_dolfinx.config import config_toml, load_config
         from valve_dolfinx.study.grid import StudySettings
 
-        config_toml(load_config(overrides=["pressure_mmhg=90"]))
+        config_toml(load_config(overrides=["loading.pressure_mmhg=90"]))
         settings = StudySettings(widths_pct=(0.0, 14.0), heights_pct=(13.0,), paths=2,
-                                 vary={"bending_modulus_kpa": [0, 200]})
+                                 vary={"native.bending_modulus_kpa": [0, 200]})
         names = [case.name for case in settings.layout().cases]
         assert len(names) == 2 + 2 * 2 * 2, names
-        assert names[:2] == ["normal__bending_modulus_kpa=0", "normal__bending_modulus_kpa=200"]
-        assert "W14_H13__bending_modulus_kpa=200__path=2" in names
+        assert names[:2] == ["normal__native.bending_modulus_kpa=0",
+                             "normal__native.bending_modulus_kpa=200"]
+        assert "W14_H13__native.bending_modulus_kpa=200__path=2" in names
         print("ok")
     """)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

@@ -85,7 +85,7 @@ def test_the_default_leaflet_gives_the_default_mesh_exactly():
     patient = PatientInput(root_diameter_mm=20.0, leaflet_free_edge_mm=FREE_EDGE_MM,
                            leaflet_height_mm=HEIGHT_MM)
     layout = plan_study_settings(patient).layout()
-    config = layout.configs["normal__root.loaded_diameter=20"]
+    config = layout.configs["normal__root.loaded_diameter_mm=20"]
     assert config.geometry.mesh_size == DEFAULT_MESH_SIZE
     planned, default = build_valve(config.geometry), build_valve()
     for name in ("points", "cells", "flat", "fibres", "edges"):
@@ -561,8 +561,8 @@ def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
     assert study.cells[2].spread_mm == pytest.approx(
         stand_in_height((14.0, 13.0), 21.0, 1) - stand_in_height((14.0, 13.0), 23.0, 2))
     names = _case_names(out)
-    assert len(names) == 3 + 4 * 3 * 2 and "normal__root.loaded_diameter=23" in names
-    assert "W14_H13__root.loaded_diameter=23__path=2" in names
+    assert len(names) == 3 + 4 * 3 * 2 and "normal__root.loaded_diameter_mm=23" in names
+    assert "W14_H13__root.loaded_diameter_mm=23__path=2" in names
 
     summary = json.loads((out / "summary.json").read_text())
     saved = summary["answers"]["values"][0]
@@ -585,8 +585,8 @@ def test_a_plan_recommends_over_three_diameters_and_the_paths(tmp_path):
     assert read_patient(out / "patient.toml") == replace(patient, mesh_size_mm=2.0)
     # the closed valve shown is the recommended graft's at the measured diameter, path 1
     markdown = (out / "plan.md").read_text()
-    assert "(study/cases/W14_H13__root.loaded_diameter=22/closed_valve_aortic.png)" in markdown
-    assert "(study/cases/W14_H13__root.loaded_diameter=22/closed_valve_ventricular.png)" in (
+    assert "(study/cases/W14_H13__root.loaded_diameter_mm=22/closed_valve_aortic.png)" in markdown
+    assert "(study/cases/W14_H13__root.loaded_diameter_mm=22/closed_valve_ventricular.png)" in (
         markdown)
     assert f"| W14/H13 | {stand_in_height((14.0, 13.0), 23.0, 2):.2f} |" in markdown
     text = _pdf_text(out / "plan.pdf")
@@ -756,7 +756,7 @@ def stiff_case(config, out_dir: Path, comm, *, start: Path | None = None) -> dic
 
 
 def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
-    """--vary graft_bending_modulus_kpa=200,2000 on the stand-in (21, 22, 23 mm, two paths).
+    """--vary graft.bending_modulus_kpa=200,2000 on the stand-in (21, 22, 23 mm, two paths).
     At 200 kPa the answer is W14/H13, as without the axis
     (:func:`test_a_plan_recommends_over_three_diameters_and_the_paths`).  At 2000 kPa every
     graft is 0.088 mm lower: at the widest graft, W14, the surface's margin at 23 mm is
@@ -767,16 +767,16 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
     stiffness.  The normal valve is solved once per diameter, for both values."""
     from valve_dolfinx.plan.runner import run_plan
 
-    patient = _patient(vary={"graft_bending_modulus_kpa": [200, 2000]})
-    assert patient.vary == {"graft_bending_modulus_kpa": (200.0, 2000.0)}
+    patient = _patient(vary={"graft.bending_modulus_kpa": [200, 2000]})
+    assert patient.vary == {"graft.bending_modulus_kpa": (200.0, 2000.0)}
     out = tmp_path / "plan"
     outcome = run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0,
                        case_function=stiff_case)
     answers = outcome.answers
-    assert answers.varied and answers.axes == {"graft_bending_modulus_kpa": [200.0, 2000.0]}
+    assert answers.varied and answers.axes == {"graft.bending_modulus_kpa": [200.0, 2000.0]}
     soft, stiff = answers.values
-    assert soft.comparison == {"graft_bending_modulus_kpa": 200.0}
-    assert stiff.comparison == {"graft_bending_modulus_kpa": 2000.0}
+    assert soft.comparison == {"graft.bending_modulus_kpa": 200.0}
+    assert stiff.comparison == {"graft.bending_modulus_kpa": 2000.0}
     threshold = 13 + (0.03 + STIFF_LOSS_MM - PATH_SCATTER_MM) / 0.005
     assert threshold == pytest.approx(22.46, abs=0.01)
     assert soft.graft == GraftSize(14.0, 13.0)
@@ -790,7 +790,7 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
     assert answers.common == graft
     assert answers.kind == "graft"
     dependence = answers.dependence()
-    assert dependence.startswith("The answer differs with graft_bending_modulus_kpa: "
+    assert dependence.startswith("The answer differs with graft.bending_modulus_kpa: "
                                  f"W14/H13 at 200, {graft.label} at 2000.")
     assert (f"{graft.label} (+14 % width, +{graft.height_pct:g} % height) is the smallest size "
             "that qualifies at every value (solved at 2000, read from the surface at 200)") in (
@@ -799,33 +799,33 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
     # one study: the normal valve once per diameter, every graft at both values
     names = _case_names(out)
     normals = [n for n in names if n.startswith("normal")]
-    assert normals == [f"normal__root.loaded_diameter={d}" for d in (21, 22, 23)]
+    assert normals == [f"normal__root.loaded_diameter_mm={d}" for d in (21, 22, 23)]
     grid = [n for n in names if not n.startswith("normal")
             and n.split("__")[0] in ("W7_H13", "W7_H27", "W14_H13", "W14_H27")]
     assert len(grid) == 2 * 4 * 3 * 2
     # the files: a sizing map per value, the templates of both answers, the page
     for value in (200, 2000):
-        assert (out / f"sizing_map__graft_bending_modulus_kpa={value}.png").stat().st_size \
+        assert (out / f"sizing_map__graft.bending_modulus_kpa={value}.png").stat().st_size \
             > 10_000
     assert not (out / "sizing_map.png").exists()
     assert {t.graft for t in outcome.templates} == {GraftSize(14.0, 13.0), graft}
     summary = json.loads((out / "summary.json").read_text())["answers"]
-    assert summary["axes"] == {"graft_bending_modulus_kpa": [200.0, 2000.0]}
+    assert summary["axes"] == {"graft.bending_modulus_kpa": [200.0, 2000.0]}
     assert summary["common"]["label"] == graft.label
     assert [v["comparison"] for v in summary["values"]] == [
-        {"graft_bending_modulus_kpa": 200.0}, {"graft_bending_modulus_kpa": 2000.0}]
+        {"graft.bending_modulus_kpa": 200.0}, {"graft.bending_modulus_kpa": 2000.0}]
     assert [v["graft"]["label"] for v in summary["values"]] == ["W14/H13", graft.label]
     markdown = (out / "plan.md").read_text()
-    for words in (f"**{dependence}**", "### At graft_bending_modulus_kpa=2000",
+    for words in (f"**{dependence}**", "### At graft.bending_modulus_kpa=2000",
                   f"**Recommended graft {graft.label}",
-                  "sizing_map__graft_bending_modulus_kpa=2000.png",
-                  "## Every graft over the members at graft_bending_modulus_kpa=200",
-                  "| compared (--vary) | graft_bending_modulus_kpa: 200, 2000 |"):
+                  "sizing_map__graft.bending_modulus_kpa=2000.png",
+                  "## Every graft over the members at graft.bending_modulus_kpa=200",
+                  "| compared (--vary) | graft.bending_modulus_kpa: 200, 2000 |"):
         assert words in markdown, words
     text = _pdf_text(out / "plan.pdf")
-    for words in ("Sizing map at graft_bending_modulus_kpa=200",
-                  "Sizing map at graft_bending_modulus_kpa=2000",
-                  f"At graft_bending_modulus_kpa=2000: {graft.label} (+14 % width",
+    for words in ("Sizing map at graft.bending_modulus_kpa=200",
+                  "Sizing map at graft.bending_modulus_kpa=2000",
+                  f"At graft.bending_modulus_kpa=2000: {graft.label} (+14 % width",
                   "The closed valve of each value's graft: plan.md"):
         assert words in text, words
     # patient.toml keeps the axis: rerunning it recomputes nothing
@@ -848,17 +848,17 @@ def test_a_plan_answers_at_each_value_of_a_comparison_axis(tmp_path):
     (["--root-diameter", "22", "--paths", "0"], "paths (--paths)"),
     ([], "root_diameter_mm is missing"),
     # comparison axes: checked as a sweep's, none the plan sets itself, at most 3 values
-    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200,-5"],
-     "vary (--vary) graft_bending_modulus_kpa=-5"),
-    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa"], "give KEY=V1,V2"),
-    (["--root-diameter", "22", "--vary", "root.loaded_diameter=21,23"],
+    (["--root-diameter", "22", "--vary", "graft.bending_modulus_kpa=200,-5"],
+     "vary (--vary) graft.bending_modulus_kpa=-5"),
+    (["--root-diameter", "22", "--vary", "graft.bending_modulus_kpa"], "give KEY=V1,V2"),
+    (["--root-diameter", "22", "--vary", "root.loaded_diameter_mm=21,23"],
      "the plan sets it from --root-diameter and --root-uncertainty"),
-    (["--root-diameter", "22", "--vary", "pressure_mmhg=80,100"], "from --pressure"),
-    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200,2000",
-      "--vary", "graft_material.thickness=0.4,0.5"], "2 × 2 = 4 combinations"),
-    (["--root-diameter", "22", "--vary", "graft_bending_modulus_kpa=200",
-      "--vary", "graft_bending_modulus_kpa=2000"], "given twice"),
-    (["--root-diameter", "22", "--vary", "geometry.graft_placement=billowed"],
+    (["--root-diameter", "22", "--vary", "loading.pressure_mmhg=80,100"], "from --pressure"),
+    (["--root-diameter", "22", "--vary", "graft.bending_modulus_kpa=200,2000",
+      "--vary", "graft.material.thickness_mm=0.4,0.5"], "2 × 2 = 4 combinations"),
+    (["--root-diameter", "22", "--vary", "graft.bending_modulus_kpa=200",
+      "--vary", "graft.bending_modulus_kpa=2000"], "given twice"),
+    (["--root-diameter", "22", "--vary", "graft.placement=billowed"],
      "numerical path 2"),
 ])
 def test_cli_plan_stops_on_bad_input_before_any_computation(tmp_path, caplog, args, expected):

@@ -77,7 +77,7 @@ def test_report_over_an_interrupted_rerun_with_other_settings_is_no_answer(tmp_p
     out = tmp_path / "study"
     run_study(_settings(), out, MPI.COMM_SELF, case_function=study_case)
     assert all((out / name).is_file() for name in STUDY_ANSWER)
-    stiff = _settings(case={"bending_modulus_kpa": 100.0})
+    stiff = _settings(case={"native": {"bending_modulus_kpa": 100.0}})
     with pytest.raises(Interrupted):
         run_study(stiff, out, MPI.COMM_SELF, case_function=_interrupted_after(1, study_case))
     assert main(["report", str(out)]) == ExitCode.STUDY_INCOMPLETE
@@ -103,7 +103,7 @@ def test_report_over_an_interrupted_rerun_with_other_settings_is_no_answer(tmp_p
 
 def test_sigint_to_a_rerun_with_another_setting_then_report_is_no_answer(tmp_path):
     """The issue's reproduction with real processes and a real SIGINT: a sweep, then its
-    rerun with --set bending_modulus_kpa=100 interrupted once its first case is recomputed;
+    rerun with --set native.bending_modulus_kpa=100 interrupted once its first case is recomputed;
     `report` ends with status 9 naming the stale cases, and states no recommendation."""
     out, run_log = tmp_path / "study", tmp_path / "runs.log"
     env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "0.05"}
@@ -112,7 +112,7 @@ def test_sigint_to_a_rerun_with_another_setting_then_report_is_no_answer(tmp_pat
                            text=True, timeout=120)
     assert first.returncode == 0, first.stderr[-2000:]
     env["STUDY_STAND_IN_SLEEP"] = "1.0"
-    proc = subprocess.Popen(_sweep_cmd(*sweep, "--set", "bending_modulus_kpa=100"), env=env,
+    proc = subprocess.Popen(_sweep_cmd(*sweep, "--set", "native.bending_modulus_kpa=100"), env=env,
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     for line in proc.stderr:  # the normal valve recomputed: the first graft is in flight
@@ -190,7 +190,7 @@ def test_report_on_a_plan_with_a_missing_or_damaged_case_writes_no_plan(tmp_path
     run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=plan_case)
     summary = json.loads((out / "summary.json").read_text())
     cases = out / "study" / "cases"
-    name = "normal__root.loaded_diameter=22"
+    name = "normal__root.loaded_diameter_mm=22"
     if damage == "deleted normal valve":
         for path in sorted((cases / name).iterdir()):
             path.unlink()
@@ -320,7 +320,7 @@ def test_plan_no_wait_writes_no_plan_over_a_case_in_progress(tmp_path, holder):
     from valve_dolfinx.plan.runner import run_plan
 
     out, patient = tmp_path / "plan", _patient(root_uncertainty_mm=0.0, paths=1)
-    holder(out / "study", "W14_H13__root.loaded_diameter=22")
+    holder(out / "study", "W14_H13__root.loaded_diameter_mm=22")
     with pytest.raises(StudyIncompleteError, match="in progress: W14_H13"):
         run_plan(patient, out, MPI.COMM_SELF, mesh_size_mm=2.0, case_function=plan_case,
                  wait=False)
@@ -346,7 +346,7 @@ def test_an_interrupted_force_rerun_leaves_no_old_answer(tmp_path, caplog, quiet
         assert not (out / name).exists(), name
     assert "graft_fibre_angle_deg = 30.0" in (out / "patient.toml").read_text()
     assert main(["report", str(out)]) == ExitCode.STUDY_INCOMPLETE
-    assert "stale: W7_H13__root.loaded_diameter=21" in caplog.text
+    assert "stale: W7_H13__root.loaded_diameter_mm=21" in caplog.text
     assert not (out / "plan.md").exists() and not (out / "summary.json").exists()
 
 
@@ -408,7 +408,7 @@ def test_patient_and_configuration_files_are_read_with_a_byte_order_mark(tmp_pat
     patient.write_bytes(b"\xef\xbb\xbfroot_diameter_mm = 22.0\n")
     assert read_patient(patient).root_diameter_mm == 22.0
     config = tmp_path / "case.toml"
-    config.write_bytes(b"\xef\xbb\xbfpressure_mmhg = 90.0\n")
+    config.write_bytes(b"\xef\xbb\xbf[loading]\npressure_mmhg = 90.0\n")
     assert load_config(config).pressure_mmhg == 90.0
 
 
@@ -494,5 +494,5 @@ def test_a_target_from_a_normal_valve_that_leaks_is_said_so(tmp_path):
     assert "Caution: the target is the height of a normal valve that is not competent" in (
         study["text"])
     assert list(study["incompetent_targets"]) == [
-        "root.loaded_diameter=23, path 1 (from the closed valve)",
-        "root.loaded_diameter=23, path 2 (from the open valve)"]
+        "root.loaded_diameter_mm=23, path 1 (from the closed valve)",
+        "root.loaded_diameter_mm=23, path 2 (from the open valve)"]

@@ -56,7 +56,7 @@ def study(seed: int = 0, shift: float = 0.0, diameters=(None,), leaks=lambda w, 
     rng = np.random.default_rng(seed)
     tables = []
     for d in diameters:
-        uncertain = () if d is None else (("root.loaded_diameter", d),)
+        uncertain = () if d is None else (("root.loaded_diameter_mm", d),)
         for path in (1, 2):
             heights = {(w, h): truth(w, h, d or 20.0) + shift + rng.normal(0, noise)
                        for w in WIDTHS for h in HEIGHTS}
@@ -288,13 +288,13 @@ def test_design_scales_the_inputs_root_first_and_choices_as_indicators():
     from valve_dolfinx.sizing.surface import Design, SurfacePoint
 
     def point(w, h, e, d, tension):
-        return SurfacePoint(w, h, (("bending_modulus_kpa", e), ("root.loaded_diameter", d),
+        return SurfacePoint(w, h, (("bending_modulus_kpa", e), ("root.loaded_diameter_mm", d),
                                    ("graft_tension_field", tension), ("nodulus_length_mm", 1.0)))
 
     points = [point(0.0, 0.0, 200.0, 20.0, True), point(27.0, 40.0, 800.0, 22.0, False),
               point(14.0, 13.0, 200.0, 21.0, True)]
     design = Design.of(points)
-    assert design.columns == ("graft_width_pct", "graft_height_pct", "root.loaded_diameter",
+    assert design.columns == ("graft_width_pct", "graft_height_pct", "root.loaded_diameter_mm",
                               "bending_modulus_kpa", "graft_tension_field=False")
     x = design.matrix(points + [point(7.0, 20.0, 500.0, 21.5, False)])
     assert x.min() == 0.0 and x[:3].max() == 1.0

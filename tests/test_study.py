@@ -185,9 +185,9 @@ def test_settings_from_toml(tmp_path):
     from valve_dolfinx.study.grid import load_study_toml
 
     path = tmp_path / "study.toml"
-    path.write_text('pressure_mmhg = 90\n[study]\nwidths = [14, 0]\nheights = "0, 27"\n'
+    path.write_text('[loading]\npressure_mmhg = 90\n[study]\nwidths = [14, 0]\nheights = "0, 27"\n'
                     'mesh_size = 1.5\npanel_cases = ["W14_H27"]\n'
-                    '[pseudo_transient]\nmax_steps = 77\n')
+                    '[solver.pseudo_transient]\nmax_steps = 77\n')
     settings = load_study_toml(path)
     assert settings.widths_pct == (0.0, 14.0) and settings.heights_pct == (0.0, 27.0)
     assert [c.name for c in settings.cases()] == ["normal", "W0_H0", "W0_H27", "W14_H0",
@@ -197,15 +197,15 @@ def test_settings_from_toml(tmp_path):
     assert configs["normal"].geometry.mesh_size == 1.5
     assert configs["normal"].pseudo_transient.max_steps == 77
     assert configs["W14_H27"].pressure_mmhg == 90.0
-    assert load_study_toml(path, ["pseudo_transient.max_steps=78"]).case[
-        "pseudo_transient"]["max_steps"] == 78
+    assert load_study_toml(path, ["solver.pseudo_transient.max_steps=78"]).case[
+        "solver"]["pseudo_transient"]["max_steps"] == 78
     path.write_text("[study]\nwidth = [0]\n")
     with pytest.raises(ParameterError, match="unknown key 'width'"):
         load_study_toml(path)
-    path.write_text("[study]\n[dynamics]\nno_such_setting = 1\n")
-    with pytest.raises(ParameterError, match="unknown key 'dynamics.no_such_setting'"):
+    path.write_text("[study]\n[solver.dynamics]\nno_such_setting = 1\n")
+    with pytest.raises(ParameterError, match="unknown key 'solver.dynamics.no_such_setting'"):
         load_study_toml(path)
-    path.write_text("[study.case.pseudo_transient]\nmax_steps = 77\n")
+    path.write_text("[study.case.solver.pseudo_transient]\nmax_steps = 77\n")
     with pytest.raises(ParameterError, match=r"\[study.case\] is not read"):
         load_study_toml(path)
 
@@ -260,7 +260,7 @@ def test_small_grid_writes_every_file(tmp_path, caplog):
     header = list(csv_rows[0])
     assert header[:len(SPEC_COLUMNS)] == list(SPEC_COLUMNS)
     assert {"case", "status", "reason", "config_hash", "future_field_mm",
-            "leaflets.a.h", "parameters.geometry.mesh_size", "versions.stand_in"} <= set(header)
+            "leaflets.a.h", "parameters.geometry.mesh_size_mm", "versions.stand_in"} <= set(header)
     json_rows = json.loads((out / "results.json").read_text())
     assert [r["case"] for r in json_rows] == [r["case"] for r in csv_rows] == [
         "normal", "W0_H0", "W7_H0"]
@@ -721,8 +721,8 @@ def test_real_case_through_the_sweep(real_sweep):
     from valve_dolfinx.study.table import SPEC_COLUMNS
 
     outcome, out, _ = real_sweep
-    with pytest.raises(ParameterError, match="symmetric_reference needs the normal valve"):
-        _settings(widths_pct=(0,), case={"symmetric_reference": True}).cases()
+    with pytest.raises(ParameterError, match="geometry.symmetric_reference needs the normal valve"):
+        _settings(widths_pct=(0,), case={"geometry": {"symmetric_reference": True}}).cases()
     assert outcome.computed == ["normal"]
     folder = out / "cases" / "normal"
     record = json.loads((folder / "case.json").read_text())
@@ -732,7 +732,7 @@ def test_real_case_through_the_sweep(real_sweep):
                  "cut_planes.png"):  # the normal valve draws its figures for the panels
         assert (folder / name).is_file(), name
     assert set(SPEC_COLUMNS) <= set(row) and isinstance(row["converged"], bool)
-    assert row["parameters"]["geometry"]["mesh_size"] == 2.0 and row["n_dofs"] > 0
+    assert row["parameters"]["geometry"]["mesh_size_mm"] == 2.0 and row["n_dofs"] > 0
     assert (out / "panels" / "normal.png").is_file()
     if row["converged"]:
         assert 2.0 < row["min_coaptation_height_mm"] < 6.0

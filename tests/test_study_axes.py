@@ -105,8 +105,8 @@ def _main(argv: list[str]) -> int:
 #: machinery's tests run on these, whatever the package's own paths are
 PLACEMENT_PATHS = (
     ("conformal", {}),
-    ("billowed", {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0}),
-    ("billowed outwards", {"geometry.graft_placement": "billowed", "geometry.billow_mm": -2.0}),
+    ("billowed", {"graft.placement": "billowed", "graft.billow_mm": 2.0}),
+    ("billowed outwards", {"graft.placement": "billowed", "graft.billow_mm": -2.0}),
 )
 
 
@@ -174,9 +174,9 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     from valve_dolfinx.study.runner import run_study
     from valve_dolfinx.study.table import read_csv_rows
 
-    settings = _settings(vary={"bending_modulus_kpa": [0, 200]},
-                         uncertain={"root.loaded_diameter": "20, 21"}, paths=2)
-    assert settings.vary == {"bending_modulus_kpa": (0.0, 200.0)}
+    settings = _settings(vary={"native.bending_modulus_kpa": [0, 200]},
+                         uncertain={"root.loaded_diameter_mm": "20, 21"}, paths=2)
+    assert settings.vary == {"native.bending_modulus_kpa": (0.0, 200.0)}
     out = tmp_path / "study"
     outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
     layout = settings.layout()
@@ -186,23 +186,24 @@ def test_two_axes_give_the_product_of_cases_named_by_their_values(tmp_path):
     assert sorted(_grid(outcome.computed, settings, out)) == sorted(
         c.name for c in layout.cases)
     assert [c.name for c in layout.cases[:4]] == [
-        "normal__bending_modulus_kpa=0__root.loaded_diameter=20",
-        "normal__bending_modulus_kpa=0__root.loaded_diameter=21",
-        "normal__bending_modulus_kpa=200__root.loaded_diameter=20",
-        "normal__bending_modulus_kpa=200__root.loaded_diameter=21"]
+        "normal__native.bending_modulus_kpa=0__root.loaded_diameter_mm=20",
+        "normal__native.bending_modulus_kpa=0__root.loaded_diameter_mm=21",
+        "normal__native.bending_modulus_kpa=200__root.loaded_diameter_mm=20",
+        "normal__native.bending_modulus_kpa=200__root.loaded_diameter_mm=21"]
     assert {c.name for c in layout.cases} >= {
-        "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21",
-        "W14_H13__bending_modulus_kpa=200__root.loaded_diameter=21__path=2"}
+        "W14_H13__native.bending_modulus_kpa=200__root.loaded_diameter_mm=21",
+        "W14_H13__native.bending_modulus_kpa=200__root.loaded_diameter_mm=21__path=2"}
     rows = [r for r in read_csv_rows(out / "results.csv") if r["confirmation"] == "false"]
     assert len(rows) == 52 and list(rows[0])[13:17] == [
-        "case", "bending_modulus_kpa", "root.loaded_diameter", "path"]
+        "case", "native.bending_modulus_kpa", "root.loaded_diameter_mm", "path"]
     for row in rows:
         folder = out / "cases" / row["case"]
         config = json.loads((folder / "result.json").read_text())["parameters"]
-        assert float(row["bending_modulus_kpa"]) == config["bending_modulus_kpa"]
-        assert float(row["root.loaded_diameter"]) == config["root"]["loaded_diameter"]
-        assert f"bending_modulus_kpa={float(row['bending_modulus_kpa']):g}" in row["case"]
-        placement = config["geometry"]["graft_placement"]
+        assert float(row["native.bending_modulus_kpa"]) == config["native"]["bending_modulus_kpa"]
+        assert float(row["root.loaded_diameter_mm"]) == config["root"]["loaded_diameter_mm"]
+        stiffness = float(row["native.bending_modulus_kpa"])
+        assert f"native.bending_modulus_kpa={stiffness:g}" in row["case"]
+        placement = config["graft"]["placement"]
         if row["graft_width_pct"] == "":  # the normal valve serves both paths
             assert row["path"] == "[1, 2]" and placement == "conformal"
         else:
@@ -218,20 +219,20 @@ def test_graft_settings_do_not_multiply_the_normal_valve(tmp_path):
     from valve_dolfinx.study.runner import run_study
 
     settings = _settings(widths_pct=(7,), heights_pct=(0,), paths=2,
-                         vary={"root.loaded_diameter": [20, 21]},
-                         uncertain={"graft_material.thickness": [0.4, 0.5]})
+                         vary={"root.loaded_diameter_mm": [20, 21]},
+                         uncertain={"graft.material.thickness_mm": [0.4, 0.5]})
     out = tmp_path / "study"
     outcome = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
     normals = [r for r in outcome.report.rows if r["graft_width_pct"] is None]
-    assert [r["case"] for r in normals] == ["normal__root.loaded_diameter=20",
-                                            "normal__root.loaded_diameter=21"]
-    assert [r["graft_material.thickness"] for r in normals] == [[0.4, 0.5]] * 2
+    assert [r["case"] for r in normals] == ["normal__root.loaded_diameter_mm=20",
+                                            "normal__root.loaded_diameter_mm=21"]
+    assert [r["graft.material.thickness_mm"] for r in normals] == [[0.4, 0.5]] * 2
     assert [r["path"] for r in normals] == [[1, 2]] * 2
     assert len(_runs(out)) == 2 + 2 * 2 * 2
     layout = settings.layout()
-    assert layout.member_cases(1)["graft_material.thickness=0.4, path 2 (billowed)"] == {
-        None: "normal__root.loaded_diameter=21",
-        (7.0, 0.0): "W7_H0__root.loaded_diameter=21__graft_material.thickness=0.4__path=2"}
+    assert layout.member_cases(1)["graft.material.thickness_mm=0.4, path 2 (billowed)"] == {
+        None: "normal__root.loaded_diameter_mm=21",
+        (7.0, 0.0): "W7_H0__root.loaded_diameter_mm=21__graft.material.thickness_mm=0.4__path=2"}
 
 
 def test_rerun_skips_every_finished_member(tmp_path):
@@ -239,13 +240,13 @@ def test_rerun_skips_every_finished_member(tmp_path):
     from valve_dolfinx.study.runner import run_study
 
     out = tmp_path / "study"
-    settings = _settings(uncertain={"root.loaded_diameter": [20, 21]}, paths=2)
+    settings = _settings(uncertain={"root.loaded_diameter_mm": [20, 21]}, paths=2)
     run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case, report=False)
     first = _runs(out)
     again = run_study(settings, out, MPI.COMM_SELF, case_function=stand_in_case)
     assert _grid(again.computed, settings, out) == []  # the answer's confirmations only
     assert _grid(_runs(out), settings, out) == first
-    wider = settings.replace(uncertain={"root.loaded_diameter": [20, 21, 22]})
+    wider = settings.replace(uncertain={"root.loaded_diameter_mm": [20, 21, 22]})
     before = _runs(out)
     more = run_study(wider, out, MPI.COMM_SELF, case_function=stand_in_case)
     assert sorted(more.computed) == sorted(_runs(out)[len(before):])
@@ -284,29 +285,29 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
     assert one.recommendations[0].answer.margin_mm == pytest.approx(margin(14, 0, 20, 200, 1),
                                                              abs=0.005)
 
-    settings = _settings(vary={"bending_modulus_kpa": [200, 400]},
-                         uncertain={"root.loaded_diameter": [20, 21]}, paths=2)
+    settings = _settings(vary={"native.bending_modulus_kpa": [200, 400]},
+                         uncertain={"root.loaded_diameter_mm": [20, 21]}, paths=2)
     report = run_study(settings, tmp_path / "axes", MPI.COMM_SELF,
                        case_function=stand_in_case).report
     soft, stiff = report.recommendations
-    assert soft.comparison == {"bending_modulus_kpa": 200.0}
-    assert stiff.comparison == {"bending_modulus_kpa": 400.0}
-    worst = "root.loaded_diameter=21, path 2 (billowed)"
-    assert soft.members == ["root.loaded_diameter=20, path 1 (conformal)",
-                            "root.loaded_diameter=20, path 2 (billowed)",
-                            "root.loaded_diameter=21, path 1 (conformal)", worst]
+    assert soft.comparison == {"native.bending_modulus_kpa": 200.0}
+    assert stiff.comparison == {"native.bending_modulus_kpa": 400.0}
+    worst = "root.loaded_diameter_mm=21, path 2 (billowed)"
+    assert soft.members == ["root.loaded_diameter_mm=20, path 1 (conformal)",
+                            "root.loaded_diameter_mm=20, path 2 (billowed)",
+                            "root.loaded_diameter_mm=21, path 1 (conformal)", worst]
     assert soft.targets_mm == pytest.approx(dict(zip(soft.members, [3.0, 3.0, 2.5, 2.5],
                                                       strict=True)))
     assert soft.answer.tolerance_mm == pytest.approx(0.1 / 2**0.5)
     for rec, height in ((soft, 2.0), (stiff, 12.0)):
         size = rec.answer.size
         assert size.width_pct == 14.0 and abs(size.height_pct - height) <= 1
-        assert rec.answer.limiting_member == "root.loaded_diameter=21"
-        eb = rec.comparison["bending_modulus_kpa"]
+        assert rec.answer.limiting_member == "root.loaded_diameter_mm=21"
+        eb = rec.comparison["native.bending_modulus_kpa"]
         mean = (margin(14, size.height_pct, 21, eb, 1)
                 + margin(14, size.height_pct, 21, eb, 2)) / 2
         assert rec.answer.margin_mm == pytest.approx(mean, abs=0.02)
-        assert "in `root.loaded_diameter=21`" in rec.text
+        assert "in `root.loaded_diameter_mm=21`" in rec.text
     # the solved cells beside the answer: the worst case over the four members
     cell = soft.cell("W14/H13")
     assert cell.spread_mm == pytest.approx(figure_of(14, 13, 20, 200, 1)
@@ -314,14 +315,14 @@ def test_comparison_recommends_per_value_and_uncertainty_over_all(tmp_path):
     assert cell.limiting_member == worst
     w0 = stiff.cell("W0/H13")
     assert w0.leaking == stiff.members and not w0.qualifies
-    for suffix in ("__bending_modulus_kpa=200", "__bending_modulus_kpa=400"):
+    for suffix in ("__native.bending_modulus_kpa=200", "__native.bending_modulus_kpa=400"):
         for name in ("sizing_map", "coaptation_vs_width"):
             assert (tmp_path / "axes" / f"{name}{suffix}.png").stat().st_size > 10_000
     summary = json.loads((tmp_path / "axes" / "summary.json").read_text())
     assert [r["recommended"] for r in summary["recommendations"]] == [
         soft.answer.size.label, stiff.answer.size.label]
     text = (tmp_path / "axes" / "report.md").read_text()
-    assert "### bending_modulus_kpa=400" in text and "| W14/H13 | " in text
+    assert "### native.bending_modulus_kpa=400" in text and "| W14/H13 | " in text
 
 
 def figure_of(w, h, d, eb, path) -> float:
@@ -384,29 +385,30 @@ def test_worst_case_of_each_graft_on_constructed_tables():
 # --- bad input --------------------------------------------------------------------------------
 @pytest.mark.parametrize("args,expect", [
     (["--vary", "no_such_key=1,2"], ["--vary no_such_key", "unknown key"]),
-    (["--vary", "bending_modulus_kps=0,200"], ["unknown key", "bending_modulus_kpa"]),
-    (["--uncertain", "root.loaded_diameter=20,5"], ["root.loaded_diameter", "5"]),
-    (["--vary", "bending_modulus_kpa=0,200,0.0"], ["bending_modulus_kpa", "0.0", "twice"]),
-    (["--vary", "root.loaded_diameter=20", "--vary", "root.loaded_diameter=21"],
-     ["root.loaded_diameter", "already an axis"]),
-    (["--vary", "root.loaded_diameter=20,21", "--uncertain", "root.loaded_diameter=22"],
-     ["root.loaded_diameter", "already an axis"]),
-    (["--vary", "bending_modulus_kpa=0,200", "--set", "bending_modulus_kpa=100"],
-     ["bending_modulus_kpa", "--set"]),
-    (["--vary", "geometry.graft_width_pct=0,7"], ["--widths"]),
+    (["--vary", "native.bending_modulus_kps=0,200"], ["unknown key", "native.bending_modulus_kpa"]),
+    (["--uncertain", "root.loaded_diameter_mm=20,5"], ["root.loaded_diameter_mm", "5"]),
+    (["--vary", "native.bending_modulus_kpa=0,200,0.0"],
+     ["native.bending_modulus_kpa", "0.0", "twice"]),
+    (["--vary", "root.loaded_diameter_mm=20", "--vary", "root.loaded_diameter_mm=21"],
+     ["root.loaded_diameter_mm", "already an axis"]),
+    (["--vary", "root.loaded_diameter_mm=20,21", "--uncertain", "root.loaded_diameter_mm=22"],
+     ["root.loaded_diameter_mm", "already an axis"]),
+    (["--vary", "native.bending_modulus_kpa=0,200", "--set", "native.bending_modulus_kpa=100"],
+     ["native.bending_modulus_kpa", "--set"]),
+    (["--vary", "graft.width_pct=0,7"], ["--widths"]),
     (["--vary", "root=1"], ["names a table"]),
-    (["--vary", "bending_modulus_kpa="], ["no value"]),
-    (["--vary", "bending_modulus_kpa"], ["KEY=V1,V2"]),
-    (["--vary", "solver=ptc,newton"], ["solver", "newton"]),
+    (["--vary", "native.bending_modulus_kpa="], ["no value"]),
+    (["--vary", "native.bending_modulus_kpa"], ["KEY=V1,V2"]),
+    (["--vary", "solver.method=ptc,newton"], ["solver.method", "newton"]),
     (["--paths", "4"], ["paths = 4", "1 to 3"]),
-    (["--paths", "2", "--set", "geometry.graft_placement=billowed"],
-     ["path 2 (billowed)", "geometry.graft_placement"]),
-    (["--paths", "2", "--uncertain", "geometry.billow_mm=1,2"], ["geometry.billow_mm", "path"]),
+    (["--paths", "2", "--set", "graft.placement=billowed"],
+     ["path 2 (billowed)", "graft.placement"]),
+    (["--paths", "2", "--uncertain", "graft.billow_mm=1,2"], ["graft.billow_mm", "path"]),
     # a wall-clock limit is not an axis: its values would share one case folder
-    (["--vary", "pseudo_transient.wall_time_limit_s=0.5,200"],
-     ["--vary pseudo_transient.wall_time_limit_s", "wall-clock limit", "not an axis"]),
-    (["--uncertain", "dynamics.wall_time_limit_s=10,20"],
-     ["--uncertain dynamics.wall_time_limit_s", "not an axis"]),
+    (["--vary", "solver.wall_time_limit_s=0.5,200"],
+     ["--vary solver.wall_time_limit_s", "wall-clock limit", "not an axis"]),
+    (["--uncertain", "solver.wall_time_limit_s=10,20"],
+     ["--uncertain solver.wall_time_limit_s", "not an axis"]),
     # serial: three ranks per case cannot run, and the folder is not created
     (["--ranks-per-case", "3"], ["ranks_per_case = 3 does not divide the 1 MPI ranks"]),
 ])
@@ -429,8 +431,9 @@ def test_bad_axes_stop_before_computing(tmp_path, caplog, quiet_cli, monkeypatch
     assert not out.exists()
 
 
-@pytest.mark.parametrize("args", [["--set", "solver=bdf2"], ["--uncertain", "solver=ptc,bdf2"],
-                                  ["--vary", "solver=bdf2,ptc"]])
+@pytest.mark.parametrize("args", [["--set", "solver.method=bdf2"],
+                                  ["--uncertain", "solver.method=ptc,bdf2"],
+                                  ["--vary", "solver.method=bdf2,ptc"]])
 def test_bdf2_on_a_path_with_a_warm_start_stops_before_computing(tmp_path, caplog, quiet_cli,
                                                                  warm_paths, args):
     """BDF2 cannot start from a loaded valve: with a path that starts its grafts from the
@@ -439,8 +442,8 @@ def test_bdf2_on_a_path_with_a_warm_start_stops_before_computing(tmp_path, caplo
     out = tmp_path / "study"
     assert _main(["sweep", *GRID, "--out", str(out), *args]) == 2
     err = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
-    assert len(err) == 1 and "solver = 'bdf2' with the numerical path 1" in err[0], err
-    assert "needs solver = 'ptc'" in err[0]
+    assert len(err) == 1 and "solver.method = 'bdf2' with the numerical path 1" in err[0], err
+    assert "needs solver.method = 'ptc'" in err[0]
     assert not out.exists()
 
 
@@ -451,21 +454,23 @@ def test_axes_from_the_study_table(tmp_path):
 
     path = tmp_path / "study.toml"
     path.write_text('[study]\nwidths = [7]\nheights = [0]\npaths = 2\n'
-                    'vary = {bending_modulus_kpa = [0, 200]}\n'
-                    'uncertain = {root = {loaded_diameter = ["none", 21]}}\n')
+                    'vary = {native.bending_modulus_kpa = [0, 200]}\n'
+                    'uncertain = {root = {loaded_diameter_mm = ["none", 21]}}\n')
     settings = load_study_toml(path)
-    assert settings.vary == {"bending_modulus_kpa": (0.0, 200.0)}
-    assert settings.uncertain == {"root.loaded_diameter": (None, 21.0)}  # none: the wall law
+    assert settings.vary == {"native.bending_modulus_kpa": (0.0, 200.0)}
+    assert settings.uncertain == {"root.loaded_diameter_mm": (None, 21.0)}  # none: the wall law
     names = [c.name for c in settings.cases()]
-    assert "W7_H0__bending_modulus_kpa=200__root.loaded_diameter=none__path=2" in names
+    assert "W7_H0__native.bending_modulus_kpa=200__root.loaded_diameter_mm=none__path=2" in names
     assert settings == type(settings).from_dict(json.loads(json.dumps(settings.to_dict())))
     for text, match in (
-            ("pressure_mmhg = 90\n[study]\nvary = {pressure_mmhg = [80, 100]}\n",
-             "vary pressure_mmhg: it is also set by the case"),
-            ("[study]\nvary = {pressure_mmhg = [80]}\nuncertain = {pressure_mmhg = [9]}\n",
+            ("[loading]\npressure_mmhg = 90\n[study]\n"
+             "vary = {\"loading.pressure_mmhg\" = [80, 100]}\n",
+             "vary loading.pressure_mmhg: it is also set by the case"),
+            ("[study]\nvary = {loading = {pressure_mmhg = [80]}}\n"
+             "uncertain = {\"loading.pressure_mmhg\" = [9]}\n",
              "both varied"),
-            ('[study]\nuncertain = {"root.loaded_diameter" = 50}\n',
-             "uncertain root.loaded_diameter=50")):
+            ('[study]\nuncertain = {"root.loaded_diameter_mm" = 50}\n',
+             "uncertain root.loaded_diameter_mm=50")):
         path.write_text(text)
         with pytest.raises(ParameterError, match=match):
             load_study_toml(path)
@@ -483,10 +488,10 @@ def test_axes_and_warm_starts_give_the_serial_tables(tmp_path_factory, warm_path
     comm = MPI.COMM_WORLD
     root = Path(comm.bcast(str(tmp_path_factory.mktemp("axes")) if comm.rank == 0 else None))
     settings = _settings(widths_pct=(0, 14), heights_pct=(13,), paths=2,
-                         uncertain={"root.loaded_diameter": [20, 21]})
-    assert all(c.start_from == f"normal__root.loaded_diameter={c.axis_values[k]:g}"
+                         uncertain={"root.loaded_diameter_mm": [20, 21]})
+    assert all(c.start_from == f"normal__root.loaded_diameter_mm={c.axis_values[k]:g}"
                for c in settings.cases() if not c.is_normal
-               for k in ["root.loaded_diameter"])
+               for k in ["root.loaded_diameter_mm"])
     outcome = run_study(settings, root / "world", comm, case_function=stand_in_case,
                         poll_s=0.05)
     assert sorted(outcome.computed) == sorted(c.name for c in settings.cases())
@@ -494,7 +499,7 @@ def test_axes_and_warm_starts_give_the_serial_tables(tmp_path_factory, warm_path
         assert sorted(_runs(root / "world")) == sorted(outcome.computed)
         rows = outcome.report.rows
         assert all(r["status"] == "finished" for r in rows), [r["reason"] for r in rows]
-        assert all(r["start_height_mm"] == 3.0 - 0.5 * (r["root.loaded_diameter"] - 20)
+        assert all(r["start_height_mm"] == 3.0 - 0.5 * (r["root.loaded_diameter_mm"] - 20)
                    for r in rows if r["graft_width_pct"] is not None)
         run_study(settings, root / "serial", MPI.COMM_SELF, case_function=stand_in_case)
         assert (stable_csv(root / "world" / "results.csv")
@@ -506,18 +511,18 @@ def test_case_index_computes_its_start_and_report_equals_one_sweep(tmp_path, cap
     """A job array over an axis and two paths: each task runs its case (and, first, the
     normal valve it starts from, unless finished); `report` then gives one sweep's table."""
     args = ["--widths", "7", "14", "--heights", "0", "--uncertain",
-            "root.loaded_diameter=20,21", "--paths", "2", "--no-progress"]
+            "root.loaded_diameter_mm=20,21", "--paths", "2", "--no-progress"]
     whole, array = tmp_path / "whole", tmp_path / "array"
     assert _main(["sweep", *args, "--out", str(whole)]) == 0
     capsys.readouterr()
     assert _main(["sweep", *args, "--out", str(array), "--list"]) == 0
     listing = capsys.readouterr().out.splitlines()
     assert len(listing) == 1 + 2 + 2 * 2 * 2
-    assert "W14_H0__root.loaded_diameter=21__path=2" in listing[-1]
+    assert "W14_H0__root.loaded_diameter_mm=21__path=2" in listing[-1]
     last = int(listing[-1].split()[0])
     assert _main(["sweep", *args, "--out", str(array), "--case-index", str(last)]) == 0
-    assert _runs(array) == ["normal__root.loaded_diameter=21",
-                            "W14_H0__root.loaded_diameter=21__path=2"]
+    assert _runs(array) == ["normal__root.loaded_diameter_mm=21",
+                            "W14_H0__root.loaded_diameter_mm=21__path=2"]
     for i in range(last):
         assert _main(["sweep", *args, "--out", str(array), "--case-index", str(i)]) == 0
     assert sorted(_runs(array)) == sorted(_runs(whole))  # every case once
@@ -550,7 +555,7 @@ def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli, di
     backwards = nomogram_rows(report.recommendations[::-1], report.rows)
     assert [r["root_loaded_diameter_mm"] for r in backwards] == [21.0, 22.0]
     printed = capsys.readouterr().out
-    assert "nomogram.png" in printed and "[root.loaded_diameter=21]" in printed
+    assert "nomogram.png" in printed and "[root.loaded_diameter_mm=21]" in printed
     rows = read_csv_rows(out / "nomogram.csv")
     summary = json.loads((out / "summary.json").read_text())["recommendations"]
     assert [float(r["root_loaded_diameter_mm"]) for r in rows] == [21.0, 22.0]
@@ -575,9 +580,9 @@ def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli, di
 
 
 @pytest.mark.parametrize("diameters,expect", [
-    (["20", "5"], ["--root-diameters root.loaded_diameter=5", "root.loaded_diameter"]),
+    (["20", "5"], ["--root-diameters root.loaded_diameter_mm=5", "root.loaded_diameter_mm"]),
     (["20", "none"], ["--root-diameters", "in mm"]),
-    (["20", "20.0"], ["--root-diameters root.loaded_diameter", "twice"]),
+    (["20", "20.0"], ["--root-diameters root.loaded_diameter_mm", "twice"]),
 ])
 def test_nomogram_bad_diameters_stop_before_computing(tmp_path, caplog, quiet_cli, diameters,
                                                        expect):
@@ -607,9 +612,9 @@ def test_nomogram_on_real_closures(tmp_path, quiet_cli):
     assert [float(r["root_loaded_diameter_mm"]) for r in rows] == [19.0, 20.0]
     for row, rec in zip(rows, summary, strict=True):
         graft = next(r for r in results if r["graft_width_pct"] == "21.0"
-                     and r["root.loaded_diameter"] == row["root_loaded_diameter_mm"])
+                     and r["root.loaded_diameter_mm"] == row["root_loaded_diameter_mm"])
         normal = next(r for r in results if r["graft_width_pct"] == ""
-                      and r["root.loaded_diameter"] == row["root_loaded_diameter_mm"])
+                      and r["root.loaded_diameter_mm"] == row["root_loaded_diameter_mm"])
         reaches = (graft["converged"] == "true" and graft["competent"] == "true"
                    and normal["converged"] == "true"
                    and float(graft["min_coaptation_height_mm"])
@@ -656,7 +661,7 @@ def confirmed_sizes(out: Path, comparison: int = 0) -> list[list[float]]:
             if p.confirms and p.comparison == comparison]
 
 
-CONFIRM_SETTINGS = {"uncertain": {"root.loaded_diameter": [20, 21]}, "paths": 2}
+CONFIRM_SETTINGS = {"uncertain": {"root.loaded_diameter_mm": [20, 21]}, "paths": 2}
 
 
 def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
@@ -679,14 +684,14 @@ def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
     confirmed = confirmed_sizes(out)
     assert confirmed[0] == [14.0, 2.0]
     first = [n for n in _runs(out) if n.startswith("W14_H2_") or n == "W14_H2"]
-    assert sorted(first) == sorted(["W14_H2__root.loaded_diameter=20",
-                                    "W14_H2__root.loaded_diameter=20__path=2",
-                                    "W14_H2__root.loaded_diameter=21",
-                                    "W14_H2__root.loaded_diameter=21__path=2"])
+    assert sorted(first) == sorted(["W14_H2__root.loaded_diameter_mm=20",
+                                    "W14_H2__root.loaded_diameter_mm=20__path=2",
+                                    "W14_H2__root.loaded_diameter_mm=21",
+                                    "W14_H2__root.loaded_diameter_mm=21__path=2"])
     # in the tables, marked, with the worst of the four members as solved
     rows = {r["case"]: r for r in report.rows}
     assert all(rows[name]["confirmation"] for name in first)
-    assert not rows["W14_H0__root.loaded_diameter=20"]["confirmation"]
+    assert not rows["W14_H0__root.loaded_diameter_mm=20"]["confirmation"]
     cell = rec.cell("W14/H2")
     assert cell.confirmation and len(cell.heights_mm) == 4
     trough = -2.0 * math.sin(2 * math.pi / 13) ** 2
@@ -700,7 +705,7 @@ def test_the_answer_is_confirmed_in_every_member_and_a_miss_refits(tmp_path):
     limit = miss_limit_mm(rec.answer.resolution)
     assert 0.1 / 2**0.5 - 1e-9 <= tolerance < limit < -solved
     assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": pytest.approx(solved),
-                                    "limiting_member": "root.loaded_diameter=21",
+                                    "limiting_member": "root.loaded_diameter_mm=21",
                                     "holds": False}
     assert "Confirmation 1: W14/H2 solved in every member" in rec.text
     assert "it misses (0.50 mm short" in rec.text
@@ -735,7 +740,7 @@ def test_a_confirmation_is_judged_by_the_answers_statistic(tmp_path):
     tolerance = rec.answer.tolerance_mm
     assert tolerance >= 0.1 / 2**0.5 - 1e-12 and solved >= -tolerance
     assert rec.confirmations == [{"graft": "W14/H2", "margin_mm": pytest.approx(solved),
-                                  "limiting_member": "root.loaded_diameter=21",
+                                  "limiting_member": "root.loaded_diameter_mm=21",
                                   "holds": True}]
     cell = rec.cell("W14/H2")
     assert cell.sound and cell.margin_mm == pytest.approx(-0.12, abs=1e-12)
@@ -767,7 +772,7 @@ def test_a_held_confirmation_stays_unless_the_answer_moves_beyond_the_same_size(
     solved = answer_margin(14, 2, 21, amplitude)
     assert solved == pytest.approx(-0.07 + amplitude * 0.2160, abs=1e-4)
     assert rec.confirmations[0] == {"graft": "W14/H2", "margin_mm": pytest.approx(solved),
-                                    "limiting_member": "root.loaded_diameter=21",
+                                    "limiting_member": "root.loaded_diameter_mm=21",
                                     "holds": True}
     assert rec.confirm == []  # the answer is solved in every member
     if amplitude == 1.0:

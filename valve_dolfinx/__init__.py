@@ -4,7 +4,7 @@ The public API::
 
     import valve_dolfinx as vd
 
-    config = vd.load_config("case.toml", overrides=["pressure_mmhg=100"])
+    config = vd.load_config("case.toml", overrides=["loading.pressure_mmhg=100"])
     result = vd.run_case(config, "results/case")        # closes the valve, writes the folder
     case = vd.load_case("results/case")                  # result, configuration, surface
     valve = vd.build_valve(vd.CaseConfig().geometry)     # the unloaded valve mesh

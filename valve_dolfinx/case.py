@@ -105,8 +105,8 @@ def _leaflet_energy_on_cylinder(model: MembraneModel, wrap_radius: float
 
 def leaflet_rigidity(config: CaseConfig, is_graft: bool) -> float:
     """Flexural rigidity D = E_b·t³/12 (mN·mm) of a leaflet's tissue: the graft's
-    ``graft_bending_modulus_kpa`` and thickness, or the native leaflets'
-    ``bending_modulus_kpa`` and thickness."""
+    ``graft.bending_modulus_kpa`` and thickness, or the native leaflets'
+    ``native.bending_modulus_kpa`` and thickness."""
     if is_graft:
         return flexural_rigidity(config.graft_bending_modulus_kpa,
                                  config.graft_material.thickness)
@@ -168,7 +168,7 @@ def _set_free_positions(model: MembraneModel, positions: np.ndarray,
 
 def coarse_start(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ValveState | None:
     """The equilibrium of a valve without a graft on the coarse mesh
-    (``pseudo_transient.coarse_mesh_mm``), to start the case's own mesh from; None for a
+    (``solver.pseudo_transient.coarse_mesh_mm``), to start the case's own mesh from; None for a
     graft valve, when the case's mesh is not finer, or when the coarse closure did not
     converge (the case then starts from the unloaded valve).
 
@@ -226,8 +226,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     if start is None:
         start = coarse_start(config, comm)
     if start is not None and config.solver != "ptc":
-        raise ParameterError("a closure that starts from a loaded valve needs solver = 'ptc' "
-                             "(the BDF2 cross-check starts from the unloaded valve)")
+        raise ParameterError("a closure that starts from a loaded valve needs solver.method = "
+                             "'ptc' (the BDF2 cross-check starts from the unloaded valve)")
     if valve is None and comm.rank == 0:
         valve = build_valve(config.geometry)
     if config.symmetric_reference and comm.rank == 0:
@@ -255,7 +255,8 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     hooks = _closure_hooks(valve, model, config, guard)
     if config.solver == "ptc":
         solver = PseudoTransientSolver(model, [bc], config.pressure_kpa,
-                                       config.pseudo_transient, hooks=hooks, watch_nodes=watch)
+                                       config.solver_parameters(), hooks=hooks,
+                                       watch_nodes=watch)
         refused = None
         if start is not None and guard.intersects(solver.coupling.positions(model.u)):
             # a barrier holds a crossing it starts with: start unloaded instead
@@ -272,7 +273,7 @@ def solve_case(config: CaseConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     else:
         stiffness = {tag: m.stiffness_scale for tag, m in model.materials.items()}
         solver = DampedDynamicsSolver(model, [bc], u0, config.pressure_kpa, stiffness, watch,
-                                      config.dynamics, hooks=hooks)
+                                      config.solver_parameters(), hooks=hooks)
         report = solver.solve(progress=progress)
     state = solver.state
     hook = solver.hooks[0]

@@ -16,7 +16,7 @@ plan    one patient's repair from the measured root and leaflet: the recommended
         its template at true size (SVG, PDF) and a one-page report (plan.md, plan.pdf)
 config  print the case configuration as TOML, every setting with its unit and meaning
 
-Settings: the defaults < --config FILE < --set section.key=value < the named flags
+Settings: the defaults < --config FILE < --set table.key=value < the named flags
 (--mesh-size, --graft-width, ...).
 """
 
@@ -132,31 +132,30 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, metavar="CASE.TOML",
                    help="configuration file (TOML; `valve-dolfinx config` prints every key); "
                    "the flags given here override it")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+    p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                    dest="overrides",
-                   help="override one setting, e.g. --set pressure_mmhg=100 --set "
-                   "geometry.mesh_size=1.6 (repeatable)")
+                   help="override one setting, e.g. --set loading.pressure_mmhg=100 --set "
+                   "geometry.mesh_size_mm=1.6 (repeatable)")
 
 
 def _case_config(args: argparse.Namespace):
     """The case configuration of ``run``/``config``: defaults < --config < --set < flags."""
-    from valve_dolfinx.config import load_config
+    from valve_dolfinx.config import WALL_CLOCK_KEY, load_config
 
     values: dict = {}
     if getattr(args, "mesh_size", None) is not None:
-        values["geometry.mesh_size"] = args.mesh_size
+        values["geometry.mesh_size_mm"] = args.mesh_size
     graft = _graft_size(args.parser, args) if hasattr(args, "graft_width") else None
     if graft is not None:
-        values["geometry.graft_width_pct"], values["geometry.graft_height_pct"] = graft
+        values["graft.width_pct"], values["graft.height_pct"] = graft
     if getattr(args, "root_diameter", None) is not None:
-        values["root.loaded_diameter"] = args.root_diameter
+        values["root.loaded_diameter_mm"] = args.root_diameter
     if getattr(args, "solver", None) is not None:
-        values["solver"] = args.solver
+        values["solver.method"] = args.solver
     if getattr(args, "symmetric_reference", False):
-        values["symmetric_reference"] = True
+        values["geometry.symmetric_reference"] = True
     if getattr(args, "wall_time_limit", None) is not None:
-        for stage in ("pseudo_transient", "dynamics"):
-            values[f"{stage}.wall_time_limit_s"] = args.wall_time_limit
+        values[WALL_CLOCK_KEY] = args.wall_time_limit
     return load_config(args.config, args.overrides, values)
 
 
@@ -237,15 +236,13 @@ def _study_settings(args: argparse.Namespace, compared: dict | None = None):
     """Study settings: defaults < --config (its [study] table and case settings) < --set
     (case settings) < command-line flags; ``compared`` adds comparison axes (already
     checked) for the nomogram."""
-    from valve_dolfinx.config import apply_overrides, config_from_dict
+    from valve_dolfinx.config import apply_overrides
     from valve_dolfinx.study.grid import StudySettings, load_study_toml, parse_percentages
 
     if args.config:
         settings = load_study_toml(args.config, args.overrides)
     else:
-        case = apply_overrides({}, args.overrides)
-        config_from_dict(case, source="--set")
-        settings = StudySettings(case=case)
+        settings = StudySettings(case=apply_overrides({}, args.overrides), case_source="--set")
     changes = {"mesh_size_mm": args.mesh_size, "ranks_per_case": args.ranks_per_case,
                "target_coaptation_mm": args.target_coaptation,
                "wall_time_limit_s": args.wall_time_limit, "paths": args.paths,
@@ -489,7 +486,7 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
     _add_grid_args(p)
     p.add_argument("--uncertain", action="append", default=[], metavar="KEY=V1,V2",
                    help="an uncertainty axis: values of KEY that are not known, e.g. "
-                   "--uncertain root.loaded_diameter=20,21,22; the recommendation holds for all "
+                   "--uncertain root.loaded_diameter_mm=20,21,22; the recommendation holds for all "
                    "of them (repeatable)")
     p.add_argument("--adaptive", action="store_true",
                    help="solve a small design over the grid's width and height range, then "
@@ -506,7 +503,7 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
                    help="configuration file: a case configuration (`valve-dolfinx config`) "
                    "applied to every case, with a [study] table for the grid (flags given "
                    "here override it)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+    p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                    dest="overrides",
                    help="override one case setting of every case (repeatable)")
     p.add_argument("--ranks-per-case", type=int, default=None, metavar="K",
@@ -610,7 +607,7 @@ def _add_plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
                    help="a comparison axis: the plan answers at each value of the case "
                    "setting KEY that is not measured, e.g. --vary "
-                   "graft_bending_modulus_kpa=200,2000 (repeatable: every combination, at "
+                   "graft.bending_modulus_kpa=200,2000 (repeatable: every combination, at "
                    "most 3; docs/plan.md)")
     p.add_argument("--label", default=None, help="plan name printed on the template and the "
                    "report (no identifying data needed)")
@@ -718,8 +715,8 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("sweep", help="graft sizing study: normal valve + width x height grid")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
                    help="a comparison axis: a table, maps and a recommendation per value of the "
-                   "case setting KEY (as --set takes it), e.g. --vary bending_modulus_kpa=0,200 "
-                   "(repeatable: every combination)")
+                   "case setting KEY (as --set takes it), e.g. --vary "
+                   "native.bending_modulus_kpa=0,200 (repeatable: every combination)")
     _add_sweep_args(p, "results/graft_sweep", None)
     p.set_defaults(func=_cmd_sweep, parser=p)
 

@@ -8,7 +8,12 @@ control, the contact's taper at the commissures, ...) or fields of a parameter s
 :data:`NOT_A_SETTING`.  Every setting is a dataclass field declared with
 :func:`~valve_dolfinx.setting_fields.setting`, which carries its unit and meaning: the
 comments of :func:`config_toml`, :func:`describe` and the settings table of docs/outputs.md
-(:func:`settings_table_markdown`) read them there.  Each nested parameter set
+(:func:`settings_table_markdown`) read them there.  :data:`LAYOUT` places each setting once,
+in a table by concept (``[graft]``, ``[solver.dynamics]``, ...) under its field's name with
+the suffix of its unit (:data:`UNIT_SUFFIXES`); a key of the earlier layout is refused with
+its new name (:data:`RENAMED`).  The parameter sets keep the names the physics code reads
+(``config.geometry.mesh_size``); the file, ``--set`` and the study axes spell the layout's
+keys (``geometry.mesh_size_mm``).  Each nested parameter set
 validates its own ranges; :class:`CaseConfig` checks how they combine.  Nothing
 here imports DOLFINx or PETSc, so a configuration is loaded and checked in a
 fraction of a second, before any mesh is built.
@@ -22,7 +27,7 @@ import math
 import re
 import tomllib
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +40,6 @@ from valve_dolfinx.mechanics.root import RootParameters
 from valve_dolfinx.setting_fields import (
     NOT_A_SETTING,
     check_setting,
-    is_graft_only,
     is_setting,
     setting,
     setting_field,
@@ -62,6 +66,15 @@ __all__ = [
     "get_dotted",
     "setting_keys",
     "GRAFT_ONLY_SETTINGS",
+    "GRAFT_TABLE",
+    "LAYOUT",
+    "TABLES",
+    "RENAMED",
+    "UNIT_SUFFIXES",
+    "WALL_CLOCK_KEY",
+    "key_with_unit",
+    "check_key",
+    "check_keys",
     "config_from_dict",
     "config_toml",
     "write_config",
@@ -91,8 +104,9 @@ SOLVERS = ("ptc", "bdf2")
 CONFIG_FILE = "config.toml"
 #: top-level table of a sizing study's configuration file (read by valve_dolfinx.study.grid)
 STUDY_TABLE = "study"
-#: settings that bound the run's wall-clock time, not its result (left out of settings_hash)
-_WALL_CLOCK_KEYS = ("wall_time_limit_s",)
+#: the one setting that bounds the run's wall-clock time, not its result (left out of
+#: settings_hash)
+WALL_CLOCK_KEY = "solver.wall_time_limit_s"
 
 #: version of what a case's result holds and how it is judged (its analysis, competence
 #: included); part of every settings hash, so that a case analysed under an earlier rule is
@@ -110,7 +124,8 @@ _SECTIONS = {"geometry": ValveParameters, "native_material": FungMaterial,
 @dataclass
 class CaseConfig:
     """Everything that defines one closure case (written beside every result); each
-    setting's unit and meaning is on its field.
+    setting's unit and meaning is on its field, and :data:`LAYOUT` says under which key of
+    which table the configuration file shows it.
 
     ``symmetric_reference=True`` runs the cheap reference of SPEC §4 instead of
     the valve: the left-coronary leaflet alone, closing against the two planes
@@ -131,27 +146,23 @@ class CaseConfig:
     reported.
     """
 
-    geometry: ValveParameters = setting(default_factory=ValveParameters,
-                                        meaning="the valve's geometry and mesh (SPEC §1)")
+    # the parameter sets: LAYOUT shows their settings and gives each table its meaning
+    geometry: ValveParameters = field(default_factory=ValveParameters)
     pressure_mmhg: float = setting(80.0, "mmHg", "transvalvular diastolic pressure on the "
                                    "aortic side")
-    native_material: FungMaterial = setting(NATIVE_LEAFLET, "", "the native leaflets' tissue "
-                                            "(Fung law, SPEC §3)")
-    graft_material: FungMaterial = setting(BOVINE_PERICARDIUM, "", "the graft's tissue (Fung "
-                                           "law, SPEC §3)", graft_only=True)
-    root: RootParameters = setting(default_factory=RootParameters,
-                                   meaning="the aortic root's wall (SPEC §2)")
-    contact: ContactParameters = setting(default_factory=ContactParameters,
-                                         meaning="the contact law (SPEC §5)")
+    native_material: FungMaterial = NATIVE_LEAFLET
+    graft_material: FungMaterial = BOVINE_PERICARDIUM
+    root: RootParameters = field(default_factory=RootParameters)
+    contact: ContactParameters = field(default_factory=ContactParameters)
     solver: str = setting("ptc", "", "path to the loaded equilibrium: 'ptc' (pseudo-transient "
                           "continuation, the default) or 'bdf2' (damped BDF2 dynamics, the "
                           "cross-check)")
-    pseudo_transient: PseudoTransientParameters = setting(
-        default_factory=PseudoTransientParameters,
-        meaning="numerics of the pseudo-transient continuation (solver = 'ptc')")
-    dynamics: DynamicsParameters = setting(
-        default_factory=DynamicsParameters,
-        meaning="numerics of the damped BDF2 dynamics (solver = 'bdf2')")
+    wall_time_limit_s: float | None = setting(None, "s", "wall-clock limit of the solve "
+                                              "(unset: the method's own, 900 s for 'ptc', "
+                                              "3600 s for 'bdf2')")
+    pseudo_transient: PseudoTransientParameters = field(
+        default_factory=PseudoTransientParameters)
+    dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
     coaptation_threshold_mm: float = setting(0.5, "mm", "leaflets closer than this to a "
                                              "neighbour coapt")
     nodulus_length_mm: float = setting(NODULUS_LENGTH_MM, "mm", "free-edge length at the "
@@ -165,41 +176,56 @@ class CaseConfig:
     graft_bending_modulus_kpa: float = setting(GRAFT_BENDING_MODULUS_KPA, "kPa", "flexural "
                                                "modulus E_b of the graft (fixed pericardium), "
                                                "D = E_b·t³/12 with the graft's thickness (0: "
-                                               "pure membrane)", graft_only=True)
+                                               "pure membrane)")
     graft_tension_field: bool = setting(True, "", "how the graft carries compression: true, "
                                         "the tension-field relaxed energy (it wrinkles); "
                                         "false, the plain Fung law (it resists compression "
-                                        "in-plane)", graft_only=True)
+                                        "in-plane)")
 
-    def __post_init__(self) -> None:
+    def __post_init__(self) -> None:  # messages name each setting by its key (LAYOUT)
         check_setting(self, "pressure_mmhg", 0.0, 300.0, low_open=True,
+                      label="loading.pressure_mmhg",
                       hint="diastolic aortic pressure is about 80 mmHg")
-        check_setting(self, "coaptation_threshold_mm", 0.0, 5.0, low_open=True)
-        check_setting(self, "bending_modulus_kpa", 0.0, 1e5,
+        check_setting(self, "coaptation_threshold_mm", 0.0, 5.0, low_open=True,
+                      label="analysis.coaptation_threshold_mm")
+        check_setting(self, "bending_modulus_kpa", 0.0, 1e5, label="native.bending_modulus_kpa",
                       hint="0 switches the native leaflets' bending off; they are of order "
                       "100-1000 kPa in flexure")
         check_setting(self, "graft_bending_modulus_kpa", 0.0, 1e5,
+                      label="graft.bending_modulus_kpa",
                       low_hint="0 switches the graft's bending off",
                       high_hint="that is beyond even the in-plane tensile modulus of fixed "
                       "pericardium (tens of MPa)")
+        if self.wall_time_limit_s is not None:
+            check_setting(self, "wall_time_limit_s", 0.0, 1e7, low_open=True,
+                          label=WALL_CLOCK_KEY)
         if self.solver not in SOLVERS:
-            raise ParameterError(f"solver = {self.solver!r} is not one of {SOLVERS}: "
+            raise ParameterError(f"solver.method = {self.solver!r} is not one of {SOLVERS}: "
                                  "'ptc' (pseudo-transient continuation, the default) or "
                                  "'bdf2' (damped BDF2 dynamics, the cross-check)")
         if self.symmetric_reference and self.geometry.has_graft:
-            raise ParameterError("symmetric_reference needs the normal valve (no graft)")
+            raise ParameterError("geometry.symmetric_reference needs the normal valve (no "
+                                 "graft: leave graft.width_pct and graft.height_pct unset)")
 
     @property
     def pressure_kpa(self) -> float:
         return self.pressure_mmhg * MMHG_TO_KPA
 
+    def solver_parameters(self) -> PseudoTransientParameters | DynamicsParameters:
+        """The settings of the solver path ``solver``, with the configuration's wall-clock
+        limit (``solver.wall_time_limit_s``) if it sets one."""
+        params = self.pseudo_transient if self.solver == "ptc" else self.dynamics
+        if self.wall_time_limit_s is None:
+            return params
+        return replace(params, wall_time_limit_s=self.wall_time_limit_s)
+
     def to_dict(self) -> dict:
-        """The settings, nested by section (a parameter set's fields that are not settings,
-        :data:`NOT_A_SETTING`, are left out)."""
-        out = {}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            out[f.name] = _settings_of(value) if f.name in _SECTIONS else value
+        """The settings in the layout of the configuration file (:data:`LAYOUT`): tables by
+        concept, each key with its unit suffix."""
+        out: dict = {}
+        for key, (name, attr) in _KEYS.items():
+            value = getattr(self, name)
+            set_dotted(out, key, value if attr is None else getattr(value, attr))
         return out
 
     @classmethod
@@ -216,45 +242,155 @@ class CaseConfig:
         return replace(self, geometry=geometry)
 
     def normal_valve(self) -> CaseConfig:
-        """This configuration's normal valve: no graft, and every setting only a graft uses
-        (:data:`GRAFT_ONLY_SETTINGS`) at its default, which the normal valve's result does
-        not depend on."""
-        defaults = CaseConfig().to_dict()
-        data = self.with_graft(None, None).to_dict()
-        for key in GRAFT_ONLY_SETTINGS:
-            set_dotted(data, key, get_dotted(defaults, key))
+        """This configuration's normal valve: no graft, and the ``[graft]`` table, whose
+        settings only a graft uses (:data:`GRAFT_ONLY_SETTINGS`), at its defaults, which the
+        normal valve's result does not depend on."""
+        data = self.to_dict()
+        del data[GRAFT_TABLE]
         return config_from_dict(data, source="normal valve")
 
 
-def _setting_names(section: Any) -> list[str]:
-    """The settings of a parameter set (class or instance): its fields but those marked
-    :data:`NOT_A_SETTING`."""
-    return [f.name for f in fields(section) if is_setting(f)]
+# --- the layout of the configuration file ----------------------------------------------------
+#: unit of a setting → the suffix that ends its key: the one unit-suffix rule of the
+#: configuration (docs/outputs.md).  A dimensionless setting or a switch has no suffix.
+UNIT_SUFFIXES = {"mm": "_mm", "deg": "_deg", "%": "_pct", "kPa": "_kpa", "mmHg": "_mmhg",
+                 "s": "_s", "mN": "_mn", "mN/mm": "_mn_per_mm", "mN/mm³": "_mn_per_mm3"}
+
+#: the table whose settings only a graft uses
+GRAFT_TABLE = "graft"
+
+#: The configuration file's tables, by concept, in the order they are written: each table's
+#: meaning and what it shows, as ``(key, CaseConfig field, its attribute)`` rows or as a
+#: parameter set that the table shows whole (``(None, field, None)``: each setting under the
+#: name of its attribute with the suffix of its unit).  The units and meanings are the
+#: fields' own (:func:`~valve_dolfinx.setting_fields.setting`); this table only places them.
+LAYOUT: dict[str, tuple[str, tuple[tuple[str | None, str, str | None], ...]]] = {
+    "loading": ("the load: the diastolic pressure that closes the valve", (
+        ("pressure_mmhg", "pressure_mmhg", None),)),
+    "geometry": ("the valve's geometry and mesh (SPEC §1), and the modelled domain", (
+        ("root_diameter_mm", "geometry", "root_diameter"),
+        ("gamma_deg", "geometry", "gamma_deg"),
+        ("commissure_height_mm", "geometry", "commissure_height"),
+        ("mesh_size_mm", "geometry", "mesh_size"),
+        ("symmetric_reference", "symmetric_reference", None))),
+    "native": ("the native leaflets: their bending; their tissue in [native.material]", (
+        ("bending_modulus_kpa", "bending_modulus_kpa", None),)),
+    "native.material": ("the native leaflets' tissue (Fung law, SPEC §3)", (
+        (None, "native_material", None),)),
+    GRAFT_TABLE: ("the graft: its size, fibres, placement, bending and compressive "
+                  "response; its tissue in [graft.material] (every setting here and there "
+                  "only a graft uses)", (
+        ("width_pct", "geometry", "graft_width_pct"),
+        ("height_pct", "geometry", "graft_height_pct"),
+        ("fibre_angle_deg", "geometry", "graft_fibre_angle_deg"),
+        ("placement", "geometry", "graft_placement"),
+        ("billow_mm", "geometry", "billow_mm"),
+        ("bending_modulus_kpa", "graft_bending_modulus_kpa", None),
+        ("tension_field", "graft_tension_field", None))),
+    f"{GRAFT_TABLE}.material": ("the graft's tissue (Fung law, SPEC §3)", (
+        (None, "graft_material", None),)),
+    "root": ("the aortic root's wall (SPEC §2)", ((None, "root", None),)),
+    "contact": ("the contact law (SPEC §5)", ((None, "contact", None),)),
+    "analysis": ("how a loaded valve's coaptation is measured", (
+        ("coaptation_threshold_mm", "coaptation_threshold_mm", None),
+        ("nodulus_length_mm", "nodulus_length_mm", None))),
+    "solver": ("the path to the loaded equilibrium and its wall-clock limit; each path's "
+               "numerics in its subtable", (
+        ("method", "solver", None),
+        ("wall_time_limit_s", "wall_time_limit_s", None))),
+    "solver.pseudo_transient": ("numerics of the pseudo-transient continuation "
+                                "(method = 'ptc')", ((None, "pseudo_transient", None),)),
+    "solver.dynamics": ("numerics of the damped BDF2 dynamics (method = 'bdf2')", (
+        (None, "dynamics", None),)),
+}
 
 
-def _graft_only_settings() -> tuple[str, ...]:
-    """The dotted keys of the settings declared ``graft_only`` (a top-level field that is a
-    table covers all of it)."""
-    keys = []
-    for f in fields(CaseConfig):
-        if is_graft_only(f):
-            keys.append(f.name)
-        elif f.name in _SECTIONS:
-            keys += [f"{f.name}.{g.name}" for g in fields(_SECTIONS[f.name])
-                     if is_setting(g) and is_graft_only(g)]
-    return tuple(keys)
+def key_with_unit(name: str, unit: str) -> str:
+    """``name`` ending in the suffix of ``unit`` (:data:`UNIT_SUFFIXES`), unless it does."""
+    suffix = UNIT_SUFFIXES[unit] if unit else ""
+    return name if name.endswith(suffix) else name + suffix
 
 
-#: settings that only a graft uses, from their fields' ``graft_only`` flag (dotted keys; a
-#: key that names a table covers all of it): the normal valve of a study takes them at their
-#: defaults (:meth:`CaseConfig.normal_valve`), so normal valves that differ in graft settings
-#: alone are one case
-GRAFT_ONLY_SETTINGS = _graft_only_settings()
+def _field_of(name: str, attr: str | None) -> Any:
+    """The field of CaseConfig ``name`` or of its parameter set's ``attr``."""
+    return setting_field(_SECTIONS[name], attr) if attr else setting_field(CaseConfig, name)
 
 
-def _settings_of(section: Any) -> dict:
-    values = asdict(section)
-    return {name: values[name] for name in _setting_names(section)}
+def _layout_keys() -> dict[str, tuple[str, str | None]]:
+    """Every setting's dotted key → ``(CaseConfig field, attribute or None)``, in the order
+    of :data:`LAYOUT`; TypeError if a key breaks the unit-suffix rule."""
+    keys: dict[str, tuple[str, str | None]] = {}
+    for table, (_, rows) in LAYOUT.items():
+        for key, name, attr in rows:
+            if key is not None:
+                keys[f"{table}.{key}"] = (name, attr)
+                continue
+            for f in fields(_SECTIONS[name]):
+                if is_setting(f):
+                    keys[f"{table}.{key_with_unit(f.name, f.metadata['unit'])}"] = (name, f.name)
+    suffixes = tuple(UNIT_SUFFIXES.values())
+    for key, (name, attr) in keys.items():
+        unit = _field_of(name, attr).metadata["unit"]
+        leaf = key.rpartition(".")[2]
+        if (leaf != key_with_unit(leaf, unit)) if unit else leaf.endswith(suffixes):
+            raise TypeError(f"{key}: a key ends in the suffix of its unit ({unit!r}) and a "
+                            "dimensionless key in none (UNIT_SUFFIXES)")
+    return keys
+
+
+_KEYS = _layout_keys()
+
+#: every table of the configuration file (a dotted name for a subtable)
+TABLES = tuple(LAYOUT)
+
+#: settings that only a graft uses: those of the ``[graft]`` table and its subtable.  The
+#: normal valve of a study takes them at their defaults (:meth:`CaseConfig.normal_valve`), so
+#: normal valves that differ in graft settings alone are one case
+GRAFT_ONLY_SETTINGS = tuple(k for k in _KEYS if k.split(".")[0] == GRAFT_TABLE)
+
+#: the configuration's keys before its tables were arranged by concept → each one's key now.
+#: A file, an override or a study axis that uses one gets an error naming the new key.
+RENAMED = {
+    "pressure_mmhg": "loading.pressure_mmhg",
+    "solver": "solver.method",
+    "coaptation_threshold_mm": "analysis.coaptation_threshold_mm",
+    "nodulus_length_mm": "analysis.nodulus_length_mm",
+    "symmetric_reference": "geometry.symmetric_reference",
+    "bending_modulus_kpa": "native.bending_modulus_kpa",
+    "graft_bending_modulus_kpa": "graft.bending_modulus_kpa",
+    "graft_tension_field": "graft.tension_field",
+    "geometry.root_diameter": "geometry.root_diameter_mm",
+    "geometry.commissure_height": "geometry.commissure_height_mm",
+    "geometry.mesh_size": "geometry.mesh_size_mm",
+    "geometry.graft_width_pct": "graft.width_pct",
+    "geometry.graft_height_pct": "graft.height_pct",
+    "geometry.graft_fibre_angle_deg": "graft.fibre_angle_deg",
+    "geometry.graft_placement": "graft.placement",
+    "geometry.billow_mm": "graft.billow_mm",
+    **{f"{old}.{name}": f"{new}.material.{key_with_unit(name, 'kPa' if name == 'c' else '')}"
+       for old, new in (("native_material", "native"), ("graft_material", GRAFT_TABLE))
+       for name in ("c", "A1", "A2", "A3", "A4", "A5", "A6")},
+    "native_material.thickness": "native.material.thickness_mm",
+    "graft_material.thickness": "graft.material.thickness_mm",
+    "root.youngs_modulus": "root.youngs_modulus_kpa",
+    "root.wall_thickness": "root.wall_thickness_mm",
+    "root.loaded_diameter": "root.loaded_diameter_mm",
+    "contact.stiffness": "contact.stiffness_mn_per_mm",
+    "contact.cutoff": "contact.cutoff_mm",
+    "contact.thickness": "contact.thickness_mm",
+    "contact.crossing_stiffness": "contact.crossing_stiffness_mn_per_mm",
+    "contact.guard_distance": "contact.guard_distance_mm",
+    "contact.guard_stiffness": "contact.guard_stiffness_mn_per_mm3",
+    "pseudo_transient.residual_tolerance": "solver.pseudo_transient.residual_tolerance_mn",
+    **{f"pseudo_transient.{name}": f"solver.pseudo_transient.{name}"
+       for name in ("mass_length_mm", "coarse_mesh_mm", "max_steps", "petsc_options")},
+    "pseudo_transient.wall_time_limit_s": WALL_CLOCK_KEY,
+    "dynamics.relaxation_time": "solver.dynamics.relaxation_time_s",
+    "dynamics.stop_increment_mm": "solver.dynamics.stop_increment_mm",
+    "dynamics.wall_time_limit_s": WALL_CLOCK_KEY,
+}
+#: the tables of the old keys (a file's ``[native_material]``, ...)
+_RENAMED_TABLES = {k.split(".")[0] for k in RENAMED if "." in k} - set(TABLES)
 
 
 def case_name(geometry: ValveParameters) -> str:
@@ -267,12 +403,15 @@ def case_name(geometry: ValveParameters) -> str:
 
 
 # --- meaning and unit of every setting ------------------------------------------------------
-def describe(section: str, key: str) -> tuple[str, str]:
-    """``(unit, meaning)`` of ``section.key`` (``section`` "" for a top-level key), from the
-    field's metadata; KeyError for a key that is not a setting."""
-    if section and section not in _SECTIONS:
-        raise KeyError(f"{section!r} is not a table of the configuration")
-    metadata = setting_field(_SECTIONS[section] if section else CaseConfig, key).metadata
+def describe(key: str) -> tuple[str, str]:
+    """``(unit, meaning)`` of the setting ``key`` (dotted, ``geometry.mesh_size_mm``) from its
+    field's metadata, or ``("", meaning)`` of a table (``graft.material``); KeyError for a
+    key that is neither."""
+    if key in LAYOUT:
+        return "", LAYOUT[key][0]
+    if key not in _KEYS:
+        raise KeyError(f"{key!r} is not a setting of the configuration")
+    metadata = _field_of(*_KEYS[key]).metadata
     return metadata["unit"], metadata["meaning"]
 
 
@@ -284,16 +423,15 @@ SETTINGS_TABLE_MARKERS = ("<!-- settings table: generated by "
 
 def settings_table_markdown() -> str:
     """Every setting, its default, unit and meaning as a Markdown table (the one in
-    docs/outputs.md): the top-level keys, then each table's row and its keys as
-    ``table.key``; a setting only a graft uses (:data:`GRAFT_ONLY_SETTINGS`) says so."""
+    docs/outputs.md): each table's row, then its keys as ``table.key``; a setting only a
+    graft uses (:data:`GRAFT_ONLY_SETTINGS`) says so."""
     data = CaseConfig().to_dict()
 
-    def row(section: str, key: str, default: str) -> str:
-        unit, meaning = describe(section, key)
-        name = f"{section}.{key}" if section else key
+    def row(name: str, default: str) -> str:
+        unit, meaning = describe(name)
         if name in GRAFT_ONLY_SETTINGS:
             meaning += "; *graft only*"
-        shown = f"`[{name}]`" if name in _SECTIONS else f"`{name}`"
+        shown = f"`[{name}]`" if name in LAYOUT else f"`{name}`"
         cells = (cell.replace("|", "\\|") for cell in (shown, default, unit, meaning))
         return "| " + " | ".join(cells) + " |"
 
@@ -301,10 +439,10 @@ def settings_table_markdown() -> str:
         return "unset" if value is None else f"`{_toml_value(value)}`"
 
     rows = ["| key | default | unit | meaning |", "|---|---|---|---|"]
-    rows += [row("", k, default(v)) for k, v in data.items() if k not in _SECTIONS]
-    for name in _SECTIONS:
-        rows.append(row("", name, ""))
-        rows += [row(name, k, default(v)) for k, v in data[name].items()]
+    for table in LAYOUT:
+        rows.append(row(table, ""))
+        rows += [row(key, default(get_dotted(data, key))) for key in _KEYS
+                 if key.rpartition(".")[0] == table]
     return "\n".join(rows) + "\n"
 
 
@@ -337,16 +475,16 @@ def load_config(path: str | Path | None = None, overrides: Iterable[str] = (),
         A TOML file in the :meth:`CaseConfig.to_dict` layout (any subset of the keys);
         a ``[study]`` table, a sizing study's grid, is skipped.  ``None``: the defaults.
     overrides
-        ``"section.key=value"`` strings (``--set``); the value is read as a TOML value,
-        or taken as a string if it is not one (``solver=bdf2``).
+        ``"table.key=value"`` strings (``--set``); the value is read as a TOML value,
+        or taken as a string if it is not one (``solver.method=bdf2``).
     values
-        ``{"section.key": value}`` set last (the command line's named flags).
+        ``{"table.key": value}`` set last (the command line's named flags).
 
     Raises
     ------
     ParameterError
         On an unknown key, a value of the wrong type or out of its range (the message
-        names the key, ``section.key``), or a file that is not TOML.
+        names the key, ``table.key``), or a file that is not TOML.
     InputFileError
         If ``path`` does not exist (an ``OSError``).
     """
@@ -378,13 +516,15 @@ def read_config_file(path: str | Path) -> dict:
 
 
 def apply_overrides(data: dict, overrides: Iterable[str]) -> dict:
-    """Set each ``"section.key=value"`` of ``overrides`` in the nested ``data`` (in place)."""
+    """Set each ``"table.key=value"`` of ``overrides`` in the nested ``data`` (in place)."""
     for text in overrides:
         key, sep, raw = text.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise ParameterError(f"--set {text!r}: give section.key=value, e.g. "
-                                 "--set pressure_mmhg=100 or --set geometry.mesh_size=1.6")
+            raise ParameterError(f"--set {text!r}: give table.key=value, e.g. --set "
+                                 "loading.pressure_mmhg=100 or --set geometry.mesh_size_mm=1.6")
+        if key in RENAMED:
+            check_key(key, source="--set")
         set_dotted(data, key, parse_value(raw))
     return data
 
@@ -421,15 +561,41 @@ def get_dotted(data: Mapping[str, Any], key: str) -> Any:
 
 
 def setting_keys(data: Mapping[str, Any]) -> list[str]:
-    """The dotted keys of the settings in ``data`` (the :meth:`CaseConfig.to_dict` layout,
-    any subset): ``pressure_mmhg``, ``root.loaded_diameter``, ..."""
-    keys = []
-    for key, value in data.items():
-        if key in _SECTIONS and isinstance(value, Mapping):
-            keys += [f"{key}.{name}" for name in value]
-        else:
-            keys.append(key)
-    return keys
+    """The dotted keys of the settings (and of any other leaf) in ``data`` (the
+    :meth:`CaseConfig.to_dict` layout, any subset): ``loading.pressure_mmhg``,
+    ``root.loaded_diameter_mm``, ...  A table descended into is one of :data:`TABLES`, or of
+    the old layout (:data:`RENAMED`), so that a dict-valued setting stays one key."""
+    def walk(table: Mapping[str, Any], prefix: str) -> list[str]:
+        keys = []
+        for name, value in table.items():
+            key = f"{prefix}{name}"
+            if isinstance(value, Mapping) and (key in TABLES or key in _RENAMED_TABLES):
+                keys += walk(value, key + ".")
+            else:
+                keys.append(key)
+        return keys
+
+    return walk(data, "")
+
+
+def check_key(key: str, source: str = "configuration") -> None:
+    """Raise ParameterError if the dotted ``key`` is not a setting: naming the new key of a
+    key of the old layout (:data:`RENAMED`), or the settings of its table."""
+    check_keys([key], source)
+
+
+def check_keys(keys: Iterable[str], source: str = "configuration") -> None:
+    """:func:`check_key` of every key, all the renamed ones named in one message."""
+    keys = list(keys)
+    renamed = [k for k in keys if k in RENAMED]
+    if renamed:
+        named = "; ".join(f"{k} was renamed {RENAMED[k]}" for k in renamed)
+        raise ParameterError(f"{source}: {named} (the settings are arranged in tables by "
+                             "concept, every dimensional key ending in its unit; "
+                             "`valve-dolfinx config` prints them all)")
+    unknown = [k for k in keys if k not in _KEYS]
+    if unknown:
+        raise ParameterError(f"{source}: {_unknown_message(unknown)}")
 
 
 def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> CaseConfig:
@@ -441,84 +607,74 @@ def config_from_dict(data: Mapping[str, Any], source: str = "configuration") -> 
     Raises
     ------
     ParameterError
-        Naming ``source`` and the dotted key: an unknown key, a value of the wrong
-        type, or a value outside its range.
+        Naming ``source`` and the dotted key: a key of the old layout (with its new name),
+        an unknown key, a value of the wrong type, or a value outside its range.
     """
+    for name, value in data.items():
+        if name in TABLES and not isinstance(value, Mapping) and name not in RENAMED:
+            raise ParameterError(f"{source}: {name} must be a table of settings "
+                                 f"([{name}] in a TOML file), got {value!r}")
+    keys = setting_keys(data)
+    check_keys(keys, source)
     defaults = CaseConfig()
-    known = {f.name: f for f in fields(CaseConfig)}
-    unknown = _unknown_keys(data, defaults)
-    if unknown:
-        raise ParameterError(f"{source}: {_unknown_message(unknown)}")
-    kw: dict[str, Any] = {}
-    for key, value in data.items():
-        if key in _SECTIONS:
-            kw[key] = _section(key, value, getattr(defaults, key), source)
+    top: dict[str, Any] = {}
+    changes: dict[str, dict[str, Any]] = {}
+    for key in keys:
+        name, attr = _KEYS[key]
+        value = _checked_value(key, get_dotted(data, key), _field_of(name, attr).type, source)
+        if attr is None:
+            top[name] = value
         else:
-            kw[key] = _checked_value(key, value, known[key].type, source)
+            changes.setdefault(name, {})[attr] = value
+    for name, kw in changes.items():
+        try:
+            top[name] = replace(getattr(defaults, name), **kw)
+        except ParameterError as err:
+            raise ParameterError(f"{source}: {_dotted_message(name, str(err))}") from None
     try:
-        return replace(defaults, **kw)
+        return replace(defaults, **top)
     except ParameterError as err:
         raise ParameterError(f"{source}: {err}") from None
 
 
-def _section(name: str, value: Any, default: Any, source: str) -> Any:
-    """The parameter set ``name`` with the keys of ``value`` changed from ``default``."""
-    if isinstance(value, type(default)):
-        return value
-    if not isinstance(value, Mapping):
-        raise ParameterError(f"{source}: {name} must be a table of settings "
-                             f"([{name}] in a TOML file), got {value!r}")
-    known = {f.name: f for f in fields(default) if f.name in _setting_names(default)}
-    changes = {}
-    for key, item in value.items():
-        changes[key] = _checked_value(f"{name}.{key}", item, known[key].type, source)
-    try:
-        return replace(default, **changes)
-    except ParameterError as err:
-        raise ParameterError(f"{source}: {_dotted_message(name, known, str(err))}") from None
-
-
-def _unknown_keys(data: Mapping[str, Any], defaults: CaseConfig
-                  ) -> list[tuple[str, str, list[str]]]:
-    """Every key of ``data`` that is not a setting: ``(dotted key, the number every case takes
-    if it is a fixed number of its parameter set (else ""), the settings of its table)``."""
-    top = [f.name for f in fields(CaseConfig)]
-    unknown = [(key, "", sorted(top)) for key in data if key not in top]
-    for name in _SECTIONS:
-        value, default = data.get(name), getattr(defaults, name)
-        if not isinstance(value, Mapping):
-            continue
-        settings = _setting_names(default)
-        for key in value:
-            if key not in settings:
-                fixed = getattr(default, key, None)
-                fixed = (f" (every case takes {fixed!r})" if isinstance(fixed, int | float)
-                         and not isinstance(fixed, bool) else "")
-                unknown.append((f"{name}.{key}", fixed, settings))
-    return unknown
-
-
-def _unknown_message(unknown: list[tuple[str, str, list[str]]]) -> str:
+def _unknown_message(unknown: list[str]) -> str:
     """What the keys that are not settings are, and the fix: a file of an earlier version
     can hold many (all are named at once)."""
-    named = ", ".join(f"{key!r}{fixed}" for key, fixed, _ in unknown)
+    defaults = CaseConfig()
+
+    def fixed(key: str) -> str:  # a parameter set's fixed number: what every case takes
+        table, _, name = key.rpartition(".")
+        section = next((n for _, n, a in LAYOUT.get(table, ("", ()))[1] if _ is None), None)
+        value = getattr(getattr(defaults, section), name, None) if section else None
+        return (f" (every case takes {value!r})" if isinstance(value, int | float)
+                and not isinstance(value, bool) else "")
+
+    named = ", ".join(f"{key!r}{fixed(key)}" for key in unknown)
     earlier = ("(a file written by an earlier version may hold keys that are now fixed "
                "numbers of the model or were removed)")
     if len(unknown) > 1:
         return (f"unknown keys {named}; they are not settings of this version {earlier}: "
                 "delete those lines (`valve-dolfinx config` prints every setting)")
-    key, _, settings = unknown[0]
-    table = f" of [{key.split('.')[0]}]" if "." in key else ""
+    table = unknown[0].rpartition(".")[0]
+    if table in LAYOUT:
+        allowed = [k.rpartition(".")[2] for k in _KEYS if k.rpartition(".")[0] == table]
+        where = f"allowed keys of [{table}] are {', '.join(allowed)}"
+    else:
+        where = f"the tables are {', '.join(TABLES)}"
     return (f"unknown key {named}; it is not a setting of this version {earlier}: delete the "
-            f"line; allowed keys{table} are {', '.join(settings)}")
+            f"line; {where}")
 
 
-def _dotted_message(section: str, keys: Iterable[str], message: str) -> str:
-    """A parameter set's range message with the key spelled ``section.key``."""
-    match = re.match(r"(?:\w+\.)?(\w+)( = .*)", message, re.DOTALL)
+def _dotted_message(name: str, message: str) -> str:
+    """A range message of the parameter set ``name`` with the settings spelled by their keys
+    (``geometry.mesh_size_mm``): the one it starts with, and any other it names by an
+    identifier with an underscore.  (CaseConfig's own messages name the keys.)"""
+    keys = {attr: key for key, (field_name, attr) in _KEYS.items() if field_name == name}
+    match = re.match(r"(?:[\w.]+\.)?(\w+)( = .*|\b.*)", message, re.DOTALL)
     if match and match.group(1) in keys:
-        return f"{section}.{match.group(1)}{match.group(2)}"
-    return f"[{section}] {message}"
+        message = f"{keys[match.group(1)]}{match.group(2)}"
+    return re.sub(r"(?<![\w.])(\w+_\w+)(?![\w.])",
+                  lambda m: keys.get(m.group(1), m.group(1)), message)
 
 
 def _checked_value(key: str, value: Any, annotation: Any, source: str) -> Any:
@@ -561,22 +717,22 @@ def config_toml(config: CaseConfig | None = None) -> str:
     lines = [
         "# valve-dolfinx case configuration: every setting with its unit and meaning.",
         "# Run it with `valve-dolfinx run --config FILE`; keys left out keep their defaults;",
-        "# `--set section.key=value` overrides one key.",
-        "",
+        "# `--set table.key=value` overrides one key.  A dimensional key ends in its unit.",
     ]
-    lines += [_toml_line("", k, v) for k, v in data.items() if k not in _SECTIONS]
-    for name in _SECTIONS:
-        lines += ["", f"[{name}]"]
-        lines += [_toml_line(name, k, v) for k, v in data[name].items()]
+    for table, (meaning, _) in LAYOUT.items():
+        lines += ["", f"[{table}]  # {meaning}"]
+        lines += [_toml_line(key, get_dotted(data, key)) for key in _KEYS
+                  if key.rpartition(".")[0] == table]
     return "\n".join(lines) + "\n"
 
 
-def _toml_line(section: str, key: str, value: Any) -> str:
-    unit, meaning = describe(section, key)
+def _toml_line(key: str, value: Any) -> str:
+    unit, meaning = describe(key)
     comment = f"# {unit}; {meaning}" if unit else f"# {meaning}"
+    name = key.rpartition(".")[2]
     if value is None:
-        return f"# {key} = (unset)  {comment}"
-    return f"{key} = {_toml_value(value)}  {comment}"
+        return f"# {name} = (unset)  {comment}"
+    return f"{name} = {_toml_value(value)}  {comment}"
 
 
 def _toml_value(value: Any) -> str:
@@ -628,31 +784,29 @@ def _canonical(value: Any) -> Any:
 
 def settings_hash(config: Mapping[str, Any]) -> str:
     """SHA-256 of the settings that determine a result, from the :meth:`CaseConfig.to_dict`
-    layout (other keys, such as ``result.json``'s ``root_state``, are ignored).
+    layout (keys that are not settings, such as ``result.json``'s ``root_state``, are
+    ignored).
 
     Every physical and numerical setting enters it, and :data:`ANALYSIS_VERSION`; the
-    wall-clock limits do not (they decide whether a run finishes, not where it lands).
-    Integers count as the equal real numbers.  Output paths, figures and logging are not
-    part of a :class:`CaseConfig`.
+    wall-clock limit (:data:`WALL_CLOCK_KEY`) does not (it decides whether a run finishes,
+    not where it lands).  Integers count as the equal real numbers.  Output paths, figures
+    and logging are not part of a :class:`CaseConfig`.
     """
-    names = {f.name for f in fields(CaseConfig)}
-    data = {}
-    for key, value in config.items():
-        if key not in names:
-            continue
-        if isinstance(value, Mapping):
-            value = {k: _as_float(v) for k, v in value.items() if k not in _WALL_CLOCK_KEYS}
-        data[key] = _as_float(value)
+    data: dict = {}
+    for key in setting_keys(config):
+        if key in _KEYS and key != WALL_CLOCK_KEY:
+            set_dotted(data, key, _as_float(get_dotted(config, key)))
     data["analysis_version"] = ANALYSIS_VERSION
     return canonical_hash(data)
 
 
-def wall_clock_limits(config: Mapping[str, Any]) -> dict[str, float]:
-    """The wall-clock limits (s) of a :meth:`CaseConfig.to_dict` layout, by section: the
-    settings :func:`settings_hash` leaves out."""
-    return {f"{section}.{key}": float(values[key])
-            for section, values in config.items() if isinstance(values, Mapping)
-            for key in _WALL_CLOCK_KEYS if key in values}
+def wall_clock_limits(config: Mapping[str, Any]) -> dict[str, float | None]:
+    """The wall-clock limit (s) of a :meth:`CaseConfig.to_dict` layout, by key: the setting
+    :func:`settings_hash` leaves out."""
+    try:
+        return {WALL_CLOCK_KEY: get_dotted(config, WALL_CLOCK_KEY)}
+    except KeyError:
+        return {WALL_CLOCK_KEY: None}
 
 
 def _as_float(value: Any) -> Any:

@@ -24,6 +24,7 @@ import numpy as np
 
 from valve_dolfinx.config import (
     CONFIG_FILE,
+    TABLES,
     CaseConfig,
     load_config,
     settings_hash,
@@ -413,7 +414,7 @@ def load_case(folder: str | Path) -> LoadedCase:
         config = load_config(folder / CONFIG_FILE)
     else:
         config = CaseConfig.from_dict({k: v for k, v in result.parameters.items()
-                                       if k in CaseConfig.__dataclass_fields__})
+                                       if k in TABLES})
     with np.load(folder / POSITIONS_FILE, allow_pickle=False) as data:
         positions, reference = data["positions"], data["reference"]
         forces = data["contact_forces"]

@@ -22,8 +22,7 @@ from typing import Any
 
 from valve_dolfinx.exceptions import check_range
 
-__all__ = ["NOT_A_SETTING", "setting", "is_setting", "is_graft_only", "setting_field",
-           "check_setting"]
+__all__ = ["NOT_A_SETTING", "setting", "is_setting", "setting_field", "check_setting"]
 
 #: ``metadata`` of a parameter set's field that is not a setting: a fixed number of the
 #: model, or a label, that every case takes at its default.  It is left out of the
@@ -33,31 +32,24 @@ NOT_A_SETTING = {"setting": False}
 
 
 def setting(default: Any = MISSING, unit: str = "", meaning: str = "", *,
-            default_factory: Any = MISSING, graft_only: bool = False) -> Any:
+            default_factory: Any = MISSING) -> Any:
     """A dataclass field that is a setting: ``x: float = setting(1.0, "mm", "what x is")``.
 
     ``unit`` is "" for a dimensionless setting or a switch; ``meaning`` is the short
-    description written beside the setting wherever it is shown.  ``graft_only``: only a
-    graft uses the setting, so the normal valve of a study takes it at its default
-    (:meth:`~valve_dolfinx.config.CaseConfig.normal_valve`).  Leave ``default`` (and
-    ``default_factory``) out for a field without a default.
+    description written beside the setting wherever it is shown.  Leave ``default`` (and
+    ``default_factory``) out for a field without a default.  Where the configuration file
+    shows the setting, and under which key (the field's name with the suffix of its unit),
+    is :data:`valve_dolfinx.config.LAYOUT`'s business.
     """
     if not meaning:
         raise TypeError("setting(): give the setting's meaning")
     metadata: dict[str, Any] = {"unit": unit, "meaning": meaning}
-    if graft_only:
-        metadata["graft_only"] = True
     return field(default=default, default_factory=default_factory, metadata=metadata)
 
 
 def is_setting(f: Field) -> bool:
     """Whether the field is a setting (every field but those marked :data:`NOT_A_SETTING`)."""
     return f.metadata.get("setting", True)
-
-
-def is_graft_only(f: Field) -> bool:
-    """Whether the field is a setting only a graft uses (``setting(..., graft_only=True)``)."""
-    return f.metadata.get("graft_only", False)
 
 
 def setting_field(section: Any, name: str) -> Field:

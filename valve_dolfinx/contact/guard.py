@@ -9,10 +9,10 @@ that gap with the IPC Toolkit (``ipctk``), whose geometry is exact and complete:
 
 * **Barrier.**  One collision surface holds every leaflet; the library lists every
   vertex–triangle, edge–edge, edge–vertex and vertex–vertex pair closer than the reach
-  ``d̂`` (``contact.guard_distance``), leaving out pairs that share a vertex, and adds
+  ``d̂`` (``contact.guard_distance_mm``), leaving out pairs that share a vertex, and adds
   the energy ``κ Σ w b(d)`` with the clamped log barrier
   ``b(d) = −(d − d̂)² ln(d/d̂)`` and ``w`` each pair's share of the surface's area
-  (``κ``: ``contact.guard_stiffness``).  The barrier grows without bound as ``d → 0``:
+  (``κ``: ``contact.guard_stiffness_mn_per_mm3``).  The barrier grows without bound as ``d → 0``:
   it resists any force, not only the pressure's.  Its reach is shorter than the rest
   gap of the contact law, so coapting leaflets at rest are outside it and the law alone
   sets their gap and the coaptation heights; the guard acts where the law gives way.

@@ -100,11 +100,11 @@ class ValveParameters:
     graft_height_pct: float | None = setting(None, "%", "graft height enlargement over the "
                                              "native leaflet (unset: the normal valve)")
     graft_fibre_angle_deg: float = setting(0.0, "deg", "fibre direction of the graft from the "
-                                           "circumferential direction", graft_only=True)
+                                           "circumferential direction")
     graft_placement: str = setting("conformal", "", "initial 3-D placement of the slack "
-                                   "graft: 'conformal' or 'billowed'", graft_only=True)
+                                   "graft: 'conformal' or 'billowed'")
     billow_mm: float = setting(2.0, "mm", "bulge of a 'billowed' graft towards the valve "
-                               "axis (negative: towards the sinus)", graft_only=True)
+                               "axis (negative: towards the sinus)")
 
     def __post_init__(self) -> None:
         if (self.graft_width_pct is None) != (self.graft_height_pct is None):

@@ -114,12 +114,12 @@ class RootParameters:
 
     def __post_init__(self) -> None:
         check_setting(self, "free_edge_excess", -0.2, 1.0, label="root.free_edge_excess")
-        check_setting(self, "youngs_modulus", 1.0, 1e6, label="root.youngs_modulus",
+        check_setting(self, "youngs_modulus", 1.0, 1e6, label="root.youngs_modulus_kpa",
                       hint="aortic wall moduli are 0.1-10 MPa (100-10000 kPa)")
-        check_setting(self, "wall_thickness", 0.05, 10.0, label="root.wall_thickness")
+        check_setting(self, "wall_thickness", 0.05, 10.0, label="root.wall_thickness_mm")
         if self.loaded_diameter is not None:
             check_setting(self, "loaded_diameter", *LOADED_DIAMETER_RANGE_MM,
-                          label="root.loaded_diameter", hint="the measured diameter of the "
+                          label="root.loaded_diameter_mm", hint="the measured diameter of the "
                           "pressurised root base; None distends the root with the wall law")
 
 
@@ -169,8 +169,8 @@ def distend_root(params: RootParameters, wrap_diameter: float, leaflet_height: f
         R = 0.5 * params.loaded_diameter
     elif pressure * R0 >= Et:
         raise SolverError(f"the root wall (E·t = {Et:g} kPa·mm) cannot hold {pressure:g} kPa: "
-                          "increase root.youngs_modulus or root.wall_thickness, or prescribe "
-                          "root.loaded_diameter")
+                          "increase root.youngs_modulus_kpa or root.wall_thickness_mm, or "
+                          "prescribe root.loaded_diameter_mm")
     elif pressure == 0:
         R = R0
     else:

@@ -119,7 +119,7 @@ FIELDS: dict[str, Field] = {
                    "of the study's; the recommendation takes the worst)"),
     "vary": Field("--vary", "", "comparison axes: case settings that are not measured, each "
                   "value answered on its own (docs/plan.md), e.g. vary = "
-                  "{ graft_bending_modulus_kpa = [200.0, 2000.0] }"),
+                  '{ "graft.bending_modulus_kpa" = [200.0, 2000.0] }'),
     "mesh_size_mm": Field(
         "--mesh-size", "mm", "target triangle edge length of every case (unset: the case "
         "default, 0.8 mm)", 0.05, 2.5,
@@ -147,15 +147,15 @@ MAX_COMPARISONS = 3
 #: case settings the plan sets from its own inputs, with the flags that set them: no
 #: comparison axis may set them
 _PLAN_KEYS = {
-    "root.loaded_diameter": "--root-diameter and --root-uncertainty (the diameters the plan "
-                            "solves over are its uncertainty)",
-    "pressure_mmhg": "--pressure",
-    "geometry.root_diameter": "--leaflet-free-edge (the measured leaflet)",
+    "root.loaded_diameter_mm": "--root-diameter and --root-uncertainty (the diameters the "
+                               "plan solves over are its uncertainty)",
+    "loading.pressure_mmhg": "--pressure",
+    "geometry.root_diameter_mm": "--leaflet-free-edge (the measured leaflet)",
     "geometry.gamma_deg": "--leaflet-free-edge and --leaflet-height (the measured leaflet)",
-    "geometry.commissure_height": "--leaflet-free-edge and --leaflet-height (the measured "
-                                  "leaflet)",
-    "geometry.graft_fibre_angle_deg": "--graft-fibre-angle",
-    "geometry.mesh_size": "--mesh-size",
+    "geometry.commissure_height_mm": "--leaflet-free-edge and --leaflet-height (the "
+                                     "measured leaflet)",
+    "graft.fibre_angle_deg": "--graft-fibre-angle",
+    "geometry.mesh_size_mm": "--mesh-size",
 }
 
 
@@ -234,13 +234,13 @@ class PatientInput:
     def case_settings(self) -> dict:
         """Case settings in the ``CaseConfig.to_dict()`` layout: the measured leaflet, the
         pressure and the graft's fibres.  The root is prescribed at each of
-        :attr:`root_diameters_mm` by the plan's study (``root.loaded_diameter``)."""
+        :attr:`root_diameters_mm` by the plan's study (``root.loaded_diameter_mm``)."""
         shape = self.native_shape
-        return {"pressure_mmhg": self.pressure_mmhg,
-                "geometry": {"root_diameter": shape.root_diameter,
+        return {"loading": {"pressure_mmhg": self.pressure_mmhg},
+                "geometry": {"root_diameter_mm": shape.root_diameter,
                              "gamma_deg": shape.gamma_deg,
-                             "commissure_height": shape.commissure_height,
-                             "graft_fibre_angle_deg": self.graft_fibre_angle_deg}}
+                             "commissure_height_mm": shape.commissure_height},
+                "graft": {"fibre_angle_deg": self.graft_fibre_angle_deg}}
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -188,7 +188,7 @@ class PlanAnswers:
         return list(dict.fromkeys(g for g in grafts if g is not None))
 
     def label(self, value: PlanRecommendation) -> str:
-        """A value as the page names it (``graft_bending_modulus_kpa=200``)."""
+        """A value as the page names it (``graft.bending_modulus_kpa=200``)."""
         return axis_label(value.comparison.items())
 
     def _value(self, value: PlanRecommendation) -> str:

@@ -42,7 +42,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from valve_dolfinx._compat import MPI
-from valve_dolfinx.config import config_from_dict, set_dotted
 from valve_dolfinx.exceptions import (
     InputFileError,
     OutputConflictError,
@@ -84,7 +83,7 @@ LIMITATIONS = (
     "under diastolic pressure (no flow, no opening, no remodelling or ageing of the graft); "
     "coaptation heights are resolved to about 0.3 mm at the default mesh.")
 #: the case setting the plan's uncertainty axis sets: the loaded root diameter (mm)
-ROOT_KEY = "root.loaded_diameter"
+ROOT_KEY = "root.loaded_diameter_mm"
 
 
 @dataclass
@@ -142,10 +141,6 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
     mesh_size_mm = patient.mesh_size_mm if mesh_size_mm is None else mesh_size_mm
     if wall_time_limit_s is None:
         wall_time_limit_s = patient.wall_time_limit_s
-    data = patient.case_settings()
-    if mesh_size_mm is not None:
-        set_dotted(data, "geometry.mesh_size", mesh_size_mm)
-    config_from_dict(data, source="the plan's case settings")
     diameters = reachable_roots(patient)[0] or (patient.root_diameter_mm,)
     return StudySettings(widths_pct=patient.graft_widths_pct,
                          heights_pct=patient.graft_heights_pct,
@@ -154,7 +149,8 @@ def plan_study_settings(patient: PatientInput, mesh_size_mm: float | None = None
                          panel_cases=(), case=patient.case_settings(),
                          uncertain={ROOT_KEY: list(diameters)}, paths=patient.paths,
                          vary={k: list(v) for k, v in patient.vary.items()},
-                         design=patient.design, budget=patient.budget)
+                         design=patient.design, budget=patient.budget,
+                         case_source="the plan's case settings")
 
 
 # --- the plan's study ----------------------------------------------------------------------

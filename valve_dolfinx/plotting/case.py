@@ -45,7 +45,7 @@ def _get(result, key: str):
 
 def _closed(result) -> str:
     """``closed under 80 mmHg`` (the pressure of the case's parameters)."""
-    pressure = (_get(result, "parameters") or {}).get("pressure_mmhg")
+    pressure = ((_get(result, "parameters") or {}).get("loading") or {}).get("pressure_mmhg")
     return "closed" + (f" under {pressure:g} mmHg" if isinstance(pressure, int | float)
                        and math.isfinite(pressure) else "")
 

@@ -210,7 +210,7 @@ def _mesh_size(tables: Sequence[MemberTable]) -> float | None:
         for row in table.rows:
             mesh = _number(row, "mesh_size_mm")
             if math.isnan(mesh):
-                mesh = _number((row.get("parameters") or {}).get("geometry"), "mesh_size")
+                mesh = _number((row.get("parameters") or {}).get("geometry"), "mesh_size_mm")
             if math.isfinite(mesh):
                 return mesh
     return None
@@ -221,9 +221,9 @@ def _leaflet(tables: Sequence[MemberTable]) -> LeafletShape:
     for table in tables:
         for row in _graft_rows(table):
             geometry = (row.get("parameters") or {}).get("geometry") or {}
-            if "root_diameter" in geometry:
-                return LeafletShape(geometry["root_diameter"], geometry["gamma_deg"],
-                                    geometry["commissure_height"])
+            if "root_diameter_mm" in geometry:
+                return LeafletShape(geometry["root_diameter_mm"], geometry["gamma_deg"],
+                                    geometry["commissure_height_mm"])
     return LeafletShape()
 
 

@@ -51,7 +51,7 @@ __all__ = ["SurfacePoint", "Design", "CoaptationSurface", "SealingModel", "fit_s
 log = logging.getLogger(__name__)
 
 #: the axis that comes first among the inputs, after W and H
-ROOT_KEY = "root.loaded_diameter"
+ROOT_KEY = "root.loaded_diameter_mm"
 #: the seed of every optimiser restart (the fits are deterministic)
 RANDOM_STATE = 0
 #: optimiser restarts from random hyperparameters, beside the initial ones

@@ -10,9 +10,10 @@ of its module, documented there.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from valve_dolfinx.setting_fields import check_setting, setting
+from valve_dolfinx.exceptions import check_range
+from valve_dolfinx.setting_fields import NOT_A_SETTING, check_setting, setting
 
 __all__ = ["PseudoTransientParameters", "DynamicsParameters"]
 
@@ -39,7 +40,9 @@ class PseudoTransientParameters:
                                     "comes to rest on a mesh of this size and starts from "
                                     "there (0: from the unloaded valve)")
     max_steps: int = setting(4000, "", "limit on pseudo-time steps (accepted + rejected)")
-    wall_time_limit_s: float = setting(900.0, "s", "wall-clock limit of the solve")
+    #: s; wall-clock limit of the solve: not a setting of its own, the configuration's one
+    #: limit (``solver.wall_time_limit_s``) sets it (CaseConfig.solver_parameters)
+    wall_time_limit_s: float = field(default=900.0, metadata=NOT_A_SETTING)
     petsc_options: dict = setting(default_factory=dict, meaning="extra PETSc options for the "
                                   "TS/SNES/KSP (no prefix), e.g. { snes_rtol = 1e-8 }")
 
@@ -51,7 +54,8 @@ class PseudoTransientParameters:
                       hint="nodal pressure forces are ~1-10 mN; 1e-3 mN is the default")
         check_setting(self, "mass_length_mm", 0.0, 1e3, low_open=True)
         check_setting(self, "max_steps", 1, 1e7)
-        check_setting(self, "wall_time_limit_s", 0.0, 1e7, low_open=True)
+        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
+                    unit="s")
 
 
 @dataclass
@@ -64,9 +68,11 @@ class DynamicsParameters:
                                      "and the mass time scale")
     stop_increment_mm: float = setting(1e-5, "mm", "convergence: displacement increment per "
                                        "step")
-    wall_time_limit_s: float = setting(3600.0, "s", "wall-clock limit of the solve")
+    #: s; wall-clock limit of the solve, set as the pseudo-transient path's
+    wall_time_limit_s: float = field(default=3600.0, metadata=NOT_A_SETTING)
 
     def __post_init__(self) -> None:
         check_setting(self, "relaxation_time", 0.0, 1e6, low_open=True)
         check_setting(self, "stop_increment_mm", 0.0, 1.0, low_open=True)
-        check_setting(self, "wall_time_limit_s", 0.0, 1e7, low_open=True)
+        check_range("wall_time_limit_s", self.wall_time_limit_s, 0.0, 1e7, low_open=True,
+                    unit="s")

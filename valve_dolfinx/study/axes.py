@@ -1,7 +1,7 @@
 """Study axes: settings a study varies beside the graft's width and height (SPEC §7).
 
 An axis is a case-configuration key (dotted, as ``--set`` takes it:
-``root.loaded_diameter``, ``bending_modulus_kpa``) and the values it takes.  It
+``root.loaded_diameter_mm``, ``native.bending_modulus_kpa``) and the values it takes.  It
 is of one of two kinds:
 
 * a **comparison** axis (``--vary KEY=V1,V2``, ``[study] vary``): each value is a
@@ -29,7 +29,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from valve_dolfinx.config import (
+    RENAMED,
+    WALL_CLOCK_KEY,
     CaseConfig,
+    check_key,
     config_from_dict,
     get_dotted,
     parse_value,
@@ -56,11 +59,8 @@ UNCERTAINTY = "uncertainty"
 #: the column (and folder-name key) of a case's numerical path
 PATH_KEY = "path"
 #: case settings a study sets itself, and the option that sets them
-_GRID_KEYS = {"geometry.graft_width_pct": "--widths (study.widths)",
-              "geometry.graft_height_pct": "--heights (study.heights)"}
-#: case settings that bound how long a case may run, not what it computes: the settings
-#: hash leaves them out, so their values would share one case folder; no axis may set them
-_RUN_LIMIT_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
+_GRID_KEYS = {"graft.width_pct": "--widths (study.widths)",
+              "graft.height_pct": "--heights (study.heights)"}
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]")
 
 
@@ -116,7 +116,7 @@ def parse_axis_option(option: str, text: str) -> tuple[str, list[Any]]:
     """
     key, sep, values = text.partition("=")
     key = key.strip()
-    example = f"e.g. {option} root.loaded_diameter=20,21,22"
+    example = f"e.g. {option} root.loaded_diameter_mm=20,21,22"
     if not sep or not key:
         raise ParameterError(f"{option} {text!r}: give KEY=V1,V2,... with KEY a case setting "
                              f"as --set takes it, {example}")
@@ -129,10 +129,10 @@ def parse_axis_option(option: str, text: str) -> tuple[str, list[Any]]:
 
 def axis_table(option: str, table: Any) -> dict[str, list[Any]]:
     """``{"section.key": [values]}`` from a ``[study]`` table's ``vary``/``uncertain``
-    (dotted keys, or nested tables ``{root = {loaded_diameter = [20, 21]}}``)."""
+    (dotted keys, or nested tables ``{root = {loaded_diameter_mm = [20, 21]}}``)."""
     if not isinstance(table, Mapping):
         raise ParameterError(f"{option} must be a table of settings and their values, e.g. "
-                             f'{option} = {{"root.loaded_diameter" = [20, 21, 22]}}')
+                             f'{option} = {{"root.loaded_diameter_mm" = [20, 21, 22]}}')
     flat: dict[str, list[Any]] = {}
     for key, value in table.items():
         if isinstance(value, Mapping):
@@ -151,7 +151,9 @@ def _check_key(option: str, key: str) -> None:
     if key == PATH_KEY:
         raise ParameterError(f"{option} path: the numerical paths are set with --paths N "
                              "(study.paths)")
-    if key in _RUN_LIMIT_KEYS:
+    if key in RENAMED:
+        check_key(key, source=option)
+    if key == WALL_CLOCK_KEY:  # the settings hash leaves it out: its values would share a case
         raise ParameterError(f"{option} {key}: a wall-clock limit bounds how long a case may "
                              "run, not what it computes, so it is not an axis (its values "
                              "would share one case folder); give one limit with "

@@ -19,12 +19,13 @@ import json
 import logging
 import math
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import InitVar, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from valve_dolfinx.config import (
     STUDY_TABLE,
+    WALL_CLOCK_KEY,
     CaseConfig,
     apply_overrides,
     config_from_dict,
@@ -82,8 +83,6 @@ DEFAULT_PANEL_CASES = ("W0_H0", "W7_H0", "W21_H27")
 #: the range (mm) of a target minimum coaptation height, in every command: above 0, at
 #: most this (a normal valve coapts 3-4 mm at its centre)
 TARGET_COAPTATION_MAX_MM = 10.0
-#: every solver stage's wall-clock limit (``wall_time_limit_s`` sets them all)
-_WALL_CLOCK_KEYS = ("pseudo_transient.wall_time_limit_s", "dynamics.wall_time_limit_s")
 #: how messages name the case settings as what sets a key
 _CASE_SETTINGS = "the case settings (--set or the configuration file)"
 
@@ -174,8 +173,13 @@ class StudySettings:
     case
         Case settings applied to every case (the ``CaseConfig.to_dict()`` layout, nested
         tables for nested parameters; in a file, its top-level keys and tables).
+    case_source
+        How messages name where ``case`` came from (``--set``, the file); not kept.
+    base_config
+        The configuration every case starts from (:meth:`base_case`), validated once when
+        the settings are made: ``case`` with the mesh size and the wall-clock limit.
     vary
-        Comparison axes, ``{"section.key": values}`` (``--vary KEY=V1,V2``): a table, maps
+        Comparison axes, ``{"table.key": values}`` (``--vary KEY=V1,V2``): a table, maps
         and a recommendation per value (per combination of the values of several axes).
     uncertain
         Uncertainty axes (``--uncertain KEY=V1,V2``): with the paths they make the members
@@ -209,8 +213,10 @@ class StudySettings:
     paths: int = 1
     design: str = GRID
     budget: int = ADAPTIVE_BUDGET
+    case_source: InitVar[str] = "study case settings"
+    base_config: CaseConfig = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, case_source: str) -> None:
         set_ = object.__setattr__  # frozen: normalise in place once
         set_(self, "widths_pct", parse_percentages("widths", self.widths_pct, "width"))
         set_(self, "heights_pct", parse_percentages("heights", self.heights_pct, "height"))
@@ -251,6 +257,7 @@ class StudySettings:
         set_(self, "panel_cases", tuple(str(p) for p in panels))
         if not isinstance(self.case, dict):
             raise ParameterError("study.case must be a table of case-configuration overrides")
+        set_(self, "base_config", config_from_dict(self.base_case(), source=case_source))
         vary, uncertain = axis_table("vary", self.vary), axis_table("uncertain", self.uncertain)
         axes = check_axes(vary, uncertain, self.base_case(), self._fixed_keys())
         set_(self, "vary", {a.key: a.values for a in axes if a.kind == COMPARISON})
@@ -263,12 +270,12 @@ class StudySettings:
         warm = [p for p in study_paths(self.paths) if p.start == START_FROM_NORMAL]
         if not warm:
             return
-        solvers = ({**self.vary, **self.uncertain}.get("solver")
-                   or (config_from_dict(self.base_case(), source="study case settings").solver,))
+        solvers = ({**self.vary, **self.uncertain}.get("solver.method")
+                   or (self.base_config.solver,))
         if "bdf2" in solvers:
-            raise ParameterError(f"solver = 'bdf2' with the numerical {warm[0].label}: that "
+            raise ParameterError(f"solver.method = 'bdf2' with the numerical {warm[0].label}: that "
                                  "path starts every graft from the loaded normal valve, and a "
-                                 "closure that starts from a loaded valve needs solver = "
+                                 "closure that starts from a loaded valve needs solver.method = "
                                  "'ptc' (BDF2 starts from the unloaded valve); every study "
                                  "takes path 1, so run the BDF2 cross-check case by case with "
                                  "`valve-dolfinx run --solver bdf2`")
@@ -278,24 +285,22 @@ class StudySettings:
         wall-clock limit (a new dict)."""
         data = json.loads(json.dumps(self.case))  # a deep copy
         if self.mesh_size_mm is not None:
-            set_dotted(data, "geometry.mesh_size", self.mesh_size_mm)
-        if self.wall_time_limit_s is not None:  # every solver stage's wall-clock limit
-            for key in _WALL_CLOCK_KEYS:
-                set_dotted(data, key, self.wall_time_limit_s)
+            set_dotted(data, "geometry.mesh_size_mm", self.mesh_size_mm)
+        if self.wall_time_limit_s is not None:
+            set_dotted(data, WALL_CLOCK_KEY, self.wall_time_limit_s)
         return data
 
     def _fixed_keys(self) -> dict[str, str]:
         """The keys something other than an axis sets, with what sets them; raises if a path
         sets a key the case settings give another value."""
-        given = config_from_dict(self.case, source="study case settings").to_dict()
+        given = self.base_config.to_dict()  # its mesh size and limit are fixed below
         defaults = CaseConfig().to_dict()
         fixed = {key: _CASE_SETTINGS for key in setting_keys(self.case)
                  if get_dotted(given, key) != get_dotted(defaults, key)}
         if self.mesh_size_mm is not None:
-            fixed["geometry.mesh_size"] = "--mesh-size (study.mesh_size)"
+            fixed["geometry.mesh_size_mm"] = "--mesh-size (study.mesh_size)"
         if self.wall_time_limit_s is not None:
-            fixed.update(dict.fromkeys(_WALL_CLOCK_KEYS, "--wall-time-limit "
-                                       "(study.wall_time_limit)"))
+            fixed[WALL_CLOCK_KEY] = "--wall-time-limit (study.wall_time_limit)"
         by_paths = {}  # paths set the same keys to different values
         for path in study_paths(self.paths):
             for key in path.overrides:
@@ -343,15 +348,19 @@ class StudySettings:
         return list(self.layout().cases)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The settings as given (``base_config`` is made from them)."""
+        data = asdict(self)
+        return {f.name: data[f.name] for f in fields(self) if f.init}
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "study") -> StudySettings:
-        """Settings from a mapping (a TOML ``[study]`` table); unknown keys are rejected."""
+    def from_dict(cls, data: dict, source: str = "study",
+                  case_source: str = "study case settings") -> StudySettings:
+        """Settings from a mapping (a TOML ``[study]`` table); unknown keys are rejected;
+        ``case_source`` names the case settings' origin in their messages."""
         aliases = {"widths": "widths_pct", "heights": "heights_pct",
                    "mesh_size": "mesh_size_mm", "target_coaptation": "target_coaptation_mm",
                    "wall_time_limit": "wall_time_limit_s"}
-        known = {f.name for f in fields(cls)}
+        known = {f.name for f in fields(cls) if f.init}
         kw = {}
         for key, value in data.items():
             name = aliases.get(key, key)
@@ -360,7 +369,7 @@ class StudySettings:
                 raise ParameterError(f"{source}: unknown key {key!r}; allowed keys are "
                                      f"{', '.join(allowed)}")
             kw[name] = value
-        return cls(**kw)
+        return cls(**kw, case_source=case_source)
 
     def replace(self, **changes: Any) -> StudySettings:
         """A copy with the given fields changed (``None`` values leave a field as it is)."""
@@ -375,20 +384,20 @@ def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySet
     The file is a case configuration (the layout ``valve-dolfinx config`` prints, read
     by ``valve-dolfinx run --config`` too) with a ``[study]`` table for the grid; its
     case settings apply to every case, whose graft size the grid sets.  ``overrides``
-    are ``section.key=value`` changes of the case settings (``--set``).  Example::
+    are ``table.key=value`` changes of the case settings (``--set``).  Example::
 
         [study]
         widths = [0, 7, 14, 21, 27]     # per cent
         heights = [0, 13, 27, 40]
         mesh_size = 0.8                 # mm
         panel_cases = ["W0_H0", "W7_H0", "W21_H27"]
-        vary = {bending_modulus_kpa = [0, 200]}                # comparison axes
-        uncertain = {"root.loaded_diameter" = [20, 21, 22]}    # uncertainty axes
+        vary = {"native.bending_modulus_kpa" = [0, 200]}       # comparison axes
+        uncertain = {"root.loaded_diameter_mm" = [20, 21, 22]}    # uncertainty axes
         paths = 2                       # numerical paths (uncertainty)
         design = "adaptive"             # or "grid" (the default): rounds chosen by the
         budget = 40                     # surface, at most this many graft cases
 
-        [dynamics]                      # the case settings of every case
+        [solver.pseudo_transient]       # the case settings of every case
         max_steps = 30000
 
     Raises
@@ -405,7 +414,7 @@ def load_study_toml(path: str | Path, overrides: Iterable[str] = ()) -> StudySet
     if "case" in study:
         raise ParameterError(f"{path}: [study.case] is not read; write the case settings at "
                              "the top level of the file, in the layout `valve-dolfinx config` "
-                             "prints (e.g. [dynamics] max_steps = 30000)")
+                             "prints (e.g. [solver.pseudo_transient] max_steps = 30000)")
     apply_overrides(data, overrides)
-    config_from_dict(data, source=str(path))  # the case settings' errors, named, now
-    return StudySettings.from_dict({**study, "case": data}, source=f"{path} [study]")
+    return StudySettings.from_dict({**study, "case": data}, source=f"{path} [study]",
+                                   case_source=str(path))

@@ -14,7 +14,7 @@ configuration (and start, below) is the same are **one case**, computed once:
 the normal valve does not depend on the path, nor on any graft setting, so a
 study runs it once per combination of the other axes' values.  A case is
 named by its graft size and by the values it is fixed on, for instance
-``W14_H13__root.loaded_diameter=21__path=2``: an axis whose value does not
+``W14_H13__root.loaded_diameter_mm=21__path=2``: an axis whose value does not
 change the case (the path of the normal valve) is left out of the name, and
 so is the first path (a plain sweep's folder names are ``normal`` and
 ``W14_H13``, and ``--paths 2`` reuses them for its first path).
@@ -193,7 +193,7 @@ class StudyCase:
 class Member:
     """One member of every cell: a value of each uncertainty axis and a numerical path.
 
-    ``label`` names it in reports (``root.loaded_diameter=21, path 2 (billowed)``); it is
+    ``label`` names it in reports (``root.loaded_diameter_mm=21, path 2 (billowed)``); it is
     empty in a study with a single member.
     """
 

@@ -1,7 +1,7 @@
 """The sizing nomogram: the recommended graft against the loaded root diameter (SPEC §7).
 
 A study whose one comparison axis is the loaded root diameter
-(``root.loaded_diameter``, numbers only) -- what ``valve-dolfinx nomogram
+(``root.loaded_diameter_mm``, numbers only) -- what ``valve-dolfinx nomogram
 --root-diameters 18 19 ...`` runs, with the numerical paths (and any
 ``--uncertain`` axis) as the members -- also writes:
 
@@ -27,7 +27,7 @@ __all__ = ["NOMOGRAM_KEY", "NOMOGRAM_COLUMNS", "is_nomogram", "nomogram_rows",
            "write_nomogram"]
 
 #: the comparison axis of a nomogram
-NOMOGRAM_KEY = "root.loaded_diameter"
+NOMOGRAM_KEY = "root.loaded_diameter_mm"
 #: the columns of ``nomogram.csv``: the diameter; the recommended graft, its enlargements,
 #: flat area, margin (mm) and limiting member, its worst-case minimum coaptation height and
 #: the limiting member's target; when none qualifies, the best graft, its enlargements and
@@ -93,8 +93,8 @@ def _footnote(layout: StudyLayout, recommendations: Sequence[Recommendation],
     """The settings a nomogram stands on, for its footnote."""
     first = next((r for r in rows if r.get("parameters")), {})
     params = first.get("parameters") or {}
-    mesh = (params.get("geometry") or {}).get("mesh_size")
-    pressure = params.get("pressure_mmhg")
+    mesh = (params.get("geometry") or {}).get("mesh_size_mm")
+    pressure = (params.get("loading") or {}).get("pressure_mmhg")
     widths = sorted({w for w, _ in layout.sizes})
     heights = sorted({h for _, h in layout.sizes})
     paths = ", ".join(p.name for p in layout.paths)

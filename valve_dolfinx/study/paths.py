@@ -47,7 +47,7 @@ class StudyPath:
     description
         What the path does, in a sentence.
     overrides
-        Case settings the path sets, ``{"section.key": value}``; no other setting of a
+        Case settings the path sets, ``{"table.key": value}``; no other setting of a
         study (``--set``, ``--vary``, ``--uncertain``) may set them.
     start
         ``None``: every case starts from the unloaded valve; :data:`START_FROM_NORMAL`:
@@ -73,11 +73,11 @@ PATHS: tuple[StudyPath, ...] = (
     StudyPath(2, "from the open valve", "the slack graft is first bulged 2 mm towards the "
               "valve axis on the unloaded valve and closes with the native leaflets from "
               "there",
-              {"geometry.graft_placement": "billowed", "geometry.billow_mm": 2.0}),
+              {"graft.placement": "billowed", "graft.billow_mm": 2.0}),
     StudyPath(3, "from the open valve, conformal", "the slack graft is first laid onto the "
               "native leaflet's wrapped surface on the unloaded valve and closes from there "
               "(what `valve-dolfinx run` does)",
-              {"geometry.graft_placement": "conformal"}),
+              {"graft.placement": "conformal"}),
 )
 
 

@@ -223,7 +223,7 @@ def _what_was_run(out: Path, rows: list[dict], layout: StudyLayout | None,
                   ) -> list[str]:
     first = rows[0] if rows else {}
     params = first.get("parameters") or {}
-    mesh = first.get("mesh_size_mm", (params.get("geometry") or {}).get("mesh_size"))
+    mesh = first.get("mesh_size_mm", (params.get("geometry") or {}).get("mesh_size_mm"))
     versions = first.get("versions") or {}
     compute = sum(float(r.get("wall_time_s") or 0.0) * int(r.get("n_ranks") or 1) for r in rows)
     converged = sum(bool(r.get("converged")) for r in rows)
@@ -261,7 +261,7 @@ def _write_markdown(out: Path, report: StudyReport, settings: StudySettings | No
     params = (rows[0].get("parameters") or {}) if rows else {}
     lines = ["# Graft sizing study", "",
              "Normal valve and pericardial grafts of the non-coronary leaflet, closed under "
-             f"{_fmt(params.get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
+             f"{_fmt((params.get('loading') or {}).get('pressure_mmhg'), 0)} mmHg (SPEC §7).", "",
              "## What was run", "",
              *_what_was_run(out, rows, report.layout, settings, report.unfinished), ""]
     if report.complete:

@@ -494,38 +494,11 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     todo = _with_sources(layout, cases)
     _check_ranks(comm, settings.ranks_per_case)
     if case_function is None:
-        panels = {NORMAL_CASE, *settings.panel_cases}  # the report draws these cases' panels
-
-        def case_function(config, folder, group, *, start):
-            drawn = figures or case_name(config.geometry) in panels
-            return run_closure_case(config, folder, group, start=start, figures=drawn,
-                                    fields_output=fields_output)
-    error, run = None, None
-    if comm.rank == 0:
-        run = uuid.uuid4().hex
-        try:
-            prepare_output(out)
-            if case_indices is None or not (out / SETTINGS_FILE).is_file():
-                write_json(out / SETTINGS_FILE, {"settings": settings.to_dict(),
-                                                 "written_at": started})
-        except ValveError as err:
-            error = err
-    error, run = comm.bcast((error, run), root=0)
-    if error:
-        raise error
-    group = comm.Split(comm.rank // settings.ranks_per_case, comm.rank)
-    monitor = _Monitor(out, todo, layout, progress, poll_s) if comm.rank == 0 else None
-    if monitor:
-        monitor.start()
-    try:
-        computed, held = _work(group, out, layout, todo, case_function, poll_s, run, wait)
-        # every group is done: the monitor's last scan sees the other groups' last cases
-        computed = sorted(sum(comm.allgather(computed), []))
-        held = {k: v for part in comm.allgather(held) for k, v in part.items()}
-    finally:
-        if monitor:
-            monitor.stop()
-        group.Free()
+        case_function = _closure_cases(settings, figures, fields_output)
+    run = _open_study(comm, out, settings, write_settings=case_indices is None,
+                      started=started)
+    computed, held = _compute(comm, out, layout, todo, settings.ranks_per_case, progress,
+                              case_function=case_function, poll_s=poll_s, run=run, wait=wait)
     if case_indices is None and report:
         layout, more = _run_rounds(settings, out, comm, layout=layout,
                                    case_function=case_function, poll_s=poll_s, run=run,
@@ -548,6 +521,62 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
             outcome.report = build_report(out, settings)
     comm.barrier()
     return outcome
+
+
+def _closure_cases(settings: StudySettings, figures: bool,
+                   fields_output: bool) -> CaseFunction:
+    """The study's closure of one case: :func:`run_closure_case`, drawing the figures of the
+    normal valve and the panel cases (the report shows their panels), or of every case."""
+    panels = {NORMAL_CASE, *settings.panel_cases}
+
+    def case_function(config, folder, group, *, start):
+        drawn = figures or case_name(config.geometry) in panels
+        return run_closure_case(config, folder, group, start=start, figures=drawn,
+                                fields_output=fields_output)
+    return case_function
+
+
+def _open_study(comm: MPI.Comm, out: Path, settings: StudySettings, *, write_settings: bool,
+                started: str) -> str:
+    """Create the study folder and (``write_settings``, or if it has none) its settings file
+    on rank 0; this run's id, on every rank.  Raises rank 0's error on every rank."""
+    error, run = None, None
+    if comm.rank == 0:
+        run = uuid.uuid4().hex
+        try:
+            prepare_output(out)
+            if write_settings or not (out / SETTINGS_FILE).is_file():
+                write_json(out / SETTINGS_FILE, {"settings": settings.to_dict(),
+                                                 "written_at": started})
+        except ValveError as err:
+            error = err
+    error, run = comm.bcast((error, run), root=0)
+    if error:
+        raise error
+    return run
+
+
+def _compute(comm: MPI.Comm, out: Path, layout: StudyLayout, todo: list[StudyCase],
+             ranks_per_case: int, progress: ProgressCallback | None, *,
+             case_function: CaseFunction, poll_s: float, run: str,
+             wait: bool) -> tuple[list[str], dict[str, str]]:
+    """Compute ``todo`` in groups of ``ranks_per_case`` ranks, rank 0 watching the folder:
+    the names of the cases computed, and those another process holds (with its owner),
+    gathered from every group."""
+    group = comm.Split(comm.rank // ranks_per_case, comm.rank)
+    monitor = _Monitor(out, todo, layout, progress, poll_s) if comm.rank == 0 else None
+    if monitor:
+        monitor.start()
+    try:
+        computed, held = _work(group, out, layout, todo, case_function, poll_s, run, wait)
+        # every group is done: the monitor's last scan sees the other groups' last cases
+        computed = sorted(sum(comm.allgather(computed), []))
+        held = {k: v for part in comm.allgather(held) for k, v in part.items()}
+    finally:
+        if monitor:
+            monitor.stop()
+        group.Free()
+    return computed, held
 
 
 def _rounds_of(out: Path, settings: StudySettings) -> tuple:

@@ -3,7 +3,7 @@
 A row is a case's ``result.json`` (whatever fields ``CaseResult`` has) with the
 study's bookkeeping (case name, its axis values, status, reason, configuration
 hash).  The SPEC §7 columns come first, then the case name, one column per axis
-key (``root.loaded_diameter``, ...) and ``path`` (a list where the case serves
+key (``root.loaded_diameter_mm``, ...) and ``path`` (a list where the case serves
 several values, as the normal valve serves every path), then the rest of the
 bookkeeping, then every other field of the result in its own order.  A case
 folder whose files are damaged (:func:`~valve_dolfinx.result.check_case`) is a
@@ -13,7 +13,7 @@ status ``stale``; the result fields of both are empty, so that no number of thei
 a table, figure or recommendation.
 ``results.json`` keeps the nested fields (per-leaflet numbers, parameters,
 versions) as they are; ``results.csv`` flattens them into
-dotted column names (``parameters.geometry.mesh_size``), so both hold the
+dotted column names (``parameters.geometry.mesh_size_mm``), so both hold the
 same numbers.
 """
 
