@@ -266,22 +266,24 @@ def _heavy(config: CaseConfig) -> CaseConfig:
         mass_length_mm=PseudoTransientParameters().mass_length_mm / 4))
 
 
-#: Default-mesh cases and the rank (under ``mpirun -n 2``) that solves each alone.  W21/H27
-#: is placed slack, bulged 0.75 mm towards the valve axis (the case of the other W21/H27
-#: checks) and 0.75 mm away from it (SPEC §1).
+#: Default-mesh cases and the rank (under ``mpirun -n 2``) that solves each alone, the two
+#: ranks' shares of about equal time.  W21/H27 is placed slack, bulged 0.75 mm towards the
+#: valve axis (the case of the other W21/H27 checks) and 0.75 mm away from it (SPEC §1).
+#: The numerical mass ×4 is checked on W21/H27; on the leaking W27/H0 it moves the figure of
+#: merit by 0.036 mm (two resting states), which ``benchmarks/independence.py`` measures
+#: (docs/numerics.md).
 DEFAULT_MESH_CASES = {
     "normal": (1, CaseConfig()),
     "reference": (0, _reference_config()),
-    "W0/H0": (0, CaseConfig().with_graft(0.0, 0.0)),
+    "W0/H0": (1, CaseConfig().with_graft(0.0, 0.0)),
     "W27/H0": (1, CaseConfig().with_graft(27.0, 0.0)),
-    "W27/H0 heavy": (1, _heavy(CaseConfig().with_graft(27.0, 0.0))),
     "W21/H27": (0, _graft(21.0, 27.0, 0.75)),
     "W21/H27 heavy": (0, _heavy(_graft(21.0, 27.0, 0.75))),
     "W21/H27 outward": (1, _graft(21.0, 27.0, -0.75)),
 }
 
 
-#: the first test to use :func:`default_mesh_cases` pays for its eight closures (the suite's
+#: the first test to use :func:`default_mesh_cases` pays for its seven closures (the suite's
 #: 900 s per test is for one closure on two loaded cores)
 DEFAULT_MESH_TIMEOUT = pytest.mark.timeout(3600)
 
@@ -356,15 +358,10 @@ def test_normal_valve_is_sealed_and_agrees_with_the_reference(default_mesh_cases
 @pytest.mark.mpi
 @pytest.mark.slow
 @DEFAULT_MESH_TIMEOUT
-@pytest.mark.parametrize("case", [
-    pytest.param("W27/H0", marks=pytest.mark.xfail(
-        strict=True, reason="with the contact's guard the leaking W27/H0 rests in two states "
-        "0.036 mm apart (mass x1 0.848 mm, x4 0.884 mm): docs/numerics.md")),
-    "W21/H27"])
-def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases, case):
-    """The numerical mass ×4 moves the figure of merit by less than 0.02 mm."""
-    (_, base, *_), (heavy_report, heavy, *_) = (default_mesh_cases[case],
-                                                default_mesh_cases[f"{case} heavy"])
+def test_graft_equilibrium_independent_of_the_numerical_mass(default_mesh_cases):
+    """The numerical mass ×4 moves W21/H27's figure of merit by less than 0.02 mm."""
+    (_, base, *_), (heavy_report, heavy, *_) = (default_mesh_cases["W21/H27"],
+                                                default_mesh_cases["W21/H27 heavy"])
     assert heavy_report.converged, heavy_report.reason
     assert heavy["min_coaptation_height_mm"] == pytest.approx(base["min_coaptation_height_mm"],
                                                               abs=SAME)

@@ -44,6 +44,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 from sklearn.model_selection import GroupKFold, cross_val_predict
+from threadpoolctl import threadpool_limits
 
 __all__ = ["SurfacePoint", "Design", "CoaptationSurface", "SealingModel", "fit_surface",
            "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS"]
@@ -60,6 +61,13 @@ RESTARTS = 4
 CV_FOLDS = 5
 #: bounds of the scaled length scales: a tenth of the studied range to 20 times it
 _LENGTH_BOUNDS = (0.1, 20.0)
+
+#: Every fit and reading of the surfaces runs on one thread of the BLAS and OpenMP pools:
+#: they are small dense problems (tens to hundreds of cases) that threads do not speed up,
+#: and under ``mpirun`` (or pytest-xdist) every process's pool would claim every core; a
+#: stand-in adaptive sweep under ``mpirun -n 2`` on 2 cores took 17.8 s with the default
+#: pools and 2.0 s with one thread each.
+_one_thread = threadpool_limits.wrap(limits=1)
 
 
 @dataclass(frozen=True)
@@ -187,6 +195,7 @@ class CoaptationSurface:
     n_cases: int
     n_cells: int
 
+    @_one_thread
     def predict(self, points: Sequence[SurfacePoint]) -> tuple[np.ndarray, np.ndarray]:
         """The predicted height (mm) and the standard deviation of the smooth surface there
         (mm; the noise term left out: how well the surface is known, not a case's scatter)."""
@@ -213,6 +222,7 @@ def _regressor(n_inputs: int) -> GaussianProcessRegressor:
                                     random_state=RANDOM_STATE)
 
 
+@_one_thread
 def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
                 cv_folds: int = CV_FOLDS) -> CoaptationSurface:
     """Fit :class:`CoaptationSurface` to ``heights_mm`` solved at ``points`` (replicates,
@@ -254,6 +264,7 @@ class SealingModel:
     cells: np.ndarray
     share: np.ndarray
 
+    @_one_thread
     def probability(self, points: Sequence[SurfacePoint]) -> np.ndarray:
         x = self.design.matrix(points)
         nearest = NearestNDInterpolator(self.cells, self.share)
@@ -276,6 +287,7 @@ class SealingModel:
                          "sealed cases"}
 
 
+@_one_thread
 def fit_sealing(points: Sequence[SurfacePoint], sealed: Sequence[bool],
                 design: Design | None = None) -> SealingModel:
     """:class:`SealingModel` of the outcomes ``sealed`` at ``points``; ``design``: the
