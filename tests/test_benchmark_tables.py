@@ -51,6 +51,7 @@ def committed_tables() -> dict:
             "contact_comparison": bench("contact_comparison").TABLE,
             "adaptive_plan": bench("adaptive_plan").TABLE,
             "answer_stability": bench("answer_stability").TABLE,
+            "independence": bench("independence").TABLE,
             "sensitivity": bench("sensitivity").TABLE,
             "bdf2": bench("bdf2").TABLE,
             "sweep": bench("sweep").TABLE,
