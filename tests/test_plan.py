@@ -37,7 +37,8 @@ from valve_dolfinx.plan.reach import (
     max_fibre_stretch,
 )
 from valve_dolfinx.plan.recommendation import PlanAnswers, PlanRecommendation
-from valve_dolfinx.sizing import Recommendation, Resolution, SizingAnswer
+from valve_dolfinx.sizing import MemberTable, Recommendation, Resolution, SizingAnswer
+from valve_dolfinx.sizing.surface import ROOT_KEY
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE_EDGE_MM = math.pi / 3 * 20.0
@@ -357,7 +358,8 @@ def _pdf_text(path: Path) -> str:
 
 
 def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
-           target=2.31, source="given", members=("",), trim=None) -> PlanRecommendation:
+           target=2.31, source="given", members=("",), trim=None, tables=()
+           ) -> PlanRecommendation:
     """A plan's answer made by hand: the recommendation of a study over ``members`` (the
     members named by themselves), its answer ``graft`` with ``margin``, or ``closest`` with
     ``shortfall``."""
@@ -368,7 +370,8 @@ def answer(graft=None, margin=None, closest=None, shortfall=None, limiting=None,
                           margin_mm=margin, limiting_member=limiting,
                           highest=GraftSize(*closest) if closest else size,
                           shortfall_mm=shortfall, why="" if size else "short", trim=trim)
-    study = Recommendation({}, list(members), targets, target, source, sizing)
+    study = Recommendation({}, list(members), targets, target, source, sizing,
+                           tables=list(tables))
     return PlanRecommendation(study, {}, source)
 
 
@@ -386,9 +389,11 @@ ANSWERS = {
     # the answer cut half a millimetre off: the page says it is not robust to it
     # ... and names its members, every root along every path, in one line
     "cut": (answer((10, 19), -0.14, limiting="root 20.0 mm",
-                   members=tuple(f"root {d} mm, path {p} (from the {how} valve)"
-                                 for d in ("20.0", "21.0") for p, how in ((1, "closed"),
-                                                                          (2, "open"))),
+                   members=tuple(f"root {d:.1f} mm, path {p}" for d in (20.0, 21.0)
+                                 for p in (1, 2)),
+                   tables=[MemberTable(f"root {d:.1f} mm, path {p}", [],
+                                       uncertain=((ROOT_KEY, d),), path=p)
+                           for d in (20.0, 21.0) for p in (1, 2)],
                    trim={"mm": 0.5, "width_pct": 2.0, "height_pct": 4.0,
                          "sizes": ["W8/H15", "W8/H19", "W8/H23", "W10/H15", "W10/H23",
                                    "W12/H15", "W12/H19", "W12/H23"],

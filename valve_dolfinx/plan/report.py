@@ -17,7 +17,6 @@ millimetres).
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -32,6 +31,7 @@ from valve_dolfinx.plotting.study import plot_sizing_map, sizing_map_key
 from valve_dolfinx.result import margin_text
 from valve_dolfinx.sizing.answer import trim_text
 from valve_dolfinx.sizing.cells import cell_state
+from valve_dolfinx.sizing.surface import ROOT_KEY
 from valve_dolfinx.study.axes import value_text
 from valve_dolfinx.study.paths import study_paths
 
@@ -144,15 +144,19 @@ def _targets(rec: PlanRecommendation) -> str:
 
 def _members(rec: PlanRecommendation) -> str:
     """The members in words: ``roots 20.0, 21.0, 22.0 mm × paths 1, 2 (6)`` when they are
-    every diameter along every path (the paths are named in the inputs), else each one."""
-    names = [rec.name(m) for m in rec.recommendation.members]
-    parts = [re.fullmatch(r"root (.+) mm, path (\d+)(?: \(.*\))?", n) for n in names]
-    roots = list(dict.fromkeys(p.group(1) for p in parts if p))
-    paths = list(dict.fromkeys(p.group(2) for p in parts if p))
-    if all(parts) and len(names) == len(roots) * len(paths) > 1:
-        return (f"{'roots' if len(roots) > 1 else 'root'} {', '.join(roots)} mm × "
-                f"{'paths' if len(paths) > 1 else 'path'} {', '.join(paths)} ({len(names)})")
-    return "; ".join(names)
+    every root diameter along every path (the paths are named in the inputs), else each
+    one by its name."""
+    study = rec.recommendation
+    tables = study.tables
+    roots = sorted({dict(t.uncertain).get(ROOT_KEY) for t in tables}, key=lambda d: d or 0.0)
+    paths = sorted({t.path for t in tables})
+    if (None not in roots and all(len(t.uncertain) == 1 for t in tables)
+            and len(study.members) == len(tables) == len(roots) * len(paths) > 1):
+        return (f"{'roots' if len(roots) > 1 else 'root'} "
+                f"{', '.join(f'{d:.1f}' for d in roots)} mm × "
+                f"{'paths' if len(paths) > 1 else 'path'} {', '.join(map(str, paths))} "
+                f"({len(tables)})")
+    return "; ".join(rec.name(m) for m in study.members)
 
 
 def _details(rec: PlanRecommendation) -> list[str]:
