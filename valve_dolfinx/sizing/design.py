@@ -68,7 +68,6 @@ from valve_dolfinx.sizing.answer import (
     StudyFit,
     member_values,
     same_size,
-    trim_check,
 )
 from valve_dolfinx.sizing.surface import SurfacePoint
 
@@ -205,10 +204,8 @@ def cut_points(fit: StudyFit, answer: SizingAnswer, tables: Sequence[MemberTable
     probability of sealing over the members is below the answer's threshold (module
     docstring, item 3), each with that probability as its ``chance`` (``saving`` 0) and
     the member where it is least; the least likely to seal first."""
-    if answer.size is None or fit.sealing is None:
-        return []
-    trim = trim_check(answer, fit.leaflet)
-    if not trim:
+    trim = answer.trim
+    if answer.size is None or fit.sealing is None or not trim:
         return []
     sizes = [GraftSize.parse(label) for label in trim["sizes"]]
     values = member_values(tables)
