@@ -630,6 +630,54 @@ def test_two_pressed_sheets_count_their_pair_twice():
     assert on_a + on_b == pytest.approx(0.0, abs=1e-9)  # action = reaction
 
 
+def rest_gap_of_pressed_sheets(spacing: float, shift: float) -> tuple[float, float]:
+    """Two flat 8 mm sheets of ``spacing`` squares under the valve's contact (0.25 mm
+    thickness, taper), the upper one shifted by ``shift`` squares, each pushed onto the other
+    by 80 mmHg on its nodal areas (``F = p·spacing²``): the gap at which the contact carries
+    the pressure of the middle nodes, and the nodal force F."""
+    from scipy.optimize import brentq
+
+    params = ContactParameters()
+    x, cells = grid_sheet(round(8.0 / spacing), round(8.0 / spacing), spacing)
+    upper = x + [shift * spacing, shift * spacing, 0.0]
+    triangles = np.vstack([cells, cells + len(x)])
+    body = np.r_[np.ones(len(cells), int), np.full(len(cells), 2)]
+    force = 80.0 * 0.133322 * spacing**2
+    f_ext = np.zeros((2 * len(x), 3))
+    f_ext[: len(x), 2], f_ext[len(x):, 2] = force, -force
+    middle = np.flatnonzero(np.all(np.abs(x[:, :2] - 4.0) < 2.0, axis=1))
+
+    def carried(gap: float) -> float:  # the lower sheet's middle nodes, pushed back down
+        y = np.vstack([x, upper + [0.0, 0.0, gap]])
+        contact = SurfaceContact(triangles, len(y), params, triangle_body=body)
+        contact.update_history(y)
+        return -contact.evaluate(y, f_ext, jacobian=False).forces[middle, 2].mean()
+
+    t = params.thickness
+    return brentq(lambda gap: carried(gap) - force, t, t + 0.999 * params.cutoff), force
+
+
+@pytest.mark.parametrize("spacing", [0.8, 0.4, 0.2])
+@pytest.mark.parametrize("shift", [0.0, 0.5])
+def test_pressed_flat_sheets_rest_at_the_gap_the_law_predicts(spacing, shift):
+    """Each node meets the other sheet and is met by it, so at rest each of the two passes
+    carries half the pressure: ``f(d, F) = F/2`` (the tapered SPEC §5 law), a gap of
+    ``thickness + d`` that grows with the nodal force, i.e. with the element size: 0.323 mm
+    at 0.8 mm elements, 0.317 at 0.4, 0.280 at 0.2.  Where neighbouring triangles' edge rows
+    join the blend (fine elements, nodes above edges) they carry less than a face row at
+    the same gap, so the sheets rest closer, never beyond the prediction nor inside the
+    thickness."""
+    from scipy.optimize import brentq
+
+    gap, force = rest_gap_of_pressed_sheets(spacing, shift)
+    d = brentq(lambda d: spec_force(d, force, taper=0.5) - 0.5 * force, 0.0, H)
+    predicted = ContactParameters().thickness + d
+    if spacing >= 0.4:
+        assert gap == pytest.approx(predicted, rel=0.02)
+    else:
+        assert ContactParameters().thickness <= gap <= predicted * 1.001
+
+
 @pytest.mark.parametrize("thickness", [0.0, 0.05])
 def test_full_jacobian_matches_finite_differences_on_curved_sheets(thickness):
     """Blended face/edge/vertex contacts at angles, fading rows, turning driving forces.
