@@ -29,7 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 import valve_dolfinx  # noqa: F401  (dolfinx_solver before anything else)
 
@@ -164,12 +164,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--patients", nargs="*", default=list(PATIENTS),
                         choices=list(PATIENTS), metavar="NAME",
                         help=f"which patients (default all: {', '.join(PATIENTS)})")
-    add_table_options(parser)
-    args = parser.parse_args(argv)
-    table = TABLE.at(args.results)
-    if args.tables_only:
-        print(table.redraw())
-        return 0
+    args = TABLE.arguments(parser, argv)
+    table = args.table
     rows = []
     for patient in args.patients:
         reports, walls = {}, {}

@@ -22,7 +22,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 import valve_dolfinx  # noqa: F401  (dolfinx_solver before anything else)
 
@@ -81,12 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("studies", nargs="*", type=Path, help="finished study folders")
     parser.add_argument("--resamples", type=int, default=50,
                         help="bootstrap resamples per answer (default %(default)s)")
-    add_table_options(parser)
-    args = parser.parse_args(argv)
-    table = TABLE.at(args.results)
-    if args.tables_only:
-        print(table.redraw())
-        return 0
+    args = TABLE.arguments(parser, argv)
+    table = args.table
     if not args.studies:
         parser.error("give at least one finished study folder")
     rows = [row for folder in args.studies for row in stability_rows(folder, args.resamples)]

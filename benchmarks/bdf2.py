@@ -16,7 +16,7 @@ import argparse
 from dataclasses import replace
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 from valve_dolfinx.config import CaseConfig
 from valve_dolfinx.geometry.valve import ValveParameters
@@ -62,11 +62,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", default="reference,normal")
     parser.add_argument("--wall-time-limit", type=float, default=3600.0)
-    add_table_options(parser)
-    args = parser.parse_args()
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return
+    args = TABLE.arguments(parser)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.case import run_case
 
@@ -81,7 +77,7 @@ def main() -> None:
                          **{key: getattr(r, key) for key in FIELDS[3:]}})
             print(f"{name} {solver}: {r.min_coaptation_height_mm:.3f} mm, {r.time_steps} "
                   f"steps, {r.wall_time_s:.1f} s", flush=True)
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
 
 
 if __name__ == "__main__":

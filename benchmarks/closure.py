@@ -48,7 +48,7 @@ from cases import (
 )
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, cell, markdown_table
+from result_tables import Column, Table, cell, markdown_table
 
 CASES = ("normal", "W0/H0", "W27/H0", "W21/H27")
 #: rows of the table: (label, key of a run's figures, format)
@@ -222,11 +222,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=2, help="runs per case and process")
     parser.add_argument("--user-cache", action="store_true",
                         help="compile into the user's FFCx cache instead of an empty one")
-    add_table_options(parser)
-    args = parse_arguments(parser, argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv, parse_arguments)
     if args.worker:
         report(worker(args.cases[0], args.mesh_size, args.repeat, args.user_cache))
         return 0
@@ -238,7 +234,7 @@ def main(argv=None) -> int:
               file=sys.stderr, flush=True)
     rows = [{**run, "case": label, "run": k, "mesh_size_mm": args.mesh_size}
             for label, runs in measured.items() for k, run in enumerate(runs, start=1)]
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f, indent=1)

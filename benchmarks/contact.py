@@ -45,7 +45,7 @@ import tracemalloc  # noqa: E402
 import numpy as np  # noqa: E402
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, markdown_table  # noqa: E402
+from result_tables import Column, Table, markdown_table  # noqa: E402
 
 from valve_dolfinx.contact import ContactParameters, SurfaceContact, candidate_pairs  # noqa: E402
 
@@ -193,11 +193,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sizes", type=int, nargs="+", default=[2_000, 8_000, 32_000, 128_000],
                         help="approximate numbers of triangles")
-    add_table_options(parser)
-    args = parser.parse_args()
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return
+    args = TABLE.arguments(parser)
     before = load_average()
     length = float(np.sqrt(700.0 / 3.0))
     spacing = length / round(np.sqrt(32_000 / 6))
@@ -212,7 +208,7 @@ def main() -> None:
     for row in rows:
         row.update(title=SERIES[row["series"]].format(length=length, gap=GAP, spacing=spacing),
                    load_before=before, load_after=after)
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
 
 
 if __name__ == "__main__":

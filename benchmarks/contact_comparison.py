@@ -17,7 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 FIGURES = ("intersecting_pairs", "newton_iterations", "rejected_newton_iterations",
            "wall_time_s", "min_coaptation_height_mm", "competent", "converged")
@@ -86,12 +86,8 @@ def main() -> None:
     parser.add_argument("after", type=Path, nargs="?", help="study folder (the change)")
     parser.add_argument("--labels", nargs=2, default=("before", "after"),
                         help="what to call the two runs in the headings")
-    add_table_options(parser)
-    args = parser.parse_args()
-    table = TABLE.at(args.results)
-    if args.tables_only:
-        print(table.redraw())
-        return
+    args = TABLE.arguments(parser)
+    table = args.table
     if args.before is None or args.after is None:
         parser.error("give the two study folders (or --tables-only)")
     rows = compare(read_study(args.before), read_study(args.after))

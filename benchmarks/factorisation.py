@@ -25,7 +25,7 @@ import time
 
 # benchmarks/cases.py, beside this script
 from cases import SINGLE_THREAD, case_config, case_label, parse_arguments, parse_case
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 # one BLAS thread, set before NumPy and PETSc load their libraries
 for _name, _value in SINGLE_THREAD.items():
@@ -126,11 +126,7 @@ def main(argv=None) -> None:
                         help="'normal' (default) or W<w>/H<h>")
     parser.add_argument("--mesh-size", type=float, default=None, help="mesh size (mm)")
     parser.add_argument("--repeat", type=int, default=10, help="refactorisations timed")
-    add_table_options(parser)
-    args = parse_arguments(parser, argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return
+    args = TABLE.arguments(parser, argv, parse_arguments)
     A, result = last_jacobian(args.case, args.mesh_size)
     info = A.getInfo()
     jacobian = {"case": case_label(args.case), "mesh_size_mm": args.mesh_size,
@@ -142,7 +138,7 @@ def main(argv=None) -> None:
         rows.append({**jacobian, "factorisation": label, "first_s": first, "again_s": again,
                      "flops": flops, "largest_front": front})
         print(f"{label}: {first * 1e3:.1f} ms, again {again * 1e3:.1f} ms", flush=True)
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
 
 
 if __name__ == "__main__":

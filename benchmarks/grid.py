@@ -36,7 +36,7 @@ from cases import (
     report,
     run_worker,
 )
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 from valve_dolfinx.study.grid import STUDY_HEIGHTS_PCT, STUDY_WIDTHS_PCT, case_name
 
@@ -114,11 +114,7 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="cases run at a time")
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
     parser.add_argument("--keep", type=str, default=None, help="keep the case folders in DIR")
-    add_table_options(parser)
-    args = parse_arguments(parser, argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv, parse_arguments)
     if args.worker:
         report(worker(args.cases[0], args.mesh_size, args.wall_time_limit, args.keep))
         return 0
@@ -139,7 +135,7 @@ def main(argv=None) -> int:
     ordered = [{"kind": "case", **rows[case]} for case in args.cases]
     run = {"kind": "run", "mesh_size_mm": args.mesh_size, "jobs": args.jobs,
            "elapsed_s": elapsed}
-    print("\n" + TABLE.at(args.results).write([*ordered, run]).read_text(), end="")
+    print("\n" + args.table.write([*ordered, run]).read_text(), end="")
     if args.json:
         args.json.write_text(json.dumps({"mesh_size_mm": args.mesh_size, "jobs": args.jobs,
                                          "elapsed_s": elapsed, "cases": ordered}, indent=1))

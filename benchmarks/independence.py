@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, cell, markdown_table
+from result_tables import Column, Table, cell, markdown_table
 
 from valve_dolfinx.config import CaseConfig
 from valve_dolfinx.geometry.valve import ValveParameters
@@ -134,11 +134,7 @@ TABLE = Table("independence", ".venv/bin/python benchmarks/independence.py", FIE
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mesh-size", type=float, default=ValveParameters().mesh_size)
-    add_table_options(parser)
-    args = parser.parse_args()
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return
+    args = TABLE.arguments(parser)
     rows, placed = [], []
     for case, variant, width, height, mass, billow in SOLVES:
         print(f"{case}, {variant}:")
@@ -147,7 +143,7 @@ def main() -> None:
         if billow is not None:
             placed.append(state)
     rows[-1].update(_placements_compared(*placed))
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
 
 
 if __name__ == "__main__":

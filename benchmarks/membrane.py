@@ -25,7 +25,7 @@ import sys
 import numpy as np
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 R = 10.0  # sphere radius (mm)
 P = 10.666  # 80 mmHg in kPa
@@ -143,11 +143,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=float, nargs="+", default=list(SIZES))
     parser.add_argument("--np", type=int, default=1, help="MPI ranks per run")
     parser.add_argument("--one", type=float, help=argparse.SUPPRESS)
-    add_table_options(parser)
-    args = parser.parse_args()
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return
+    args = TABLE.arguments(parser)
     if args.one is not None:
         result = run_one(args.one)
         from valve_dolfinx._compat import MPI
@@ -166,7 +162,7 @@ def main() -> None:
         line = next(line for line in out.splitlines() if line.startswith("RESULT"))
         rows.append({**json.loads(line[len("RESULT "):]), "exact_radius_mm": exact})
         print(f"h = {h:g} mm: {rows[-1]['wall_s']:.2f} s", flush=True)
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
 
 
 if __name__ == "__main__":

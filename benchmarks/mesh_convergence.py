@@ -20,7 +20,7 @@ import argparse
 
 # benchmarks/cases.py and result_tables.py, beside this script
 from cases import case_config, case_label, parse_cases
-from result_tables import Column, Table, add_table_options, cell, markdown_table
+from result_tables import Column, Table, cell, markdown_table
 
 #: SPEC §8's cells and one beside them
 CASES = "normal,W21/H27,W0/H40"
@@ -76,11 +76,7 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", type=parse_cases, default=parse_cases(CASES),
                         help=f"comma-separated (default {CASES})")
     parser.add_argument("--meshes", type=float, nargs="+", default=[0.8, 0.6], metavar="MM")
-    add_table_options(parser)
-    args = parser.parse_args(argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv)
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.case import run_case
 
@@ -93,7 +89,7 @@ def main(argv=None) -> int:
                          **{key: getattr(r, key) for key in FIELDS[2:]}})
             print(f"{case_label(case)} at {mesh:g} mm: {r.min_coaptation_height_mm:.3f} mm, "
                   f"{r.wall_time_s:.0f} s", flush=True)
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
     return 0
 
 

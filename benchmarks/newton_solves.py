@@ -46,7 +46,7 @@ from cases import (
     report,
     run_worker,
 )
-from result_tables import Column, Table, add_table_options, cell, markdown_table
+from result_tables import Column, Table, cell, markdown_table
 
 CASES = ("W21/H27", "W21/H40")
 #: PETSc events whose time is charged to a factorised Jacobian
@@ -188,11 +188,7 @@ TABLE = Table("newton_solves", ".venv/bin/python benchmarks/newton_solves.py", F
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_common_arguments(parser, [parse_case(c) for c in CASES])
-    add_table_options(parser)
-    args = parse_arguments(parser, argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv, parse_arguments)
     if args.worker:
         report(worker(args.cases[0], args.mesh_size))
         return 0
@@ -205,7 +201,7 @@ def main(argv=None) -> int:
             print(f"{label}: {error}", file=sys.stderr)
             return 1
     rows = [row for label, figures in measured.items() for row in case_rows(label, figures)]
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"mesh_size_mm": args.mesh_size, "cases": measured}, f)

@@ -136,6 +136,20 @@ class Table:
         """The same table in another folder."""
         return replace(self, folder=Path(folder))
 
+    def arguments(self, parser: argparse.ArgumentParser, argv: Sequence[str] | None = None,
+                  parse: Callable | None = None) -> argparse.Namespace:
+        """A benchmark's command line: ``parser`` with ``--tables-only`` and ``--results DIR``
+        parsed from ``argv`` (by ``parse(parser, argv)`` if given, e.g. one that fills in
+        defaults), ``args.table`` this table in that folder.  ``--tables-only`` redraws the
+        Markdown from the CSV, prints its path and exits."""
+        add_table_options(parser)
+        args = parse(parser, argv) if parse is not None else parser.parse_args(argv)
+        args.table = self.at(args.results)
+        if args.tables_only:
+            print(args.table.redraw())
+            raise SystemExit(0)
+        return args
+
     def redraw(self) -> Path:
         """Draw the Markdown from the CSV; its path."""
         if not self.csv_path.is_file():

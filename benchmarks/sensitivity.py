@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Table, add_table_options, cell
+from result_tables import Table, cell
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.config import CaseConfig, get_dotted
@@ -201,11 +201,7 @@ def main(argv=None) -> int:
     parser.add_argument("--choices", nargs="+", default=[c.name for c in CHOICES],
                         choices=[c.name for c in CHOICES], metavar="NAME",
                         help=f"a subset of {', '.join(c.name for c in CHOICES)}")
-    add_table_options(parser)
-    args = parser.parse_args(argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
@@ -235,7 +231,7 @@ def main(argv=None) -> int:
           f"mesh {args.mesh_size:g} mm, {args.paths} path(s), {comm.size} MPI rank(s); "
           "minimum coaptation height in mm (the worst member's with several paths), the "
           "recommendation with its margin (mm).\n")
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
     total = time.perf_counter() - t0
     print(f"wall time: defaults {walls['defaults']:.0f} s; all studies {total:.0f} s "
           f"({total / 3600:.2f} h) -> {args.out}")

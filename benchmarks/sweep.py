@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 # benchmarks/result_tables.py, beside this script
-from result_tables import Column, Table, add_table_options, markdown_table
+from result_tables import Column, Table, markdown_table
 
 from valve_dolfinx._compat import MPI
 from valve_dolfinx.interrupts import interrupt_on_signals
@@ -82,11 +82,7 @@ def main(argv=None) -> int:
     parser.add_argument("--heights", type=float, nargs="+", default=list(STUDY_HEIGHTS_PCT))
     parser.add_argument("--wall-time-limit", type=float, default=None, metavar="SECONDS")
     parser.add_argument("--out", type=Path, default=None)
-    add_table_options(parser)
-    args = parser.parse_args(argv)
-    if args.tables_only:
-        print(TABLE.at(args.results).redraw())
-        return 0
+    args = TABLE.arguments(parser, argv)
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
     comm = MPI.COMM_WORLD
     if comm.rank == 0:  # one line per finished case
@@ -105,7 +101,7 @@ def main(argv=None) -> int:
             for row in outcome.report.rows]
     rows.append({"kind": "sweep", "computed": len(outcome.computed), "ranks": comm.size,
                  "ranks_per_case": settings.ranks_per_case, "elapsed_s": outcome.elapsed_s})
-    print(TABLE.at(args.results).write(rows).read_text())
+    print(args.table.write(rows).read_text())
     print(f"-> {out}")
     return 0
 
