@@ -17,7 +17,8 @@ its template still qualifies::
 
     .venv/bin/python benchmarks/adaptive_plan.py --root /scratch/plans
 
-The table goes to ``benchmarks/results/adaptive_plan.{csv,md}``.
+The table goes to ``benchmarks/results/adaptive_plan.{csv,md}``; with ``--patients``, the
+rows of the other patients already there stay.
 """
 
 from __future__ import annotations
@@ -166,7 +167,8 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"which patients (default all: {', '.join(PATIENTS)})")
     args = TABLE.arguments(parser, argv)
     table = args.table
-    rows = []
+    rows = [row for row in (table.read() if table.csv_path.is_file() else [])
+            if row["patient"] not in args.patients]  # the other patients' rows stand
     for patient in args.patients:
         reports, walls = {}, {}
         for design in ("grid", "adaptive"):
@@ -177,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
             row = row_of(patient, design, reports[design], walls[design], reports["grid"])
             rows.append(row)
             print(json.dumps(row))
+    order = {name: k for k, name in enumerate(PATIENTS)}
+    rows.sort(key=lambda row: order.get(row["patient"], len(order)))  # (stable: grid first)
     print(table.write(rows).read_text())
     return 0
 
