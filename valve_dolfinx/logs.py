@@ -4,8 +4,8 @@ Library modules log through ``logging.getLogger(__name__)`` and never add
 handlers; ``valve-dolfinx`` runs each command inside :class:`configure_logging`, and a
 script that wants the same output calls it once.  Lines read::
 
-    2026-12-01 23:10:05 INFO    root: d0 = 17.391 mm -> d = 20.089 mm at 10.666 kPa
-    2026-12-01 23:10:07 ERROR   [rank 1/2] error: ...
+    YYYY-MM-DD hh:mm:ss INFO    root: d0 = 17.391 mm -> d = 20.089 mm at 10.666 kPa
+    YYYY-MM-DD hh:mm:ss ERROR   [rank 1/2] error: ...
 
 the ``[rank r/n]`` tag only under MPI with more than one process.
 """
