@@ -59,6 +59,7 @@ def committed_tables() -> dict:
             "bdf2": bench("bdf2").TABLE,
             "sweep": bench("sweep").TABLE,
             "mesh_convergence": bench("mesh_convergence").TABLE,
+            "path_agreement": bench("path_agreement").TABLE,
             "mesh_ladder": bench("mesh_ladder").ladder_table(RESULTS / "mesh_ladder.csv")}
 
 
@@ -344,3 +345,32 @@ def test_the_answer_stability_table_gives_the_share_and_leaves_one_path_blank(tm
          "answer": "W10/H13", "tolerance_mm": 0.28}], tmp_path)
     two, one = markdown_rows(text)
     assert two[8:10] == ["82%", "8"] and one[7:10] == ["–", "–", "–"]
+
+
+def test_path_agreement_pairs_the_paths_of_each_grid_cell(tmp_path):
+    """Four grid cells and a confirmation size off the grid: differences 0.1 and 0.5 mm, one
+    cell unconverged on path 2, one sealed on path 1 only; the normal valve and the
+    confirmation are left out."""
+    import json
+
+    (tmp_path / "study.json").write_text(json.dumps(
+        {"settings": {"widths_pct": [0.0, 14.0], "heights_pct": [0.0, 27.0]}}))
+    fields = ["case", "graft_width_pct", "graft_height_pct", "converged", "competent",
+              "min_coaptation_height_mm"]
+    rows = [("normal", "", "", "true", "true", "2.9"),
+            ("W0_H0", "0", "0", "true", "true", "1.0"),
+            ("W0_H0__path=2", "0", "0", "true", "true", "1.1"),
+            ("W14_H0", "14", "0", "true", "true", "2.0"),
+            ("W14_H0__path=2", "14", "0", "true", "false", "1.5"),
+            ("W0_H27", "0", "27", "true", "true", "2.0"),
+            ("W0_H27__path=2", "0", "27", "false", "false", "0.4"),
+            ("W14_H27", "14", "27", "true", "true", "2.5"),
+            ("W10_H13", "10", "13", "true", "true", "9.0"),
+            ("W10_H13__path=2", "10", "13", "true", "true", "0.0")]
+    with open(tmp_path / "results.csv", "w") as fh:
+        fh.write(",".join(fields) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+    row = bench("path_agreement").agreement_row(tmp_path)
+    assert row["cells"] == 3 and row["both_converged"] == 2 and row["within"] == 1
+    assert row["median_mm"] == pytest.approx(0.3)
+    assert row["largest_mm"] == pytest.approx(0.5) and row["largest_cell"] == "W14_H0"
+    assert row["not_converged"] == "W0_H27" and row["sealed_on_one_path"] == "W14_H0"
