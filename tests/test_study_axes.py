@@ -561,6 +561,8 @@ def test_nomogram_rows_match_the_recommendations(tmp_path, capsys, quiet_cli, di
     assert [float(r["root_loaded_diameter_mm"]) for r in rows] == [21.0, 22.0]
     for row, rec in zip(rows, summary, strict=True):
         assert row["recommended"] == (rec["recommended"] or "")
+        assert row["solved"] == ("" if not rec["recommended"] else
+                                 "true" if not rec["confirm"] else "false")
         assert row["best"] == (rec["best"] or "")
         assert row["members"] == "2"
         resolution = rec["answer"]["resolution"]

@@ -398,9 +398,10 @@ def plot_nomogram(rows: Sequence[dict], path: Path | None = None, *, title: str,
 
     Bars about the recommended enlargements span the band of sizes that also qualify.  A
     diameter without a graft is shaded, with the closest size's enlargements hollow and its
-    margin (negative: its shortfall) in vermillion; under each
-    diameter, the normal valve's minimum coaptation height (the target) and whether it
-    is competent."""
+    margin (negative: its shortfall) in vermillion; an answer read from the surface and not
+    solved in every member (its confirmations spent) says so under its name, its margin
+    bar hatched; under each diameter, the normal valve's minimum coaptation height (the
+    target) and whether it is competent."""
     d = np.array([r["root_loaded_diameter_mm"] for r in rows], dtype=float)
     ok = np.array([bool(r["recommended"]) for r in rows], dtype=bool)
     fig = new_figure(7.5, 8.0)
@@ -451,6 +452,8 @@ def _nomogram_sizes(top, rows: Sequence[dict], d: np.ndarray, ok: np.ndarray,
         highest = np.nanmax([highest, *y[ok], *best[~ok]])
     for r, x in zip(rows, d, strict=True):
         name = r["recommended"] or (f"closest {r['best']}" if r["best"] else "")
+        if r["recommended"] and r.get("solved") is False:
+            name += "\nnot solved"  # read from the surface, its confirmations spent
         if name:
             top.annotate(name, (x, 0), xytext=(0, 4), textcoords="offset points",
                          xycoords=("data", "axes fraction"), ha="center", fontsize=8,
@@ -467,17 +470,20 @@ def _nomogram_margins(low, rows: Sequence[dict], d: np.ndarray, ok: np.ndarray,
     qualifies, the closest size's shortfall, negative), the tolerance, and under each
     diameter the normal valve's minimum coaptation height."""
     margin = np.where(ok, _column(rows, "margin_mm"), -_column(rows, "shortfall_mm"))
-    for where, colour, label in (
-            (ok, OKABE_ITO["bluish_green"], "the answer's predicted worst-case margin"),
-            (~ok, OKABE_ITO["vermillion"], "no graft: the closest size's margin "
+    unsolved = ok & np.array([r.get("solved") is False for r in rows], dtype=bool)
+    for where, colour, hatch, label in (
+            (ok & ~unsolved, OKABE_ITO["bluish_green"], None,
+             "the answer's predicted worst-case margin"),
+            (unsolved, "white", "///", "the same, the answer not solved in every member"),
+            (~ok, OKABE_ITO["vermillion"], None, "no graft: the closest size's margin "
              "(if positive, it does not seal)")):
         if where.any():
-            low.bar(d[where], margin[where], width=step / 2, color=colour, label=label)
+            low.bar(d[where], margin[where], width=step / 2, color=colour, label=label,
+                    hatch=hatch, edgecolor=OKABE_ITO["bluish_green"] if hatch else None)
     for x, m in zip(d, margin, strict=True):
-        if math.isfinite(m):
-            low.annotate(margin_text(m, signed=True), (x, m),
-                         xytext=(0, 3 if m >= 0 else -3), textcoords="offset points",
-                         ha="center", va="bottom" if m >= 0 else "top", fontsize=8)
+        if math.isfinite(m):  # above the bar, or above the zero line over a negative one
+            low.annotate(margin_text(m, signed=True), (x, max(m, 0.0)), xytext=(0, 3),
+                         textcoords="offset points", ha="center", va="bottom", fontsize=8)
     low.axhline(0.0, color="k", lw=1.0)
     tolerance = _column(rows, "tolerance_mm")
     if np.isfinite(tolerance).any():

@@ -37,7 +37,7 @@ NOMOGRAM_KEY = "root.loaded_diameter_mm"
 #: band of qualifying sizes (its least and greatest W and H)
 NOMOGRAM_COLUMNS = (
     "root_loaded_diameter_mm", "recommended", "graft_width_pct", "graft_height_pct",
-    "flat_area_ratio", "margin_mm", "limiting_member", "min_coaptation_height_mm",
+    "flat_area_ratio", "solved", "margin_mm", "limiting_member", "min_coaptation_height_mm",
     "target_mm", "best", "best_width_pct", "best_height_pct", "shortfall_mm", "members",
     "normal_min_coaptation_mm", "normal_competent", "tolerance_mm", "band_width_min_pct",
     "band_width_max_pct", "band_height_min_pct", "band_height_max_pct",
@@ -70,6 +70,8 @@ def nomogram_rows(recommendations: Sequence[Recommendation],
             "graft_width_pct": chosen.width_pct if chosen else None,
             "graft_height_pct": chosen.height_pct if chosen else None,
             "flat_area_ratio": chosen.area_ratio if chosen else None,
+            # the answer solved in every member (confirmed), or read from the surface only
+            "solved": not rec.confirm if chosen else None,
             "margin_mm": answer.margin_mm,
             "limiting_member": limit if limit is not None else "",
             "min_coaptation_height_mm": answer.predicted_height_mm,
