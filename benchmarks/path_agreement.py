@@ -23,7 +23,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from result_tables import Column, Table, markdown_table
+from result_tables import Column, Table, markdown_table, parse
 
 #: a difference the README reads as within the default mesh's resolution (mm)
 WITHIN_MM = 0.3
@@ -32,7 +32,8 @@ FIELDS = ("study", "cells", "both_converged", "within", "median_mm", "largest_mm
 
 
 def _flag(text: str) -> bool:
-    return text.strip().lower() == "true"
+    """A CSV cell that reads true (:func:`result_tables.parse`)."""
+    return parse(text) is True
 
 
 def agreement_row(folder: Path) -> dict:
