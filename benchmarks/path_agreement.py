@@ -37,21 +37,26 @@ def _flag(text: str) -> bool:
 
 
 def agreement_row(folder: Path) -> dict:
-    """The row of the study in ``folder``."""
-    settings = json.loads((folder / "study.json").read_text())["settings"]
-    grid = {(float(w), float(h)) for w in settings["widths_pct"]
-            for h in settings["heights_pct"]}
+    """The row of the study in ``folder``.
+
+    A cell is a grid size and a value of every comparison and uncertainty axis, read from
+    the table's own columns (the axis keys and ``path``); it is named by its path-1 case.
+    """
+    study = json.loads((folder / "study.json").read_text())["settings"]
+    grid = {(float(w), float(h)) for w in study["widths_pct"] for h in study["heights_pct"]}
+    axes = [*(study.get("vary") or {}), *(study.get("uncertain") or {})]
     with open(folder / "results.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    cells: dict[str, dict[int, dict]] = {}
+    cells: dict[tuple, dict[int, dict]] = {}
     for row in rows:
         if not row["graft_width_pct"]:
             continue  # a normal valve, shared by the paths
-        if (float(row["graft_width_pct"]), float(row["graft_height_pct"])) not in grid:
+        size = (float(row["graft_width_pct"]), float(row["graft_height_pct"]))
+        if size not in grid:
             continue  # a confirmation size
-        name, _, path = row["case"].partition("__path=")
-        cells.setdefault(name, {})[int(path or 1)] = row
-    paired = {name: paths for name, paths in cells.items() if {1, 2} <= set(paths)}
+        cell = (size, tuple(row[key] for key in axes))
+        cells.setdefault(cell, {})[int(row.get("path") or 1)] = row
+    paired = {paths[1]["case"]: paths for paths in cells.values() if {1, 2} <= set(paths)}
     differences, unconverged, flips = [], [], []
     for name, paths in sorted(paired.items()):
         one, two = paths[1], paths[2]

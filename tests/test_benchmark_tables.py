@@ -348,29 +348,33 @@ def test_the_answer_stability_table_gives_the_share_and_leaves_one_path_blank(tm
 
 
 def test_path_agreement_pairs_the_paths_of_each_grid_cell(tmp_path):
-    """Four grid cells and a confirmation size off the grid: differences 0.1 and 0.5 mm, one
-    cell unconverged on path 2, one sealed on path 1 only; the normal valve and the
-    confirmation are left out."""
+    """Four cells (two grid sizes at two root diameters) and a confirmation size off the
+    grid: differences 0.1 and 0.5 mm, one cell unconverged on path 2, one sealed on path 1
+    only; the normal valve and the confirmation are left out.  The cells are paired by the
+    table's axis and path columns, not by the case names."""
     import json
 
+    root = "root.loaded_diameter_mm"
     (tmp_path / "study.json").write_text(json.dumps(
-        {"settings": {"widths_pct": [0.0, 14.0], "heights_pct": [0.0, 27.0]}}))
+        {"settings": {"widths_pct": [0.0, 14.0], "heights_pct": [0.0, 27.0],
+                      "vary": {}, "uncertain": {root: [19.0, 21.0]}}}))
     fields = ["case", "graft_width_pct", "graft_height_pct", "converged", "competent",
-              "min_coaptation_height_mm"]
-    rows = [("normal", "", "", "true", "true", "2.9"),
-            ("W0_H0", "0", "0", "true", "true", "1.0"),
-            ("W0_H0__path=2", "0", "0", "true", "true", "1.1"),
-            ("W14_H0", "14", "0", "true", "true", "2.0"),
-            ("W14_H0__path=2", "14", "0", "true", "false", "1.5"),
-            ("W0_H27", "0", "27", "true", "true", "2.0"),
-            ("W0_H27__path=2", "0", "27", "false", "false", "0.4"),
-            ("W14_H27", "14", "27", "true", "true", "2.5"),
-            ("W10_H13", "10", "13", "true", "true", "9.0"),
-            ("W10_H13__path=2", "10", "13", "true", "true", "0.0")]
+              "min_coaptation_height_mm", root, "path"]
+    rows = [("normal", "", "", "true", "true", "2.9", "[19.0, 21.0]", "[1, 2]"),
+            ("a", "0", "0", "true", "true", "1.0", "19.0", "1"),
+            ("b", "0", "0", "true", "true", "1.1", "19.0", "2"),
+            ("c", "0", "0", "true", "true", "2.0", "21.0", "1"),
+            ("d", "0", "0", "true", "false", "1.5", "21.0", "2"),
+            ("e", "14", "27", "true", "true", "2.0", "19.0", "1"),
+            ("f", "14", "27", "false", "false", "0.4", "19.0", "2"),
+            ("g", "14", "27", "true", "true", "2.5", "21.0", "1"),
+            ("h", "10", "13", "true", "true", "9.0", "21.0", "1"),
+            ("i", "10", "13", "true", "true", "0.0", "21.0", "2")]
     with open(tmp_path / "results.csv", "w") as fh:
-        fh.write(",".join(fields) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+        fh.write(",".join(fields) + "\n"
+                 + "".join(",".join(f'"{v}"' for v in r) + "\n" for r in rows))
     row = bench("path_agreement").agreement_row(tmp_path)
     assert row["cells"] == 3 and row["both_converged"] == 2 and row["within"] == 1
     assert row["median_mm"] == pytest.approx(0.3)
-    assert row["largest_mm"] == pytest.approx(0.5) and row["largest_cell"] == "W14_H0"
-    assert row["not_converged"] == "W0_H27" and row["sealed_on_one_path"] == "W14_H0"
+    assert row["largest_mm"] == pytest.approx(0.5) and row["largest_cell"] == "c"
+    assert row["not_converged"] == "e" and row["sealed_on_one_path"] == "c"

@@ -78,6 +78,12 @@ class Recommendation:
     tables: list[MemberTable] = field(default_factory=list, repr=False)
 
     @property
+    def solved(self) -> bool:
+        """The answer is a size solved in every member (confirmed, not only read from the
+        surface); False when there is no answer."""
+        return self.answer.size is not None and not self.confirm
+
+    @property
     def next_confirmation(self) -> GraftSize | None:
         """The size to solve next in every member: the answer's, when it is not solved in
         every member yet and fewer than :data:`CONFIRM_ROUNDS` sizes have been solved to
@@ -307,7 +313,7 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
     if size is not None and not excluded:
         scope = f" in all {n} members" if n > 1 else ""
         within = "" if tol is None else " within the model's resolution"
-        if not rec.confirm:  # solved in every member
+        if rec.solved:
             return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
                     f"+{size.height_pct:g} % height). It converges, seals and reaches "
                     f"{target}{scope}{within}; its smallest margin is "

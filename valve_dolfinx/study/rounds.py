@@ -106,7 +106,7 @@ def _open_text(rec: Recommendation, candidates: Sequence[Candidate],
             parts.append(f"{len(candidates)} sizes could still qualify (chance >= "
                          f"{SETTLE_PROBABILITY:g}; the likeliest {best.size.label}, "
                          f"{best.chance:.2f}, in `{best.member}`)")
-    if answer.size is not None and not rec.confirm:
+    if rec.solved:
         missed = [e for e in rec.confirmations if e["graft"] == answer.size.label
                   and not e["holds"]]
         if missed:
