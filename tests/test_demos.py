@@ -42,23 +42,24 @@ def test_normal_valve_demo(tmp_path):
 
 @pytest.mark.slow
 def test_patient_plan_demo(tmp_path):
-    """The worked patient (22 ± 1 mm root, 22 mm free edge) on a coarse mesh and a one-graft
-    grid, two paths: six members, the report is written, and rebuilding it from the case
-    folders gives the same answer."""
+    """The worked patient (22 ± 1 mm root, 22 mm free edge) on a coarse mesh, a one-graft
+    grid and one path: three members, the report is written, and rebuilding it from the
+    case folders gives the same answer."""
     proc = _run("patient_plan.py", "--out", str(tmp_path), "--mesh-size", "2.5",
-                "--widths", "14", "--heights", "13", "--full-grid", cwd=tmp_path)
+                "--widths", "14", "--heights", "13", "--paths", "1", "--full-grid",
+                cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "read back gives the same inputs: True" in proc.stdout
     assert "root 23.0 mm: reach" in proc.stdout and "-> can seal" in proc.stdout
-    assert "6 members, 9 cases" in proc.stdout
+    assert "3 members, 6 cases" in proc.stdout
     assert "rebuilt from the case folders: True" in proc.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     answer = summary["answers"]["values"][0]
     # one graft is too few solved cells for a response surface: the plan reads no size
     # and says so, rather than "no graft"
     assert answer["graft"] is None and answer["closest"] is None
-    assert answer["headline"].startswith("No answer") and len(answer["members"]) == 6
-    assert summary["run"]["cases"] == 9 and summary["templates"] == []
+    assert answer["headline"].startswith("No answer") and len(answer["members"]) == 3
+    assert summary["run"]["cases"] == 6 and summary["templates"] == []
     for name in ("plan.pdf", "plan.md", "worked_patient.toml", "study/report.md"):
         assert (tmp_path / name).stat().st_size > 500, name
 

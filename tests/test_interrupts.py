@@ -1,7 +1,7 @@
 """Nothing wrong is recorded as a result: interrupts and errors inside the solvers' callbacks.
 
-SIGINT and SIGTERM, sent as real signals at several points of a run (the root step, early
-and late pseudo-time steps, the analysis, the output) and of a sweep, end the command with
+SIGINT and SIGTERM, sent as real signals at several points of a run (the root step, a
+pseudo-time step, the analysis, the output) and of a sweep, end the command with
 status 130 or 143 and one line, write no ``result.json`` and commit no study case; the
 rerun computes the result of an uninterrupted run.  An exception raised inside a PETSc
 callback (a test double of a hook that raises at its k-th call) is an error naming it,
@@ -194,7 +194,6 @@ def test_error_in_a_callback_fails_the_study_case(tmp_path, monkeypatch, quiet_c
 @pytest.mark.parametrize("stage,trigger,sig", [
     ("root step", r"INFO +distributed valve:", signal.SIGTERM),
     ("early step", r"closing: step 2,", signal.SIGINT),
-    ("late step", r"closing: step 18,", signal.SIGTERM),
     ("analysis", r"pseudo-transient continuation: NOT converged", signal.SIGINT),
     pytest.param("output", r"wrote .*closed_valve\.png", signal.SIGTERM,
                  marks=pytest.mark.slow),  # the figures drawn twice: over 30 s

@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 from test_plan import _patient, no_case
 from test_plan import stand_in_case as plan_case
-from test_study import ROOT, SMALL_GRID, _runs, _settings, _sweep_cmd, cli_with
+from test_study import ROOT, _runs, _settings, _sweep_cmd, cli_with
 from test_study import stand_in_case as study_case
 
 from valve_dolfinx._compat import MPI
@@ -99,36 +99,6 @@ def test_report_over_an_interrupted_rerun_with_other_settings_is_no_answer(tmp_p
     assert sorted(ran) == ["W0_H0", "W7_H0"]
     assert main(["report", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["complete"] is True
-
-
-def test_sigint_to_a_rerun_with_another_setting_then_report_is_no_answer(tmp_path):
-    """The issue's reproduction with real processes and a real SIGINT: a sweep, then its
-    rerun with --set native.bending_modulus_kpa=100 interrupted once its first case is recomputed;
-    `report` ends with status 9 naming the stale cases, and states no recommendation."""
-    out, run_log = tmp_path / "study", tmp_path / "runs.log"
-    env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "0.05"}
-    sweep = [*SMALL_GRID, "--mesh-size", "2", "--out", str(out), "--no-progress"]
-    first = subprocess.run(_sweep_cmd(*sweep), env=env, cwd=ROOT, capture_output=True,
-                           text=True, timeout=120)
-    assert first.returncode == 0, first.stderr[-2000:]
-    env["STUDY_STAND_IN_SLEEP"] = "1.0"
-    proc = subprocess.Popen(_sweep_cmd(*sweep, "--set", "native.bending_modulus_kpa=100"), env=env,
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    for line in proc.stderr:  # the normal valve recomputed: the first graft is in flight
-        if "[1/3] normal" in line:
-            proc.send_signal(signal.SIGINT)
-            break
-    proc.communicate(timeout=60)
-    assert proc.returncode == ExitCode.INTERRUPTED
-    assert _runs(run_log)[3:] == ["normal", "W7_H0"]
-    report = subprocess.run([sys.executable, "-m", "valve_dolfinx.cli", "report", str(out)],
-                            cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert report.returncode == ExitCode.STUDY_INCOMPLETE, report.stderr[-2000:]
-    assert "stale: W0_H0, W7_H0" in report.stderr and "Traceback" not in report.stderr
-    assert "No answer: the study is incomplete" in report.stdout
-    assert json.loads((out / "summary.json").read_text())["recommendations"] == []
-    assert not (out / "sizing_map.png").exists()
 
 
 def test_a_folder_without_study_json_is_read_without_an_expected_identity(tmp_path, quiet_cli):

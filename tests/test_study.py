@@ -130,11 +130,13 @@ def _stable_json(value):
     return value
 
 
-def _reference_sweep(out: Path) -> Path:
+@pytest.fixture(scope="module")
+def reference_sweep(tmp_path_factory) -> Path:
     """The small grid swept serially, in this process (what the subprocess sweeps must give)."""
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.study.runner import run_study
 
+    out = tmp_path_factory.mktemp("reference") / "study"
     run_study(_settings(mesh_size_mm=None), out, MPI.COMM_SELF, case_function=stand_in_case)
     return out
 
@@ -416,11 +418,12 @@ def test_claims_are_exclusive_and_stale_ones_are_taken_over(tmp_path):
     second.release()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
-def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
-    """A real signal to a sweep after its first case: SIGTERM and SIGINT end it with status
-    143 and 130, SIGKILL kills it; the rerun finishes the others without recomputing the
-    first and gives the same tables as an uninterrupted sweep."""
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_sweep_resumes_without_recomputing(tmp_path, reference_sweep, sig):
+    """A real signal to a sweep after its first case: SIGTERM ends it with status 143,
+    SIGKILL kills it; the rerun finishes the others without recomputing the first and gives
+    the same tables as an uninterrupted sweep.  (SIGINT to a sweep of real closures:
+    ``tests/test_interrupts.py``.)"""
     out, run_log = tmp_path / "study", tmp_path / "runs.log"
     env = {**os.environ, "STUDY_RUN_LOG": str(run_log), "STUDY_STAND_IN_SLEEP": "1.0"}
     proc = subprocess.Popen(_sweep_cmd(*SMALL_GRID, "--out", str(out), "--no-progress"),
@@ -437,7 +440,7 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
     # the second case was in flight: the larger graft first
     assert _runs(run_log) == ["normal", "W7_H0"]
     claims = list((out / "cases" / ".claims").iterdir())
-    # SIGTERM, SIGINT release the claim on the way out; SIGKILL leaves it, stale, to the rerun
+    # SIGTERM releases the claim on the way out; SIGKILL leaves it, stale, to the rerun
     assert [c.name for c in claims] == (["W7_H0.claim"] if sig == signal.SIGKILL else [])
     record = first.read_text()
 
@@ -446,17 +449,16 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
     assert first.read_text() == record  # untouched
     assert not list((out / "cases" / ".claims").iterdir())
     assert not list((out / "cases" / ".staging").iterdir())
-    fresh = _reference_sweep(tmp_path / "fresh")
-    assert stable_csv(out / "results.csv") == stable_csv(fresh / "results.csv")
+    assert stable_csv(out / "results.csv") == stable_csv(reference_sweep / "results.csv")
     assert (_stable_json(json.loads((out / "results.json").read_text()))
-            == _stable_json(json.loads((fresh / "results.json").read_text())))
+            == _stable_json(json.loads((reference_sweep / "results.json").read_text())))
 
 
 @pytest.mark.slow
-def test_serial_and_mpi_sweeps_agree(tmp_path):
+def test_serial_and_mpi_sweeps_agree(tmp_path, reference_sweep):
     """`mpirun -n 2` spreads the cases over two groups, runs each exactly once and gives the
     serial sweep's tables; --ranks-per-case 2 runs every case on both ranks."""
-    serial = _reference_sweep(tmp_path / "serial")
+    serial = reference_sweep
     for k in (1, 2):
         out, log = tmp_path / f"mpi{k}", tmp_path / f"mpi{k}.log"
         # the grafts start from the normal valve (path 1): the other group waits for it, so
