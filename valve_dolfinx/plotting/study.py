@@ -77,7 +77,7 @@ def plot_coaptation_vs_width(rec: Recommendation, path: Path | None = None, *,
     heights = sorted({c.height_pct for c in cells})
     widths = sorted({c.width_pct for c in cells})
     step = min(np.diff(widths)) if len(widths) > 1 else 10.0
-    fig = new_figure(9.5, 5.0)
+    fig = new_figure(9.5, 5.0, layout=None)  # the axes placed by hand, the key beside them
     ax = fig.add_axes((0.08, 0.11, 0.58, 0.78))
     for k, h in enumerate(heights):
         colour = _CURVE_COLOURS[k % len(_CURVE_COLOURS)]
