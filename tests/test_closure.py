@@ -275,7 +275,7 @@ DEFAULT_MESH_CASES = {
 }
 
 
-#: the first test to use :func:`default_mesh_cases` pays for its seven closures (the suite's
+#: the first test to use :func:`default_mesh_cases` pays for its six closures (the suite's
 #: 900 s per test is for one closure on two loaded cores)
 DEFAULT_MESH_TIMEOUT = pytest.mark.timeout(3600)
 

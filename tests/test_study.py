@@ -458,7 +458,6 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, reference_sweep, sig
 def test_serial_and_mpi_sweeps_agree(tmp_path, reference_sweep):
     """`mpirun -n 2` spreads the cases over two groups, runs each exactly once and gives the
     serial sweep's tables; --ranks-per-case 2 runs every case on both ranks."""
-    serial = reference_sweep
     for k in (1, 2):
         out, log = tmp_path / f"mpi{k}", tmp_path / f"mpi{k}.log"
         # the grafts start from the normal valve (path 1): the other group waits for it, so
@@ -469,7 +468,7 @@ def test_serial_and_mpi_sweeps_agree(tmp_path, reference_sweep):
         assert sorted(r[0] for r in runs) == ["W0_H0", "W7_H0", "normal"]
         assert len({r[1] for r in runs}) == (2 if k == 1 else 1)  # both groups took cases
         assert proc.stdout.count("case(s) computed") == 1  # rank 0 alone prints
-        assert stable_csv(out / "results.csv") == stable_csv(serial / "results.csv")
+        assert stable_csv(out / "results.csv") == stable_csv(reference_sweep / "results.csv")
         rows = json.loads((out / "results.json").read_text())
         assert {r["n_ranks"] for r in rows} == {k}
 
