@@ -16,9 +16,11 @@ that gap with the IPC Toolkit (``ipctk``), whose geometry is exact and complete:
   it resists any force, not only the pressure's.  Its reach is shorter than the rest
   gap of the contact law, so coapting leaflets at rest are outside it and the law alone
   sets their gap and the coaptation heights; the guard acts where the law gives way.
-  The collision set is the library's improved max approximation with area weighting,
-  whose energy is smooth as pairs enter and leave it; the energy's exact gradient and
-  Hessian go into the residual and the Jacobian.
+  The collision set is the library's standard one with area weighting (every
+  vertex–triangle and edge–edge pair by its closest features), not its improved max
+  approximation, whose gradient was measured to jump under motions of micrometres where
+  two surfaces come within a few micrometres (docs/numerics.md); the energy's exact
+  gradient and Hessian go into the residual and the Jacobian.
 * **Steps that cannot cross.**  A barrier holds only if no step jumps over it.  Every
   Newton update is cut to its collision-free fraction (the library's continuous
   collision detection, additive CCD with its conservative rescaling), so a state the
@@ -93,7 +95,7 @@ class SurfaceGuard:
         collisions = ipctk.NormalCollisions()
         collisions.use_area_weighting = True  # before build: it sets the pairs' weights
         collisions.collision_set_type = \
-            ipctk.NormalCollisions.CollisionSetType.IMPROVED_MAX_APPROX
+            ipctk.NormalCollisions.CollisionSetType.IPC
         collisions.build(self.mesh, np.asfortranarray(x), self.distance)
         self._key = (np.array(x, copy=True), collisions)
         return collisions
