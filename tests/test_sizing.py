@@ -188,6 +188,33 @@ def test_a_shortfall_of_several_resolutions_is_no_graft():
     assert sizes_to_confirm(answer, tables) == []
 
 
+def test_a_held_confirmation_stays_the_answer_within_three_points_though_off_the_band():
+    """A size whose confirmation held (``prefer``) is the answer while it lies within
+    SAME_SIZE_PCT of the smallest qualifying size, even where the surface puts it beyond
+    the tolerance: its solves passed the confirmation's own test.  A held size further
+    away is not kept."""
+    from valve_dolfinx.sizing.answer import SAME_SIZE_PCT
+
+    tables = study(seed=8)
+    fit = fit_study(tables, ladder=None)
+    smallest = read_answer(fit, tables).size
+    assert smallest is not None and smallest.width_pct >= 2 and smallest.height_pct >= 1
+    # smaller in flat area than the smallest qualifying size: it does not qualify, and as
+    # every size seals here, its predicted worst case is beyond the tolerance
+    near = GraftSize(smallest.width_pct - 2, smallest.height_pct - 1)
+    answer = read_answer(fit, tables, prefer=[near])
+    assert answer.size == near and answer.smallest == smallest
+    assert -answer.margin_mm > answer.tolerance_mm
+    assert f"within {SAME_SIZE_PCT:g} points in width and height of {smallest.label}" \
+        in answer.text
+    assert "beyond the resolution" in answer.text and "passed the confirmation" in answer.text
+    far = GraftSize(smallest.width_pct + SAME_SIZE_PCT + 1, smallest.height_pct)
+    assert read_answer(fit, tables, prefer=[far]).size == smallest
+    # a held size that still qualifies comes before one that does not, whatever the order
+    qualifying = GraftSize(smallest.width_pct + 1, smallest.height_pct + 1)
+    assert read_answer(fit, tables, prefer=[near, far, qualifying]).size == qualifying
+
+
 def test_no_size_seals_is_no_graft():
     tables = study(seed=6, leaks=lambda w, h: True)
     answer = read_answer(fit_study(tables, ladder=None), tables)

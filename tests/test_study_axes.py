@@ -783,7 +783,8 @@ def test_a_held_confirmation_stays_unless_the_answer_moves_beyond_the_same_size(
         assert smallest.area_ratio < rec.answer.size.area_ratio
         assert same_size(smallest, rec.answer.size)
         assert 14 - smallest.width_pct <= SAME_SIZE_PCT
-        assert f"the smallest qualifying size, {smallest.label}" in rec.text
+        assert (f"within {SAME_SIZE_PCT:g} points in width and height of {smallest.label}"
+                in rec.text)
     else:
         assert 2 <= len(confirmed) == len(rec.confirmations) <= CONFIRM_ROUNDS
         assert confirmed[1][0] < 14 - SAME_SIZE_PCT

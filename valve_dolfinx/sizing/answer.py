@@ -326,9 +326,14 @@ def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float |
 
     ``target_mm`` is the minimum coaptation height to reach in every member; None takes
     each member's normal valve's.  ``prefer`` are sizes solved in every member whose
-    confirmation held: the first of them that qualifies and is the same answer as the
-    smallest qualifying size (:func:`same_size`) is the answer instead, so that an answer
-    does not creep by a per cent per round of confirmation.
+    confirmation held, in the order they were proposed: the first of them that is the same
+    answer as the smallest qualifying size (:func:`same_size`) and still qualifies, else
+    the first that is the same answer, is the answer instead, so that an answer does not
+    creep by a per cent per round of confirmation.  It need not qualify on the surface
+    itself: its own solves, now in the fit, have passed the confirmation's test
+    (:func:`~valve_dolfinx.sizing.recommendation.confirmation_holds`, the tolerance plus
+    a solve's scatter), and reading them again against the tolerance alone would undo that
+    test by a difference below a solve's scatter.
     """
     values, targets, source = _members(tables, target_mm)
     answer = SizingAnswer(dict(comparison or {}), list(values), targets, source,
@@ -384,7 +389,8 @@ def read_answer(fit: StudyFit, tables: Sequence[MemberTable], target_mm: float |
     chosen = min(np.flatnonzero(qualifies), key=lambda i: (grid[i].area_ratio, *grid[i]))
     index = {tuple(size): i for i, size in enumerate(grid)}
     kept = [index[tuple(p)] for p in prefer if tuple(p) in index]
-    kept = [i for i in kept if qualifies[i] and same_size(grid[i], grid[chosen])]
+    kept = sorted((i for i in kept if same_size(grid[i], grid[chosen])),
+                  key=lambda i: not qualifies[i])  # stable: in the order proposed
     if kept and kept[0] != chosen:
         answer.smallest = grid[chosen]
         chosen = kept[0]
@@ -497,11 +503,14 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
     size, tol = answer.size, answer.tolerance_mm
     head = (f"Recommended graft: **{size.label}** (+{size.width_pct:g} % width, "
             f"+{size.height_pct:g} % height: free edge {answer.free_edge_mm:.1f} mm, height "
-            f"{answer.height_mm:.1f} mm; flat area {size.area_ratio:.3f} × native), the "
-            f"smallest size whose predicted worst case reaches the target minimum coaptation "
-            f"height ({answer.target_source}){_every(answer)} within the resolution of "
-            f"{margin_text(tol)} mm and that seals with a probability of at least "
-            f"{answer.seal_threshold:g} ({answer.seal_probability:.2f}).")
+            f"{answer.height_mm:.1f} mm; flat area {size.area_ratio:.3f} × native), "
+            + ("" if answer.smallest is None else
+               f"solved in every member, its confirmation held, and within "
+               f"{SAME_SIZE_PCT:g} points in width and height of {answer.smallest.label}, ")
+            + f"the smallest size whose predicted worst case reaches the target minimum "
+            f"coaptation height ({answer.target_source}){_every(answer)} within the resolution "
+            f"of {margin_text(tol)} mm and that seals with a probability of at least "
+            f"{answer.seal_threshold:g} ({answer.seal_probability:.2f} at {size.label}).")
     target = answer.targets_mm[answer.limiting_member]
     where = _in(answer.limiting_member)
     if answer.margin_mm >= 0:
@@ -511,13 +520,14 @@ def _chosen_text(answer: SizingAnswer, fit: StudyFit) -> str:
     else:
         margin = (f"Its predicted worst case is {margin_text(-answer.margin_mm)} mm short of "
                   f"the target{where} ({answer.predicted_height_mm:.2f} mm against "
-                  f"{target:.2f} mm, ± {answer.margin_sd_mm:.2f} mm), within the resolution "
-                  f"of {margin_text(tol)} mm.")
+                  f"{target:.2f} mm, ± {answer.margin_sd_mm:.2f} mm), "
+                  + (f"within the resolution of {margin_text(tol)} mm." if -answer.margin_mm <= tol
+                     else f"beyond the resolution of {margin_text(tol)} mm on the surface; its "
+                     "own solves, which the surface follows there, passed the confirmation's "
+                     "test of the tolerance plus a solve's scatter."))
     if answer.smallest is not None:
-        margin += (f" It is a size solved in every member whose confirmation held; the "
-                   f"smallest qualifying size, {answer.smallest.label}, is within "
-                   f"{SAME_SIZE_PCT:g} points of it in width and height, the same answer at "
-                   "the millimetre a graft is trimmed to.")
+        margin += (f" Sizes {SAME_SIZE_PCT:g} points apart are the same answer at the "
+                   "millimetre a graft is trimmed to, so the solved size stays the answer.")
     band = answer.band
     also = (f"Sizes that also qualify: {band['sizes']} at {STEP_PCT:g} % steps, W "
             f"{band['width_pct'][0]:g}–{band['width_pct'][1]:g} %, H {band['height_pct'][0]:g}"

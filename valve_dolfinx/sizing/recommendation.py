@@ -314,10 +314,22 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
         scope = f" in all {n} members" if n > 1 else ""
         within = "" if tol is None else " within the model's resolution"
         if rec.solved:
+            # a confirmed size is reported as its solves give it
+            entry = next((e for e in rec.confirmations if e["graft"] == size.label
+                          and e["holds"] and e["margin_mm"] is not None), None)
+            margin, solved = answer.margin_mm, ""
+            if entry is not None:
+                margin, solved = entry["margin_mm"], " solved"
+                member = names.get(entry["limiting_member"], entry["limiting_member"])
+                where = f", in {member}" if member else ""
+                if tol is not None and -margin > tol:
+                    within = (f" within the model's resolution and a solve's scatter (the "
+                              f"{margin_text(miss_limit_mm(answer.resolution))} mm its "
+                              "confirmation was tested against)")
             return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
                     f"+{size.height_pct:g} % height). It converges, seals and reaches "
-                    f"{target}{scope}{within}; its smallest margin is "
-                    f"{margin_text(answer.margin_mm)} mm{where}{resolution}.")
+                    f"{target}{scope}{within}; its smallest{solved} margin is "
+                    f"{margin_text(margin)} mm{where}{resolution}.")
         solved = ", ".join(entry["graft"] for entry in rec.confirmations)
         return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
                 f"+{size.height_pct:g} % height), read from the surface fitted to the solved "
