@@ -251,6 +251,10 @@ def test_the_budget_stops_the_design_saying_what_is_not_settled(tmp_path):
     assert "stopped at the case budget, not settled" in plan.text
     assert f"{rec.answer.size.label} is not solved in {len(rec.confirm)} of its 6 members" \
         in plan.text
+    # its confirmations are bounded by the budget, not by a grid's rounds of confirmation
+    assert rec.next_confirmation == rec.answer.size
+    assert "the adaptive design solves it there next" in rec.text
+    assert "rounds of confirmation are spent" not in rec.text
     summary = json.loads((tmp_path / "budget" / "summary.json").read_text())
     assert summary["design"]["stop"] == "budget" and summary["design"]["budget"] == 15
 

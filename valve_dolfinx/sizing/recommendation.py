@@ -72,6 +72,9 @@ class Recommendation:
     confirm: list[str] = field(default_factory=list)
     incompetent_targets: dict[str, str] = field(default_factory=dict)
     confirmations: list[dict] = field(default_factory=list)
+    #: the most sizes solved to confirm the answer (None: no limit, an adaptive study's
+    #: case budget bounds them)
+    confirm_rounds: int | None = CONFIRM_ROUNDS
     text: str = ""
     #: the fit the answer was read from and the member tables it read (not written out)
     fit: StudyFit | None = field(default=None, repr=False)
@@ -86,12 +89,12 @@ class Recommendation:
     @property
     def next_confirmation(self) -> GraftSize | None:
         """The size to solve next in every member: the answer's, when it is not solved in
-        every member yet and fewer than :data:`CONFIRM_ROUNDS` sizes have been solved to
+        every member yet and fewer than :attr:`confirm_rounds` sizes have been solved to
         confirm it; else None.  Every confirmation joins the fit, so the answer read after
         one (missed, or held and moved by its cases) is confirmed in turn."""
         if self.answer.size is None or not self.confirm:
             return None
-        if len(self.confirmations) >= CONFIRM_ROUNDS:
+        if self.confirm_rounds is not None and len(self.confirmations) >= self.confirm_rounds:
             return None
         return self.answer.size
 
@@ -179,13 +182,15 @@ def _in_member(member: str | None) -> str:
 
 def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
                     target_mm: float | None, n_paths: int,
-                    confirmed: Sequence[GraftSize] = ()) -> Recommendation:
+                    confirmed: Sequence[GraftSize] = (),
+                    confirm_rounds: int | None = CONFIRM_ROUNDS) -> Recommendation:
     targets, source = member_targets({t.label: t.rows for t in tables}, target_mm)
     same = set(targets.values())
     rec = Recommendation(answer.comparison, [t.label for t in tables], targets,
                          next(iter(same)) if len(same) == 1 else None, source, answer,
                          summarise_cells({t.label: t.rows for t in tables}, targets),
-                         [table.label for _, table in sizes_to_confirm(answer, tables)])
+                         [table.label for _, table in sizes_to_confirm(answer, tables)],
+                         confirm_rounds=confirm_rounds)
     for cell in rec.cells:
         cell.confirmation = cell.size in confirmed
     for size in confirmed:
@@ -197,9 +202,14 @@ def _recommendation(answer: SizingAnswer, tables: Sequence[MemberTable],
                 "holds": confirmation_holds(cell, solved, answer.resolution)})
     lines = [answer.text, *_confirmation_text(rec)]
     if rec.confirm:
-        then = ("a sweep solves it there to confirm it" if rec.next_confirmation is not None
-                else f"the {CONFIRM_ROUNDS} rounds of confirmation are spent, so it is not "
-                "confirmed")
+        if confirm_rounds is None:
+            then = ("the adaptive design solves it there next, while its case budget allows "
+                    "(the design's state says whether it did)")
+        elif rec.next_confirmation is not None:
+            then = "a sweep solves it there to confirm it"
+        else:
+            then = (f"the {confirm_rounds} rounds of confirmation are spent, so it is not "
+                    "confirmed")
         lines.append(f"{answer.size.label} is read from the surface and not solved in "
                      f"{len(rec.confirm)} of the {len(tables)} members: {then}.")
     if target_mm is None:
@@ -226,7 +236,8 @@ def _incompetent_text(rec: Recommendation) -> list[str]:
 def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | None = None,
                   *, n_paths: int = 1, ladder: Path | None = MESH_LADDER,
                   confirmed: Mapping[int, Sequence[GraftSize]] | None = None,
-                  cv_folds: int = CV_FOLDS) -> list[Recommendation]:
+                  cv_folds: int = CV_FOLDS, confirm_rounds: int | None = CONFIRM_ROUNDS
+                  ) -> list[Recommendation]:
     """One :class:`Recommendation` per comparison value, from one fit over all of them.
 
     Parameters
@@ -248,6 +259,9 @@ def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | No
     cv_folds
         Folds of the surface's cross-validation (0: none; the answer does not depend on
         it, only the error it reports).
+    confirm_rounds
+        The most sizes solved to confirm an answer (a grid study's; None for an adaptive
+        study, whose case budget bounds them).
     """
     confirmed = confirmed or {}
     fit = fit_study([t for tables in groups for t in tables], ladder=ladder, cv_folds=cv_folds)
@@ -256,12 +270,12 @@ def recommend_all(groups: Sequence[Sequence[MemberTable]], target_mm: float | No
         comparison = dict(tables[0].comparison) if tables else {}
         sizes = [GraftSize(*s) for s in confirmed.get(c, ())]
         answer = read_answer(fit, tables, target_mm, comparison=comparison)
-        rec = _recommendation(answer, tables, target_mm, n_paths, sizes)
+        rec = _recommendation(answer, tables, target_mm, n_paths, sizes, confirm_rounds)
         held = [rec.cell(entry["graft"]).size for entry in rec.confirmations if entry["holds"]]
         if held and answer.size is not None and answer.size not in held:
             again = read_answer(fit, tables, target_mm, comparison=comparison, prefer=held)
             if again.size != answer.size:
-                rec = _recommendation(again, tables, target_mm, n_paths, sizes)
+                rec = _recommendation(again, tables, target_mm, n_paths, sizes, confirm_rounds)
         rec.fit, rec.tables = fit, list(tables)
         recs.append(rec)
     return recs
@@ -337,7 +351,9 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
                 f"{target}{scope}{within}; its smallest predicted margin is "
                 f"{margin_text(answer.margin_mm)} mm{where}{resolution}.  It was not solved "
                 f"itself: " + (f"the sizes solved to confirm the answer ({solved}) each moved "
-                               "it, and the rounds of confirmation are spent."
+                               "it, and " + ("the rounds of confirmation are spent."
+                                             if rec.confirm_rounds is not None else
+                                             "the adaptive design stopped before solving it.")
                                if solved else "the study has not confirmed it yet."))
     if size is not None:  # qualifies in the members computed, fails beyond them
         return (f"{excluded} In the {n} members{computed}, {size.label} "

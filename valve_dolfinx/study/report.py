@@ -26,7 +26,7 @@ from valve_dolfinx.plotting.study import (
     plot_sizing_map,
 )
 from valve_dolfinx.result import competence_text, margin_text
-from valve_dolfinx.sizing.recommendation import Recommendation, recommend_all
+from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS, Recommendation, recommend_all
 from valve_dolfinx.sizing.surface import CV_FOLDS
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
@@ -372,7 +372,8 @@ def build_report(out: str | Path, settings: StudySettings | None = None,
             report.recommendations = recommend_all(
                 [layout_tables(layout, c, rows) for c in range(len(layout.comparisons))],
                 target_mm, n_paths=len(layout.paths), confirmed=layout.confirm,
-                cv_folds=0 if draft else CV_FOLDS)
+                cv_folds=0 if draft else CV_FOLDS,
+                confirm_rounds=None if inferred.design == "adaptive" else CONFIRM_ROUNDS)
             report.next_round = plan_round(report.recommendations, layout, inferred.design,
                                            inferred.budget)
     if draft:

@@ -128,8 +128,8 @@ def _adaptive_points(layout: StudyLayout, c: int, rec: Recommendation
     where = {k: _unsolved_member(layout, c, k) for k in open_sizes(rec.fit, answer, rec.tables)}
     candidates = [k for k, m in where.items() if m is not None]
     points = []
-    if answer.size is not None and rec.confirm:
-        points.append(Point(c, None, tuple(answer.size)))
+    if rec.next_confirmation is not None:
+        points.append(Point(c, None, tuple(rec.next_confirmation)))
     for k in next_points(candidates, (rec.fit.widths_pct, rec.fit.heights_pct)):
         points.append(Point(c, where[k], tuple(k.size)))
     cuts = []
