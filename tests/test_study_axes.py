@@ -761,8 +761,9 @@ def test_a_held_confirmation_stays_unless_the_answer_moves_beyond_the_same_size(
     millimetre a graft is trimmed to): the confirmed W14/H2 stays the answer, and nothing
     more is solved.  At A = 3 the answer moves further (below W11) and is confirmed in
     turn, each confirmation judged on its own solved statistic."""
+    from valve_dolfinx.result import margin_text
     from valve_dolfinx.sizing.answer import SAME_SIZE_PCT, same_size
-    from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS
+    from valve_dolfinx.sizing.recommendation import CONFIRM_ROUNDS, headline
     from valve_dolfinx.study.runner import run_study
 
     settings = _settings(**CONFIRM_SETTINGS)
@@ -779,6 +780,10 @@ def test_a_held_confirmation_stays_unless_the_answer_moves_beyond_the_same_size(
     assert rec.confirm == []  # the answer is solved in every member
     if amplitude == 1.0:
         assert confirmed == [[14.0, 2.0]] and rec.answer.size.label == "W14/H2"
+        # the answer is reported as its solves give it, not as the surface predicts it
+        assert rec.margin == (pytest.approx(solved), "root.loaded_diameter_mm=21", True)
+        assert rec.margin[0] != rec.answer.margin_mm
+        assert f"its smallest solved margin is {margin_text(solved)} mm" in headline(rec)
         smallest = rec.answer.smallest
         assert smallest.area_ratio < rec.answer.size.area_ratio
         assert same_size(smallest, rec.answer.size)

@@ -123,10 +123,13 @@ class PlanRecommendation:
             {"graft": c.label, "worst_height_mm": c.worst_height_mm, "spread_mm": c.spread_mm,
              "margin_mm": c.margin_mm, "limiting_member": self.name(c.limiting_member),
              "qualifies": c.qualifies, "state": cell_state(c)} for c in rec.cells]
+        margin, member, solved = (None, None, False) if rec is None else rec.margin
+        if answer is None or answer.size is None:
+            margin, solved = None, False
+            member = None if answer is None else answer.limiting_member
         return {"comparison": self.comparison, "graft": size(self.graft),
-                "margin_mm": None if answer is None or answer.size is None
-                else answer.margin_mm,
-                "limiting_member": None if answer is None else self.name(answer.limiting_member),
+                "margin_mm": margin, "margin_solved": solved,
+                "limiting_member": None if member is None else self.name(member),
                 "closest": size(self.closest),
                 "shortfall_mm": None if answer is None else answer.shortfall_mm,
                 "target_mm": None if rec is None else rec.target_mm,
@@ -245,9 +248,11 @@ class PlanAnswers:
             where = f" in {where}" if where else ""
             if value.graft is not None:
                 graft = value.graft
+                margin, member, solved = value.recommendation.margin
+                where = f" in {value.name(member)}" if member else ""
                 text = (f"{graft.label} (+{graft.width_pct:g} % width, +{graft.height_pct:g} % "
-                        f"height), predicted worst-case margin "
-                        f"{margin_text(answer.margin_mm, signed=True)} mm{where}.")
+                        f"height), {'solved' if solved else 'predicted'} worst-case margin "
+                        f"{margin_text(margin, signed=True)} mm{where}.")
             elif answer is not None and answer.shortfall_mm is not None and value.closest:
                 text = (f"no graft is robust; the closest, {value.closest.label}, is "
                         f"{margin_text(answer.shortfall_mm)} mm short{where}.")

@@ -169,9 +169,10 @@ def _details(rec: PlanRecommendation) -> list[str]:
         out.append(f"Members (each solved on its own): {_members(rec)}.")
     if _targets(rec):
         out.append(_targets(rec))
-    if answer.size is not None and answer.limiting_member:
-        out.append(f"Smallest margin over the target: {margin_text(answer.margin_mm)} mm, in "
-                   f"{rec.name(answer.limiting_member)}.")
+    margin, member, solved = study.margin
+    if answer.size is not None and member:
+        out.append(f"Smallest {'solved ' if solved else ''}margin over the target: "
+                   f"{margin_text(margin)} mm, in {rec.name(member)}.")
     if trim_text(answer):
         out.append(trim_text(answer))
     if rec.unsealable_roots_mm:

@@ -98,6 +98,19 @@ class Recommendation:
             return None
         return self.answer.size
 
+    @property
+    def margin(self) -> tuple[float | None, str | None, bool]:
+        """The answer's worst-case margin (mm), the member that sets it, and whether it is
+        solved: a confirmed size's as its solves give it (its held confirmation's solved
+        worst case), else the surface's prediction."""
+        size = self.answer.size
+        entry = None if size is None else next(
+            (e for e in self.confirmations if e["graft"] == size.label and e["holds"]
+             and e["margin_mm"] is not None), None)
+        if entry is None:
+            return self.answer.margin_mm, self.answer.limiting_member, False
+        return entry["margin_mm"], entry["limiting_member"], True
+
     def cell(self, label: str | None) -> CellSummary | None:
         return next((c for c in self.cells if c.label == label), None)
 
@@ -328,13 +341,9 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
         scope = f" in all {n} members" if n > 1 else ""
         within = "" if tol is None else " within the model's resolution"
         if rec.solved:
-            # a confirmed size is reported as its solves give it
-            entry = next((e for e in rec.confirmations if e["graft"] == size.label
-                          and e["holds"] and e["margin_mm"] is not None), None)
-            margin, solved = answer.margin_mm, ""
-            if entry is not None:
-                margin, solved = entry["margin_mm"], " solved"
-                member = names.get(entry["limiting_member"], entry["limiting_member"])
+            margin, member, solved = rec.margin
+            if solved:
+                member = names.get(member, member)
                 where = f", in {member}" if member else ""
                 if tol is not None and -margin > tol:
                     within = (f" within the model's resolution and a solve's scatter (the "
@@ -342,8 +351,8 @@ def headline(rec: Recommendation, names: Mapping[str, str] | None = None, *,
                               "confirmation was tested against)")
             return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
                     f"+{size.height_pct:g} % height). It converges, seals and reaches "
-                    f"{target}{scope}{within}; its smallest{solved} margin is "
-                    f"{margin_text(margin)} mm{where}{resolution}.")
+                    f"{target}{scope}{within}; its smallest{' solved' if solved else ''} "
+                    f"margin is {margin_text(margin)} mm{where}{resolution}.")
         solved = ", ".join(entry["graft"] for entry in rec.confirmations)
         return (f"Recommended graft {size.label} (+{size.width_pct:g} % width, "
                 f"+{size.height_pct:g} % height), read from the surface fitted to the solved "
