@@ -141,6 +141,40 @@ def reference_sweep(tmp_path_factory) -> Path:
     return out
 
 
+def test_a_signal_while_a_case_is_claimed_leaves_no_claim(tmp_path, monkeypatch):
+    """SIGINT arriving just after a case is claimed (before the case runs) ends the sweep
+    with ``Interrupted`` and leaves no claim behind, so nothing looks held by a process
+    that is gone."""
+    import os
+    import signal
+
+    from valve_dolfinx._compat import MPI
+    from valve_dolfinx.exceptions import Interrupted
+    from valve_dolfinx.interrupts import interrupt_on_signals
+    from valve_dolfinx.study import store
+    from valve_dolfinx.study.runner import run_study
+
+    acquire = store.CaseClaim.acquire
+    ran = []
+
+    def acquire_then_signal(claim):
+        held = acquire(claim)
+        os.kill(os.getpid(), signal.SIGINT)
+        return held
+
+    def case(*args, **kwargs):
+        ran.append(args[1])
+        return stand_in_case(*args, **kwargs)
+
+    monkeypatch.setattr(store.CaseClaim, "acquire", acquire_then_signal)
+    out = tmp_path / "study"
+    with interrupt_on_signals(), pytest.raises(Interrupted):
+        run_study(_settings(), out, MPI.COMM_SELF, case_function=case)
+    assert ran == []
+    assert not any((out / "cases" / ".claims").iterdir())
+    assert not any((out / "cases" / ".staging").iterdir())
+
+
 def _settings(**kw):
     from valve_dolfinx.study.grid import StudySettings
 

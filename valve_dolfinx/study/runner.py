@@ -64,6 +64,7 @@ from valve_dolfinx._compat import MPI, package_versions
 from valve_dolfinx._version import __version__, git_commit
 from valve_dolfinx.config import case_name
 from valve_dolfinx.exceptions import ParameterError, ValveError
+from valve_dolfinx.interrupts import deferred_signals, raise_pending
 from valve_dolfinx.io import write_json
 from valve_dolfinx.result import CaseResult, competence_text, load_case
 from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
@@ -381,6 +382,7 @@ class _Scheduler:
                 else:
                     waiting = True
             if waiting:
+                raise_pending()  # nothing is claimed while waiting: a signal ends it here
                 time.sleep(self.poll_s)
         return None
 
@@ -395,21 +397,26 @@ def _work(group: MPI.Comm, out: Path, layout: StudyLayout, cases: list[StudyCase
     with ClaimHeartbeat() as beat:
         scheduler = _Scheduler(out, cases, layout, beat, poll_s, run, wait) if leader else None
         while True:
-            job = scheduler.next() if leader else None
-            picked = group.bcast(None if job is None else (job[0].name, str(job[2])), root=0)
-            if picked is None:
-                break
-            case, staging = layout.case(picked[0]), Path(picked[1])
+            job = None
             try:
-                _run_one(case, layout.configs[case.name], layout.digests[case.name], staging,
-                         group, case_function, out)
+                # a signal that arrives while a case is claimed is raised once ``job``
+                # holds the claim, so that the ``finally`` below releases it
+                with deferred_signals():
+                    job = scheduler.next() if leader else None
+                picked = group.bcast(None if job is None else (job[0].name, str(job[2])),
+                                     root=0)
+                if picked is None:
+                    break
+                case = layout.case(picked[0])
+                _run_one(case, layout.configs[case.name], layout.digests[case.name],
+                         Path(picked[1]), group, case_function, out)
                 computed.append(case.name)
             finally:
-                if leader:
+                if job is not None:
                     job[1].release()
                     beat.remove(job[1])
-                    if staging.exists():  # interrupted before its commit
-                        shutil.rmtree(staging, ignore_errors=True)
+                    if job[2].exists():  # interrupted before its commit
+                        shutil.rmtree(job[2], ignore_errors=True)
     return computed, scheduler.held if leader else {}
 
 
