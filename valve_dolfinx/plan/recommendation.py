@@ -124,9 +124,6 @@ class PlanRecommendation:
              "margin_mm": c.margin_mm, "limiting_member": self.name(c.limiting_member),
              "qualifies": c.qualifies, "state": cell_state(c)} for c in rec.cells]
         margin, member, solved = (None, None, False) if rec is None else rec.margin
-        if answer is None or answer.size is None:
-            margin, solved = None, False
-            member = None if answer is None else answer.limiting_member
         return {"comparison": self.comparison, "graft": size(self.graft),
                 "margin_mm": margin, "margin_solved": solved,
                 "limiting_member": None if member is None else self.name(member),

@@ -102,11 +102,12 @@ class Recommendation:
     def margin(self) -> tuple[float | None, str | None, bool]:
         """The answer's worst-case margin (mm), the member that sets it, and whether it is
         solved: a confirmed size's as its solves give it (its held confirmation's solved
-        worst case), else the surface's prediction."""
+        worst case), else the surface's prediction; no margin without an answer."""
         size = self.answer.size
-        entry = None if size is None else next(
-            (e for e in self.confirmations if e["graft"] == size.label and e["holds"]
-             and e["margin_mm"] is not None), None)
+        if size is None:
+            return None, self.answer.limiting_member, False
+        entry = next((e for e in self.confirmations if e["graft"] == size.label and e["holds"]
+                      and e["margin_mm"] is not None), None)
         if entry is None:
             return self.answer.margin_mm, self.answer.limiting_member, False
         return entry["margin_mm"], entry["limiting_member"], True
