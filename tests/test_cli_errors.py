@@ -122,7 +122,8 @@ def test_missing_or_broken_mesh_file_is_an_input_error(tmp_path):
 
 def test_run_closes_a_mesh_file_with_its_geometry(tmp_path):
     """``run --mesh`` takes the geometry (here a 1.6 mm W21/H27 graft valve) from the file:
-    the result records it, whatever the configuration's geometry says."""
+    the result records it, whatever the configuration's geometry says; ``--no-figures``
+    writes the fields but no PNG."""
     import json
 
     from valve_dolfinx.geometry.valve import ValveParameters, build_valve, save_valve_mesh
@@ -131,8 +132,9 @@ def test_run_closes_a_mesh_file_with_its_geometry(tmp_path):
         mesh_size=1.6, graft_width_pct=21, graft_height_pct=27)), tmp_path / "graft.npz")
     out = tmp_path / "case"
     proc = _cli("run", "--mesh", str(mesh), "--set", "solver.pseudo_transient.max_steps=1",
-                "--out", str(out))
+                "--no-figures", "--out", str(out))
     assert proc.returncode == ExitCode.NOT_CONVERGED, proc.stderr[-2000:]
+    assert (out / "fields.vtu").is_file() and not list(out.glob("*.png"))  # --no-figures
     parameters = json.loads((out / "result.json").read_text())["parameters"]
     assert (parameters["geometry"]["mesh_size_mm"], parameters["graft"]["width_pct"],
             parameters["graft"]["height_pct"]) == (1.6, 21, 27)

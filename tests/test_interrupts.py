@@ -27,8 +27,10 @@ import pytest
 from valve_dolfinx.exceptions import ExitCode, Interrupted, SolverError
 
 ROOT = Path(__file__).resolve().parents[1]
-#: a short run: 20 pseudo-time steps of the normal valve on a 2 mm mesh
-RUN = ["run", "--mesh-size", "2.0", "--set", "solver.pseudo_transient.max_steps=20"]
+#: a short run: 20 pseudo-time steps of the normal valve on a 2 mm mesh, without figures
+#: (drawing them is most of its time) but where the signal interrupts their drawing
+RUN = ["run", "--mesh-size", "2.0", "--set", "solver.pseudo_transient.max_steps=20",
+       "--no-figures"]
 #: fields of result.json that differ between two computations of the same case
 VOLATILE = ("wall_time_s",)
 
@@ -208,14 +210,16 @@ def test_interrupted_run_records_nothing_and_resumes(tmp_path, reference_run, st
     if stage == "early step":
         shutil.copytree(reference_run, out)
         force = ["--force"]
-    code, log = _interrupt([*RUN, "--out", str(out), *force], trigger, sig)
+    run = [arg for arg in RUN if arg != "--no-figures"] if stage == "output" else RUN
+    code, log = _interrupt([*run, "--out", str(out), *force], trigger, sig)
     assert code == 128 + sig, log[-3000:]
     errors = [line for line in log.splitlines() if "error:" in line]
     assert len(errors) == 1 and f"interrupted ({signal.Signals(sig).name})" in errors[0], log
     assert not (out / "result.json").exists()
-    proc = _cli(*RUN, "--out", str(out))
+    proc = _cli(*run, "--out", str(out))
     assert proc.returncode == ExitCode.NOT_CONVERGED, proc.stderr[-3000:]
     assert "already holds this case" not in proc.stdout
+    assert (out / "closed_valve.png").is_file() == (run is not RUN)
     assert _stable(out) == _stable(reference_run)
     assert (out / "history.csv").read_text() == (reference_run / "history.csv").read_text()
 
@@ -224,10 +228,12 @@ def test_interrupted_run_records_nothing_and_resumes(tmp_path, reference_run, st
 @pytest.mark.slow
 def test_interrupted_sweep_records_nothing_and_resumes(tmp_path):
     """SIGINT to a real sweep once its first case is logged, while the second is computed:
-    status 130; the second case is neither finished nor claimed; the rerun computes only it."""
+    status 130; the second case is neither finished nor claimed; the rerun computes only it
+    (``--no-figures``: no case draws its figures, the report has no panels)."""
     out = tmp_path / "study"
     sweep = ["sweep", "--widths", "0", "--heights", "0", "--mesh-size", "2.0", "--set",
-             "solver.pseudo_transient.max_steps=20", "--no-progress", "--out", str(out)]
+             "solver.pseudo_transient.max_steps=20", "--no-progress", "--no-figures",
+             "--out", str(out)]
     code, log = _interrupt(sweep, r"\[1/2\] normal:", signal.SIGINT)
     assert code == ExitCode.INTERRUPTED, log[-3000:]
     assert sorted(p.name for p in (out / "cases").iterdir()) == [".claims", ".staging",
@@ -240,3 +246,4 @@ def test_interrupted_sweep_records_nothing_and_resumes(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "1 case(s) computed" in proc.stdout
     assert "1 of 2 cases already finished" in proc.stderr
+    assert not list((out / "cases").rglob("*.png"))  # --no-figures: not even the panels

@@ -606,7 +606,7 @@ def test_nomogram_on_real_closures(tmp_path, quiet_cli):
     out = tmp_path / "nomogram"
     assert cli.main(["nomogram", "--root-diameters", "19", "20", "--widths", "21", "--heights",
                      "27", "--paths", "1", "--mesh-size", "2.5", "--wall-time-limit", "240",
-                     "--out", str(out), "--no-progress"]) == 0
+                     "--out", str(out), "--no-progress", "--no-figures"]) == 0
     results = read_csv_rows(out / "results.csv")
     assert len(results) == 4 and {r["status"] for r in results} == {"finished"}
     rows = read_csv_rows(out / "nomogram.csv")

@@ -212,7 +212,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return ExitCode.OK if done["converged"] else ExitCode.NOT_CONVERGED
     update, close = _progress_bar(comm, enabled=not args.quiet)
     try:
-        result = run_case(config, args.out, comm=comm, progress=update, valve=valve)
+        result = run_case(config, args.out, comm=comm, progress=update, valve=valve,
+                          figures=not args.no_figures)
     finally:
         close()
     if comm.rank == 0:
@@ -374,7 +375,7 @@ def _run_sweep(args: argparse.Namespace, settings) -> int:
     with _case_progress(comm, not args.no_progress and indices is None) as progress:
         outcome = run_study(settings, args.out, comm, case_indices=indices,
                             progress=progress, report=indices is None,
-                            wait=not args.no_wait)
+                            figures=not args.no_figures, wait=not args.no_wait)
     if comm.rank == 0:
         print(f"{len(outcome.computed)} case(s) computed, {len(outcome.cases)} in the "
               f"selection; {outcome.elapsed_s:.0f} s -> {args.out}")
@@ -511,6 +512,9 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
     p.add_argument("--target-coaptation", type=float, default=None, metavar="MM",
                    help="minimum coaptation height a graft must reach (default: the normal "
                    "valve's)")
+    p.add_argument("--no-figures", action="store_true",
+                   help="draw no case figures (batch runs: a case's figures cost seconds); "
+                   "by default the normal valve and the report's panel cases draw theirs")
     p.add_argument("--list", action="store_true",
                    help="print the cases with their index and state, and exit")
     p.add_argument("--case-index", type=int, default=None, metavar="I",
@@ -775,6 +779,9 @@ def _add_run_command(sub) -> None:
     p.add_argument("--mesh", type=Path, default=None, metavar="VALVE.npz",
                    help="close this valve mesh (written by `valve-dolfinx mesh`) instead of "
                    "building one; its geometry replaces the configuration's")
+    p.add_argument("--no-figures", action="store_true",
+                   help="write result.json, config.toml, history.csv and fields.vtu but no "
+                   "PNG figures (batch runs: drawing them costs seconds)")
     _add_config_args(p)
     _add_geometry_args(p)
     p.set_defaults(func=_cmd_run, parser=p)

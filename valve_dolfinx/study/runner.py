@@ -437,7 +437,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
               case_indices: Sequence[int] | None = None,
               case_function: CaseFunction | None = None,
               progress: ProgressCallback | None = None, report: bool = True,
-              figures: bool = False, fields_output: bool = True,
+              figures: bool = True, fields_output: bool = True,
               poll_s: float = 1.0, wait: bool = True) -> SweepOutcome:
     """Run the cases of a study (all, or ``case_indices``) into ``out`` and build its report.
 
@@ -463,10 +463,12 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
         Callback on world rank 0 (see ``ProgressCallback``).
     report
         Rebuild tables, figures and report.md at the end (rank 0).
-    figures, fields_output
-        Passed to ``run_case``: the PNG figures of every case (by default only the normal
-        valve and the panel cases draw theirs, which the report's panels show: a case's
-        figures cost seconds) and the ParaView fields of every case.
+    figures
+        Whether the normal valve and the panel cases draw their PNG figures (the report's
+        panels show them; the other cases never draw theirs: a case's figures cost
+        seconds).  Without them the report has no panels.
+    fields_output
+        Passed to ``run_case``: the ParaView fields of every case.
     poll_s
         How often a group that waits (for a case another process computes, or for a
         warm start's source) looks at the study folder again (s).
@@ -533,11 +535,12 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
 def _closure_cases(settings: StudySettings, figures: bool,
                    fields_output: bool) -> CaseFunction:
     """The study's closure of one case: :func:`run_closure_case`, drawing the figures of the
-    normal valve and the panel cases (the report shows their panels), or of every case."""
-    panels = {NORMAL_CASE, *settings.panel_cases}
+    normal valve and the panel cases (the report shows their panels) unless ``figures`` is
+    false."""
+    panels = {NORMAL_CASE, *settings.panel_cases} if figures else set()
 
     def case_function(config, folder, group, *, start):
-        drawn = figures or case_name(config.geometry) in panels
+        drawn = case_name(config.geometry) in panels
         return run_closure_case(config, folder, group, start=start, figures=drawn,
                                 fields_output=fields_output)
     return case_function
