@@ -241,7 +241,8 @@ def test_config_needs_no_dolfinx():
 # --- a run from a configuration file -----------------------------------------------------------
 @pytest.fixture(scope="module")
 def case_run(tmp_path_factory):
-    """``valve-dolfinx run --config case.toml`` of the 1.6 mm symmetric reference."""
+    """``valve-dolfinx run --config case.toml`` of the 1.6 mm symmetric reference (no
+    figures: no test here looks at them)."""
     from valve_dolfinx._compat import MPI
     from valve_dolfinx.cli import main
 
@@ -250,7 +251,8 @@ def case_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("config_run")
     (folder / "case.toml").write_text(CASE_TOML)
     out = folder / "case"
-    code = main(["run", "--config", str(folder / "case.toml"), "--out", str(out)])
+    code = main(["run", "--config", str(folder / "case.toml"), "--out", str(out),
+                 "--no-figures"])
     return code, folder, out
 
 
@@ -324,7 +326,8 @@ def test_changed_pressure_in_the_file_changes_the_result(case_run, tmp_path):
     path = tmp_path / "higher.toml"
     path.write_text(text.replace("pressure_mmhg = 80.0", "pressure_mmhg = 100.0")
                     .replace("max_steps = 4000", "max_steps = 1"))
-    assert main(["run", "--config", str(path), "--out", str(tmp_path / "higher")]) == 3
+    assert main(["run", "--config", str(path), "--out", str(tmp_path / "higher"),
+                 "--no-figures"]) == 3
     low = json.loads((out / "result.json").read_text())
     high = json.loads((tmp_path / "higher" / "result.json").read_text())
     assert high["parameters"]["loading"]["pressure_mmhg"] == 100.0
