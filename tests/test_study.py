@@ -718,6 +718,34 @@ def _intersecting(state):
     return Intersections(pairs, candidates=1000, time_s=0.0)
 
 
+def test_only_the_cases_the_panels_show_draw_their_figures(monkeypatch):
+    """Of a study over two roots and two paths, the closure draws the figures of the first
+    normal valve and of the first case of each panel graft (the report's panels), of no
+    other case, and of none with ``figures=False``."""
+    from valve_dolfinx.study import runner
+
+    drawn = {}
+
+    def closure(config, folder, comm, *, start=None, figures=True, fields_output=True):
+        drawn[folder.name] = figures
+        return {}
+
+    monkeypatch.setattr(runner, "run_closure_case", closure)
+    settings = _settings(widths_pct=(0, 7, 14), heights_pct=(0, 27), paths=2,
+                         uncertain={"root.loaded_diameter_mm": [20, 21]},
+                         panel_cases=("W7_H0", "W14_H27"))
+    layout = settings.layout(())
+    for figures in (True, False):
+        drawn.clear()
+        case_function = runner._closure_cases(settings, layout, figures, False)
+        for case in layout.cases:
+            case_function(layout.configs[case.name], Path(case.name), None, start=None)
+        assert len(drawn) == len(layout.cases) == 2 + 2 * 2 * 6
+        expected = {"normal__root.loaded_diameter_mm=20", "W7_H0__root.loaded_diameter_mm=20",
+                    "W14_H27__root.loaded_diameter_mm=20"} if figures else set()
+        assert {name for name, draws in drawn.items() if draws} == expected
+
+
 @pytest.fixture(scope="module")
 def real_sweep(tmp_path_factory):
     """One real closure through the sweep path: the normal valve on a 2 mm mesh (a minute or

@@ -33,7 +33,6 @@ from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import (
     NORMAL_CASE,
     StudyLayout,
-    case_name,
     layout_tables,
     read_rounds,
 )
@@ -306,10 +305,8 @@ def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None,
     panel graft (``W0_H0``), unless it is one of the cases ``skip`` (no result that counts)."""
     panels = []
     wanted = [NORMAL_CASE, *(settings.panel_cases if settings else DEFAULT_PANEL_CASES)]
-    for base in dict.fromkeys(wanted):
-        case = next((c for c in layout.cases if case_name(c.width_pct, c.height_pct) == base),
-                    None)
-        if case is None or case.name in skip:
+    for case in layout.first_cases(wanted):
+        if case.name in skip:
             continue
         panel = out / "panels" / f"{case.name}.png"
         title = _panel_title(case.width_pct, case.height_pct)

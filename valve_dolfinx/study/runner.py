@@ -62,7 +62,6 @@ from typing import TYPE_CHECKING, Protocol
 
 from valve_dolfinx._compat import MPI, package_versions
 from valve_dolfinx._version import __version__, git_commit
-from valve_dolfinx.config import case_name
 from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.interrupts import deferred_signals, raise_pending
 from valve_dolfinx.io import write_json
@@ -464,9 +463,9 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     report
         Rebuild tables, figures and report.md at the end (rank 0).
     figures
-        Whether the normal valve and the panel cases draw their PNG figures (the report's
-        panels show them; the other cases never draw theirs: a case's figures cost
-        seconds).  Without them the report has no panels.
+        Whether the cases the report's panels show (the first normal valve and the first
+        case of each panel graft) draw their PNG figures; the other cases never draw
+        theirs (a case's figures cost seconds).  Without them the report has no panels.
     fields_output
         Passed to ``run_case``: the ParaView fields of every case.
     poll_s
@@ -503,7 +502,7 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     todo = _with_sources(layout, cases)
     _check_ranks(comm, settings.ranks_per_case)
     if case_function is None:
-        case_function = _closure_cases(settings, figures, fields_output)
+        case_function = _closure_cases(settings, layout, figures, fields_output)
     run = _open_study(comm, out, settings, write_settings=case_indices is None,
                       started=started)
     computed, held = _compute(comm, out, layout, todo, settings.ranks_per_case, progress,
@@ -532,16 +531,16 @@ def run_study(settings: StudySettings, out: str | Path, comm: MPI.Comm | None = 
     return outcome
 
 
-def _closure_cases(settings: StudySettings, figures: bool,
+def _closure_cases(settings: StudySettings, layout: StudyLayout, figures: bool,
                    fields_output: bool) -> CaseFunction:
     """The study's closure of one case: :func:`run_closure_case`, drawing the figures of the
-    normal valve and the panel cases (the report shows their panels) unless ``figures`` is
-    false."""
-    panels = {NORMAL_CASE, *settings.panel_cases} if figures else set()
+    cases the report's panels show (the first normal valve and the first case of each panel
+    graft: :meth:`StudyLayout.first_cases`), and of no other, unless ``figures`` is false."""
+    panels = [layout.configs[case.name] for case in
+              layout.first_cases([NORMAL_CASE, *settings.panel_cases])] if figures else []
 
     def case_function(config, folder, group, *, start):
-        drawn = case_name(config.geometry) in panels
-        return run_closure_case(config, folder, group, start=start, figures=drawn,
+        return run_closure_case(config, folder, group, start=start, figures=config in panels,
                                 fields_output=fields_output)
     return case_function
 
