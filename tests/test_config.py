@@ -352,3 +352,49 @@ def test_load_case_gives_the_surface_to_draw(case_run):
         assert np.array_equal(case.positions[:n], written["positions"])
     with pytest.raises(FileNotFoundError, match="not a finished case folder"):
         load_case(out.parent)
+
+
+# --- the defaults the command line states ------------------------------------------------------
+def _option_help(command: str, option: str) -> str:
+    """The help text of ``option`` of ``valve-dolfinx command`` (as written, unwrapped)."""
+    import argparse
+
+    from valve_dolfinx.cli import _parser
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return next(a.help for a in sub.choices[command]._actions if option in a.option_strings)
+
+
+def test_the_help_states_the_code_defaults():
+    """The parser imports nothing heavy (``--help`` and a bad flag answer at once), so the
+    defaults its help states are spelt out there: each is the one the code uses."""
+    from valve_dolfinx.plan.patient import DEFAULT_LEAFLET, PatientInput
+    from valve_dolfinx.solvers.parameters import PseudoTransientParameters
+    from valve_dolfinx.study.grid import (
+        ADAPTIVE_BUDGET,
+        STUDY_HEIGHTS_PCT,
+        STUDY_WIDTHS_PCT,
+        StudySettings,
+    )
+
+    def spelt(values) -> str:
+        return " ".join(f"{v:g}" for v in values)
+
+    patient = PatientInput(root_diameter_mm=21.0)
+    expected = {
+        ("sweep", "--widths"): f"(default {spelt(STUDY_WIDTHS_PCT)})",
+        ("sweep", "--heights"): f"(default {spelt(STUDY_HEIGHTS_PCT)})",
+        ("sweep", "--budget"): f"(default {ADAPTIVE_BUDGET})",
+        ("sweep", "--ranks-per-case"): f"(default {StudySettings().ranks_per_case})",
+        ("plan", "--budget"): f"(default {patient.budget})",
+        ("plan", "--root-uncertainty"): f"(default {patient.root_uncertainty_mm:g})",
+        ("plan", "--leaflet-free-edge"): f"{DEFAULT_LEAFLET.free_edge_length:.2f} mm)",
+        ("plan", "--leaflet-height"): f"(default {DEFAULT_LEAFLET.height:.2f})",
+        ("plan", "--pressure"): f"(default {patient.pressure_mmhg:g})",
+        ("plan", "--graft-fibre-angle"): f"(default {patient.graft_fibre_angle_deg:g}:",
+        ("plan", "--paths"): f"(default {patient.paths})",
+        ("run", "--wall-time-limit"): f"{PseudoTransientParameters().wall_time_limit_s:g} s)",
+    }
+    for (command, option), text in expected.items():
+        assert text in _option_help(command, option), (command, option, text)
+    assert patient.graft_widths_pct == STUDY_WIDTHS_PCT
