@@ -126,15 +126,17 @@ def test_the_mesh_ladder_table_shows_its_csv_and_the_rms_error():
         assert shown[name][column] == f"{y:.2f}" + ("" if ok else " (not sound)")
         if ok:
             sound[mesh][name] = y
-    coarse, fine = meshes
-    both = sorted(set(sound[coarse]) & set(sound[fine]))
-    for name in shown:
-        expected = (f"{sound[coarse][name] - sound[fine][name]:+.2f}" if name in both
-                    else "–")
-        assert shown[name][-1] == expected, name
-    rms = math.sqrt(sum((sound[coarse][n] - sound[fine][n]) ** 2 for n in both) / len(both))
-    assert (f"Discretisation error at {coarse:g} mm: {rms:.3f} mm ({coarse:g} mm against "
-            f"{fine:g} mm over {len(both)} cases") in text
+    fine, coarser = meshes[-1], meshes[:-1]
+    for k, coarse in enumerate(coarser):  # a column of changes from the finest per mesh
+        both = sorted(set(sound[coarse]) & set(sound[fine]))
+        for name in shown:
+            expected = (f"{sound[coarse][name] - sound[fine][name]:+.2f}" if name in both
+                        else "–")
+            assert shown[name][2 + len(meshes) + k] == expected, (name, coarse)
+        rms = math.sqrt(sum((sound[coarse][n] - sound[fine][n]) ** 2 for n in both)
+                        / len(both))
+        assert (f"Discretisation error at {coarse:g} mm: {rms:.3f} mm ({coarse:g} mm against "
+                f"{fine:g} mm over {len(both)} cases") in text
 
 
 def _drawn(table, rows: list[dict], tmp_path: Path) -> str:
