@@ -57,11 +57,11 @@ MESH_KEY = "geometry.mesh_size_mm"
 
 
 def ladder_rows(rows: list[dict]) -> list[dict]:
-    """The table's rows from the study's: the grid's finished cases only, with their mesh
-    size."""
+    """The table's rows from the study's: the finished cases of the ladder's grid only (a
+    case folder the layout does not hold has no round), with their mesh size."""
     out = []
     for row in rows:
-        if row.get("status") != "finished" or row.get("confirmation"):
+        if row.get("status") != "finished" or row.get("round") is None:
             continue
         mesh = row.get(MESH_KEY, row.get("mesh_size_mm"))
         out.append({**{k: row.get(k) for k in COLUMNS}, "mesh_size_mm": mesh})

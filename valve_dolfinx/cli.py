@@ -514,7 +514,7 @@ def _add_sweep_args(p: argparse.ArgumentParser, out: str, paths: int | None) -> 
                    "valve's)")
     p.add_argument("--no-figures", action="store_true",
                    help="draw no case figures (batch runs: a case's figures cost seconds); "
-                   "by default the normal valve and the report's panel cases draw theirs")
+                   "by default the cases the report's panels show draw theirs")
     p.add_argument("--list", action="store_true",
                    help="print the cases with their index and state, and exit")
     p.add_argument("--case-index", type=int, default=None, metavar="I",

@@ -258,14 +258,15 @@ class StudyLayout:
     def case(self, name: str) -> StudyCase:
         return next(c for c in self.cases if c.name == name)
 
-    def first_cases(self, names: Sequence[str]) -> list[StudyCase]:
-        """The first case, in the study's order, of each of ``names`` (``normal``, ``W0_H0``:
-        the normal valve or a graft size, whatever its member) that the study has: the
-        cases whose figures the report's panels show."""
+    def panel_cases(self, grafts: Sequence[str]) -> list[StudyCase]:
+        """The cases whose figures the report's panels show: the first, in the study's
+        order, of the normal valve and of each of ``grafts`` (``W0_H0``, whatever its
+        member) that the study has."""
         first = {}
         for case in self.cases:
             first.setdefault(case_name(case.width_pct, case.height_pct), case)
-        return [first[name] for name in dict.fromkeys(names) if name in first]
+        return [first[name] for name in dict.fromkeys([NORMAL_CASE, *grafts])
+                if name in first]
 
     def select(self, indices: Sequence[int] | None) -> list[StudyCase]:
         """The cases with the given indices (all if ``None``); bad indices name the range."""

@@ -31,7 +31,6 @@ from valve_dolfinx.sizing.surface import CV_FOLDS
 from valve_dolfinx.study.axes import axis_label, value_text
 from valve_dolfinx.study.grid import DEFAULT_PANEL_CASES, StudySettings
 from valve_dolfinx.study.layout import (
-    NORMAL_CASE,
     StudyLayout,
     layout_tables,
     read_rounds,
@@ -304,8 +303,8 @@ def _panels(out: Path, layout: StudyLayout, settings: StudySettings | None,
     """The panel of the first case (in the study's order) of the normal valve and of each
     panel graft (``W0_H0``), unless it is one of the cases ``skip`` (no result that counts)."""
     panels = []
-    wanted = [NORMAL_CASE, *(settings.panel_cases if settings else DEFAULT_PANEL_CASES)]
-    for case in layout.first_cases(wanted):
+    grafts = settings.panel_cases if settings else DEFAULT_PANEL_CASES
+    for case in layout.panel_cases(grafts):
         if case.name in skip:
             continue
         panel = out / "panels" / f"{case.name}.png"

@@ -66,7 +66,7 @@ from valve_dolfinx.exceptions import ParameterError, ValveError
 from valve_dolfinx.interrupts import deferred_signals, raise_pending
 from valve_dolfinx.io import write_json
 from valve_dolfinx.result import CaseResult, competence_text, load_case
-from valve_dolfinx.study.grid import NORMAL_CASE, StudySettings
+from valve_dolfinx.study.grid import StudySettings
 from valve_dolfinx.study.layout import ROUNDS_FILE, StudyCase, StudyLayout, read_rounds
 from valve_dolfinx.study.report import SWEEP_LOG, StudyReport, build_report
 from valve_dolfinx.study.rounds import append_round
@@ -535,9 +535,9 @@ def _closure_cases(settings: StudySettings, layout: StudyLayout, figures: bool,
                    fields_output: bool) -> CaseFunction:
     """The study's closure of one case: :func:`run_closure_case`, drawing the figures of the
     cases the report's panels show (the first normal valve and the first case of each panel
-    graft: :meth:`StudyLayout.first_cases`), and of no other, unless ``figures`` is false."""
-    panels = [layout.configs[case.name] for case in
-              layout.first_cases([NORMAL_CASE, *settings.panel_cases])] if figures else []
+    graft: :meth:`StudyLayout.panel_cases`), and of no other, unless ``figures`` is false."""
+    panels = [layout.configs[case.name]
+              for case in layout.panel_cases(settings.panel_cases)] if figures else []
 
     def case_function(config, folder, group, *, start):
         return run_closure_case(config, folder, group, start=start, figures=config in panels,
