@@ -98,7 +98,9 @@ def _main_with_stand_in(argv: list[str]) -> int:
 
 # --- helpers ----------------------------------------------------------------------------------
 def _sweep_cmd(*args: str, mpi: int = 0) -> list[str]:
-    cmd = [sys.executable, str(THIS), "sweep", *args]
+    """A stand-in sweep in a subprocess, without figures: the tests that run one compare
+    tables and logs (a report's panels are drawn by the in-process sweeps)."""
+    cmd = [sys.executable, str(THIS), "sweep", "--no-figures", *args]
     return [str(BIN / "mpirun"), "-n", str(mpi), *cmd] if mpi else cmd
 
 

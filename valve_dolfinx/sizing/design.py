@@ -59,7 +59,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtr  # the standard normal distribution function
 
 from valve_dolfinx.geometry.outline import GraftSize
 from valve_dolfinx.sizing.answer import (
@@ -146,7 +146,7 @@ def qualify_chance(fit: StudyFit, answer: SizingAnswer, tables: Sequence[MemberT
         margin = mean - answer.targets_mm[label] + tolerance
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(sd > 0, margin / np.where(sd > 0, sd, 1.0), np.sign(margin) * np.inf)
-        chances.append(norm.cdf(z))
+        chances.append(ndtr(z))
         seals.append(fit.sealing.probability(points))
     chances, seals = np.array(chances), np.array(seals)
     deciding = chances.argmin(axis=0)

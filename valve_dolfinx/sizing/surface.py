@@ -34,17 +34,15 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 from scipy.spatial import QhullError
-from sklearn.base import clone
-from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
-from sklearn.model_selection import GroupKFold, cross_val_predict
 from threadpoolctl import threadpool_limits
+
+if TYPE_CHECKING:  # scikit-learn is imported by the fits (importing it takes about 1 s)
+    from sklearn.gaussian_process import GaussianProcessRegressor
 
 __all__ = ["SurfacePoint", "Design", "CoaptationSurface", "SealingModel", "fit_surface",
            "fit_sealing", "ROOT_KEY", "RANDOM_STATE", "RESTARTS", "CV_FOLDS"]
@@ -155,6 +153,8 @@ def _quiet_fit(model, x: np.ndarray, y: np.ndarray):
     """Fit, with scikit-learn's warnings about hyperparameters at their bounds logged at
     debug level (a length scale at its upper bound is an input the figure barely
     depends on, not an error)."""
+    from sklearn.exceptions import ConvergenceWarning
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
         model.fit(x, y)
@@ -215,6 +215,9 @@ class CoaptationSurface:
 
 
 def _regressor(n_inputs: int) -> GaussianProcessRegressor:
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+
     kernel = (ConstantKernel(1.0, (1e-2, 1e2))
               * Matern(np.ones(n_inputs), _LENGTH_BOUNDS, nu=2.5)
               + WhiteKernel(0.05, (1e-6, 1.0)))
@@ -228,6 +231,10 @@ def fit_surface(points: Sequence[SurfacePoint], heights_mm: Sequence[float], *,
     """Fit :class:`CoaptationSurface` to ``heights_mm`` solved at ``points`` (replicates,
     such as the paths of a cell, are separate points at the same place); ``cv_folds``: the
     folds of the cross-validation (0: none, as a bootstrap of the answer refits)."""
+    from sklearn.base import clone
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.model_selection import GroupKFold, cross_val_predict
+
     design = Design.of(points)
     x = design.matrix(points)
     y = np.asarray(heights_mm, dtype=float)
