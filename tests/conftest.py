@@ -16,7 +16,7 @@ def _collective_cleanup():
     """Under mpirun, after each test: collect the Python garbage and destroy the PETSc
     objects it held on every rank together, so no rank waits in another's destroy.  One
     process has no collective destroys to line up, and a full collection after each of
-    the suite's tests costs about 0.15 s (two minutes of the serial run): Python's own
+    the suite's tests costs about 0.15 s (two minutes of CPU over the serial run): Python's own
     collector is left to it there."""
     yield
     if MPI.COMM_WORLD.size > 1:
