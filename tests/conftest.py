@@ -31,6 +31,15 @@ def comm():
 
 
 @pytest.fixture
+def parallel_world():
+    """COMM_WORLD for a test that compares a run on its ranks with a serial one: skipped on
+    one rank, where both sides would be the same serial run (``mpirun -n 2`` runs it)."""
+    if MPI.COMM_WORLD.size == 1:
+        pytest.skip("compares two ranks with one: runs under mpirun -n 2")
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture
 def quiet_cli():
     """Undo what the CLI does to logging levels and SIGTERM in this process."""
     saved = {n: logging.getLogger(n).level for n in ("valve_dolfinx", "valve_dolfinx.study")}

@@ -295,12 +295,10 @@ def test_an_interrupted_design_resumes_to_the_same_answer(tmp_path, reference):
 
 
 @pytest.mark.mpi
-def test_mpi_rounds_equal_the_serial_rounds(tmp_path_factory):
+def test_mpi_rounds_equal_the_serial_rounds(tmp_path_factory, parallel_world):
     """Under mpirun -n 2 the ranks share each round's cases: the same rounds, cases and
-    answer as a serial sweep (on one rank both would be the same serial sweep)."""
-    comm = MPI.COMM_WORLD
-    if comm.size == 1:
-        pytest.skip("compares two ranks with one: runs under mpirun -n 2")
+    answer as a serial sweep."""
+    comm = parallel_world
     root = Path(comm.bcast(str(tmp_path_factory.mktemp("rounds")) if comm.rank == 0 else None))
     outcome = adaptive_sweep(root / "world", comm)
     if comm.rank == 0:

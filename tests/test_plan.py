@@ -725,14 +725,11 @@ def test_a_root_the_leaflets_cannot_span_is_answered_without_computing(tmp_path,
 
 
 @pytest.mark.mpi
-def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory):
-    """Under mpirun -n 2 the stand-in plan writes the summary of a serial plan (on one rank
-    both would be the same serial plan)."""
+def test_a_plan_under_mpi_gives_the_serial_summary(tmp_path_factory, parallel_world):
+    """Under mpirun -n 2 the stand-in plan writes the summary of a serial plan."""
     from valve_dolfinx.plan.runner import run_plan
 
-    comm = MPI.COMM_WORLD
-    if comm.size == 1:
-        pytest.skip("compares two ranks with one: runs under mpirun -n 2")
+    comm = parallel_world
     root = Path(comm.bcast(str(tmp_path_factory.mktemp("plan")) if comm.rank == 0 else None))
     patient = _patient()
     world = run_plan(patient, root / "world", comm, mesh_size_mm=2.0,
